@@ -1,0 +1,237 @@
+"""Algorithm 1: offline collaborative estimation relayed from vehicle to vehicle.
+
+Vehicle ``j`` traverses the segment, records ``y_j``, and runs its own estimator
+``D_j`` (:mod:`roadcollab.estimator`). It then receives ``(T_{j-1}, S_{j-1}, e_{j-1},
+w^f_{j-1})`` from vehicle ``j-1`` and forms
+
+.. math::
+
+    w^f_j = L_1 w^f_{j-1} + L_2 e_{j-1},\\qquad
+    \\hat w_j = D_j y_j + w^f_j,\\qquad
+    e_j = y_j - \\hat P_j \\hat w_j = T_j w + S_j w^f_j (+\\text{noise}),
+
+with ``T_j = (I - P_hat_j D_j) P_hat_j``, ``S_j = -P_hat_j`` from the vehicle's *nominal*
+model (it cannot know its true plant; ``oracle=True`` uses the true plant for analysis) and
+the optimal learning filters (eqs. 11-12), band-limited by the weight ``W`` of
+:class:`~roadcollab.spectral.SegmentGrid`:
+
+.. math::
+
+    L_1 = W S_j^{-1} T_j T_{j-1}^{-1} S_{j-1},\\qquad
+    L_2 = -W S_j^{-1} T_j T_{j-1}^{-1}.
+
+Equivalently ``w^f_j = -S_j^{-1} T_j z_{j-1}`` with
+``z_{j-1} = W T_{j-1}^{-1}(e_{j-1} - S_{j-1} w^f_{j-1})``, which with nominal ``T`` equals
+``W P_hat_{j-1}^{-1} y_{j-1}``: Algorithm 1 blends the vehicle's own observer (its low band)
+with the previous vehicle's offline model inversion (NOTES section 4).
+Vehicle 1 has ``w^f = 0``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ._validation import check_signal
+from .errors import MessageError, ParameterError
+from .estimator import JDPNoise, RoadInputEstimator, build_road_input_estimator
+from .message import ExchangeMessage, StateSpaceData, series
+from .simulation import DiscretePlant, discretize_plant
+from .spectral import SegmentGrid, inv2x2, matvec
+from .vehicle import Vehicle
+
+__all__ = ["VehicleEstimate", "CollaborativeEstimator", "learning_filters"]
+
+
+def learning_filters(T_j, S_j, T_prev, S_prev, weight):
+    """Optimal learning filters of eqs. 11-12 on a grid, band-limited by ``weight``.
+
+    Parameters
+    ----------
+    T_j, S_j, T_prev, S_prev : (K, 2, 2) complex ndarray
+        Frequency responses on the active bins.
+    weight : (K,) ndarray
+        Band weight ``W`` on those bins.
+
+    Returns
+    -------
+    L1, L2 : (K, 2, 2) complex ndarray
+    """
+    G = -(inv2x2(S_j) @ T_j @ inv2x2(T_prev)) * weight[:, None, None]   # = L2
+    return -(G @ S_prev), G
+
+
+@dataclass(frozen=True, eq=False)
+class VehicleEstimate:
+    """Vehicle ``j``'s results on one segment.
+
+    Attributes
+    ----------
+    observer_only : (N, 2) ndarray
+        ``D_j y_j``, m/s: the vehicle alone.
+    estimate : (N, 2) ndarray
+        ``w_hat_j = D_j y_j + w^f_j``, m/s: Algorithm 1.
+    W_hat, E, Wf : (K, 2) complex ndarray
+        Spectra of ``w_hat_j``, ``e_j`` and ``w^f_j`` on the grid (all bins).
+    """
+
+    observer_only: np.ndarray
+    estimate: np.ndarray
+    W_hat: np.ndarray
+    E: np.ndarray
+    Wf: np.ndarray
+
+
+class CollaborativeEstimator:
+    """Vehicle ``j``'s side of Algorithm 1 on a fixed segment grid.
+
+    Everything that does not depend on the measured data (the Lemma 1 gain, the
+    discretisations, the frequency responses of ``D_j``, ``P_hat_j``, ``T_j``, ``S_j`` and
+    their realisations) is built once here, as on a car that drives segment after segment.
+
+    Parameters
+    ----------
+    vehicle : Vehicle
+    noise : JDPNoise
+        Road and sensor statistics for the Lemma 1 design.
+    grid : SegmentGrid
+    gamma : float
+        Observer parameter of eq. 4.
+    oracle : bool
+        Use the true plant in ``T_j``, ``S_j`` and ``e_j`` (analysis only).
+    """
+
+    def __init__(self, vehicle: Vehicle, noise: JDPNoise, grid: SegmentGrid, *, gamma: float,
+                 oracle: bool = False) -> None:
+        if not isinstance(vehicle, Vehicle):
+            raise ParameterError(f"vehicle must be a Vehicle, got {type(vehicle).__name__}")
+        if not isinstance(grid, SegmentGrid):
+            raise ParameterError(f"grid must be a SegmentGrid, got {type(grid).__name__}")
+        self.vehicle = vehicle
+        self.grid = grid
+        self.oracle = bool(oracle)
+        dt = grid.dt
+        self.estimator: RoadInputEstimator = build_road_input_estimator(
+            vehicle.nominal_model, noise, gamma=gamma, dt=dt)
+        self.true_plant: DiscretePlant = discretize_plant(vehicle.true_model, dt)
+        self.model_plant: DiscretePlant = (self.true_plant if self.oracle
+                                           else discretize_plant(vehicle.nominal_model, dt))
+        om = grid.omega_dt
+        self.D_f = self.estimator.frequency_response(om)            # (K, 2, 2)
+        self.P_f = self.model_plant.frequency_response(om)         # P_hat_j (or P_j if oracle)
+        eye = np.eye(2)
+        self.T_f = (eye - self.P_f @ self.D_f) @ self.P_f
+        self.S_f = -self.P_f
+        act = grid.active
+        self._act = act
+        self._w_act = grid.weight[act]
+        # -S_j^-1 T_j = P_hat^-1 (I - P_hat D) P_hat = (I - D P_hat): the map z_{j-1} -> w^f_j.
+        self._minus_Sinv_T = -(inv2x2(self.S_f[act]) @ self.T_f[act])
+        self.T_ss, self.S_ss = self._realisations()
+        self._offset = self.estimator.steady_offset()
+
+    # -- realisations sent to the next vehicle ------------------------------------------------
+    def _realisations(self) -> tuple[StateSpaceData, StateSpaceData]:
+        """Minimal discrete realisations of ``T_j`` and ``S_j``.
+
+        .. code-block:: text
+
+            T = (I - P D) P :  u -> P -> [I - P D] -> y,  with  I - P D = I + (-P) o D
+        """
+        import control
+
+        p = self.model_plant
+        dt = self.grid.dt
+        P = StateSpaceData(p.Ad, p.Bd, p.C, p.D, dt)
+        e = self.estimator
+        Dj = StateSpaceData(e.Ad, e.Bd, e.Cc, e.Dc, dt)
+        PD = series(Dj, P)
+        I_minus_PD = StateSpaceData(PD.A, PD.B, -PD.C, np.eye(2) - PD.D, dt)
+        T_full = series(P, I_minus_PD)
+        T_min = control.minreal(T_full.to_control(), tol=1e-9, verbose=False)
+        T = StateSpaceData(np.asarray(T_min.A), np.asarray(T_min.B), np.asarray(T_min.C),
+                           np.asarray(T_min.D), dt)
+        S = StateSpaceData(p.Ad.copy(), p.Bd.copy(), -p.C, -p.D, dt)
+        return T, S
+
+    # -- per-segment work ---------------------------------------------------------------------
+    def spectrum(self, y) -> np.ndarray:
+        """Zero-padded spectrum of a measured window ``y`` (N, 2)."""
+        y = check_signal("y", y, 2)
+        if y.shape[0] != self.grid.n_samples:
+            raise ParameterError(f"y must have {self.grid.n_samples} samples (the segment grid), got {y.shape[0]}")
+        return self.grid.rfft(y)
+
+    def wf_from_z(self, Z: np.ndarray) -> np.ndarray:
+        """``w^f_j = -S_j^-1 T_j z`` for a band-limited road-input spectrum ``Z`` (K, 2)."""
+        Wf = np.zeros_like(Z)
+        Wf[self._act] = matvec(self._minus_Sinv_T, Z[self._act])
+        return Wf
+
+    def invert(self, Y: np.ndarray) -> np.ndarray:
+        """Band-limited offline model inversion ``z_j = W P_hat_j^-1 y_j`` (spectrum)."""
+        Z = np.zeros_like(Y)
+        Z[self._act] = self._w_act[:, None] * matvec(inv2x2(self.P_f[self._act]), Y[self._act])
+        return Z
+
+    def learn(self, message: ExchangeMessage) -> np.ndarray:
+        """Learning update (eqs. 11-12): ``w^f_j = L1 w^f_{j-1} + L2 e_{j-1}`` (spectrum).
+
+        Raises
+        ------
+        MessageError
+            If the message does not fit this vehicle's grid.
+        """
+        g = self.grid
+        if message.e.shape != (g.nfft, 2) or message.wf.shape != (g.nfft, 2):
+            raise MessageError(f"message signals must have shape ({g.nfft}, 2) on this segment grid, "
+                               f"got {message.e.shape} and {message.wf.shape}")
+        if message.n_samples != g.n_samples or message.sample_rate != g.sample_rate:
+            raise MessageError(f"message is for a grid of {message.n_samples} samples at {message.sample_rate} Hz, "
+                               f"this vehicle uses {g.n_samples} at {g.sample_rate} Hz")
+        act = self._act
+        om = g.omega_dt[act]
+        T_prev = message.T.frequency_response(om)
+        S_prev = message.S.frequency_response(om)
+        E_prev = g.rfft(message.e)[act]
+        Wf_prev = g.rfft(message.wf)[act]
+        L1, L2 = learning_filters(self.T_f[act], self.S_f[act], T_prev, S_prev, self._w_act)
+        Wf = np.zeros((g.n_bins, 2), complex)
+        Wf[act] = matvec(L1, Wf_prev) + matvec(L2, E_prev)
+        return Wf
+
+    def estimate(self, y, message: ExchangeMessage | None = None, *, Wf: np.ndarray | None = None
+                 ) -> VehicleEstimate:
+        """Run Algorithm 1 for this vehicle on one segment.
+
+        Parameters
+        ----------
+        y : (N, 2) array_like
+            Measured body-tip accelerations, m/s^2.
+        message : ExchangeMessage | None
+            From vehicle ``j-1``; None for vehicle 1 (``w^f = 0``).
+        Wf : (K, 2) ndarray, optional
+            A feed-forward spectrum computed elsewhere (e.g. the fused estimate); overrides
+            ``message``.
+
+        Returns
+        -------
+        VehicleEstimate
+        """
+        Y = self.spectrum(y)
+        n = self.grid.n_samples
+        DY = matvec(self.D_f, Y)
+        if Wf is None:
+            Wf = self.learn(message) if message is not None else np.zeros_like(Y)
+        W_hat = DY + Wf
+        E = Y - matvec(self.P_f, W_hat)
+        obs = self.grid.irfft(DY, n) + self._offset
+        est = self.grid.irfft(W_hat, n) + self._offset
+        return VehicleEstimate(observer_only=obs, estimate=est, W_hat=W_hat, E=E, Wf=Wf)
+
+    def message(self, result: VehicleEstimate) -> ExchangeMessage:
+        """The plain message ``(T_j, S_j, e_j, w^f_j)`` of Algorithm 1."""
+        g = self.grid
+        return ExchangeMessage(mechanism="none", sample_rate=g.sample_rate, n_samples=g.n_samples,
+                               T=self.T_ss, S=self.S_ss, e=g.irfft(result.E), wf=g.irfft(result.Wf))

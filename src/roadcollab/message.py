@@ -1,0 +1,124 @@
+"""Data objects that cross the network between consecutive vehicles.
+
+They hold plain numpy arrays and scalars only, so :mod:`roadcollab.protocol` can serialise
+them without pickle.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .estimator import dlti_frequency_response
+
+__all__ = ["StateSpaceData", "ExchangeMessage", "series", "random_orthogonal", "similarity"]
+
+
+@dataclass(frozen=True, eq=False)
+class StateSpaceData:
+    """A discrete-time state-space realisation ``(A, B, C, D)`` with sample period ``dt``.
+
+    Attributes
+    ----------
+    A : (n, n) ndarray
+    B : (n, m) ndarray
+    C : (p, n) ndarray
+    D : (p, m) ndarray
+    dt : float
+        Sample period, s.
+    """
+
+    A: np.ndarray
+    B: np.ndarray
+    C: np.ndarray
+    D: np.ndarray
+    dt: float
+
+    @property
+    def order(self) -> int:
+        return int(self.A.shape[0])
+
+    def poles(self) -> np.ndarray:
+        """Discrete poles (eigenvalues of A)."""
+        return np.linalg.eigvals(self.A) if self.order else np.zeros(0, complex)
+
+    def continuous_poles(self) -> np.ndarray:
+        """Poles mapped back to the s-plane, ``log(z) / dt`` (rad/s)."""
+        return np.log(self.poles().astype(complex)) / self.dt
+
+    def frequency_response(self, omega_dt: np.ndarray) -> np.ndarray:
+        """Response at ``z = exp(j omega_dt)``, shape (M, p, m)."""
+        if self.order == 0:
+            return np.broadcast_to(self.D.astype(complex), (len(omega_dt),) + self.D.shape).copy()
+        return dlti_frequency_response(self.A, self.B, self.C, self.D, omega_dt)
+
+    def to_control(self):
+        """The realisation as a discrete :class:`control.StateSpace`."""
+        import control
+
+        return control.ss(self.A, self.B, self.C, self.D, self.dt)
+
+
+def series(first: StateSpaceData, second: StateSpaceData) -> StateSpaceData:
+    """Realisation of ``second * first`` (``first`` acts on the input first).
+
+    .. code-block:: text
+
+        u -> [A1 B1; C1 D1] -> v -> [A2 B2; C2 D2] -> y
+
+        A = [[A1,     0 ],      B = [[B1   ],
+             [B2 C1,  A2]]           [B2 D1]]
+        C = [D2 C1,  C2],       D = D2 D1
+    """
+    n1, n2 = first.order, second.order
+    A = np.zeros((n1 + n2, n1 + n2))
+    A[:n1, :n1] = first.A
+    A[n1:, :n1] = second.B @ first.C
+    A[n1:, n1:] = second.A
+    B = np.vstack([first.B, second.B @ first.D])
+    C = np.hstack([second.D @ first.C, second.C])
+    D = second.D @ first.D
+    return StateSpaceData(A, B, C, D, first.dt)
+
+
+def random_orthogonal(n: int, rng: np.random.Generator) -> np.ndarray:
+    """Haar-random orthogonal matrix (QR of a Gaussian matrix with sign fix)."""
+    if n == 0:
+        return np.zeros((0, 0))
+    Q, R = np.linalg.qr(rng.standard_normal((n, n)))
+    return Q * np.sign(np.diag(R))
+
+
+def similarity(sys: StateSpaceData, Q: np.ndarray) -> StateSpaceData:
+    """Realisation ``(Q^T A Q, Q^T B, C Q, D)`` for orthogonal ``Q``: same transfer matrix,
+    same conditioning, no visible block structure."""
+    return StateSpaceData(Q.T @ sys.A @ Q, Q.T @ sys.B, sys.C @ Q, sys.D.copy(), sys.dt)
+
+
+@dataclass(frozen=True, eq=False)
+class ExchangeMessage:
+    """What vehicle ``j`` sends to ``j+1`` in Algorithm 1 (and, obfuscated, eq. 17).
+
+    Attributes
+    ----------
+    mechanism : str
+        ``"none"`` (Algorithm 1 in the clear) or ``"paper"`` (Algorithm 2).
+    sample_rate : float
+        Hz; fixes the grid together with ``n_samples`` and the signal length.
+    n_samples : int
+        Samples in the recorded window ``N``.
+    T, S : StateSpaceData
+        ``T_j`` and ``S_j`` (or ``Psi1 T_j`` and ``Psi1 S_j Psi2``), 2x2 discrete systems.
+    e, wf : (nfft, 2) ndarray
+        ``e_j`` and ``w^f_j`` (or ``Psi1 e_j`` and ``Psi2^-1 w^f_j``) on the padded periodic
+        grid of ``nfft`` samples.
+    """
+
+    mechanism: str
+    sample_rate: float
+    n_samples: int
+    T: StateSpaceData
+    S: StateSpaceData
+    e: np.ndarray
+    wf: np.ndarray

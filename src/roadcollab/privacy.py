@@ -1,0 +1,265 @@
+"""Algorithm 2: obfuscating dynamics (Theorem 1).
+
+Before sending, vehicle ``j`` draws two random, stable, invertible 2x2 systems ``Psi^S1``
+and ``Psi^S2`` and sends (eq. 17)
+
+.. math::
+
+    \\tilde T_j = \\Psi^{S1} T_j,\\quad \\tilde S_j = \\Psi^{S1} S_j \\Psi^{S2},\\quad
+    \\tilde e_j = \\Psi^{S1} e_j,\\quad \\tilde w^f_j = (\\Psi^{S2})^{-1} w^f_j.
+
+The receiver's ``z = T^-1 (e - S w^f)`` is unchanged:
+``T~^-1 (e~ - S~ w~f) = T^-1 Psi1^-1 (Psi1 e - Psi1 S Psi2 Psi2^-1 w^f) = z`` (Theorem 1),
+so every estimate is exactly what it would be without privacy.
+
+Each ``Psi`` has a common denominator of random order ``n`` with random left-half-plane
+poles, and four numerators (one per entry: the "four groups of zeros"), each of degree ``n``
+so ``Psi`` is biproper and ``Psi^-1`` proper. A draw is rejected unless every transmission
+zero of ``Psi`` has real part <= ``-min_zero_distance`` and ``Psi`` is well conditioned on the
+grid: otherwise exactness would become round-off amplification (NOTES section 5). The
+continuous design is discretised with the bilinear transform, which maps left-half-plane
+poles and zeros inside the unit circle. Realisations are hidden with a random orthogonal
+similarity so no block of ``T`` or ``S`` is visible verbatim.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.linalg
+import scipy.signal
+
+from ._validation import check_int, check_positive, check_real
+from .errors import ParameterError
+from .message import ExchangeMessage, StateSpaceData, random_orthogonal, series, similarity
+from .spectral import SegmentGrid, inv2x2, matvec
+
+__all__ = ["ObfuscationSpec", "Obfuscator", "draw_obfuscator", "obfuscate"]
+
+
+@dataclass(frozen=True)
+class ObfuscationSpec:
+    """Distribution the obfuscating systems are drawn from (public under Kerckhoffs).
+
+    Parameters
+    ----------
+    order_range : (int, int)
+        ``n`` uniform on these integers (inclusive), for ``n1`` and ``n2`` independently.
+    pole_frequency_range : (float, float)
+        Natural frequencies of the poles, log-uniform, Hz.
+    pole_damping_range : (float, float)
+        Damping ratios of complex pole pairs, uniform.
+    complex_fraction : float
+        Probability that a pole (zero) is drawn as a complex pair rather than real.
+    zero_frequency_range : (float, float)
+        Natural frequencies of the zeros, log-uniform, Hz.
+    zero_damping_range : (float, float)
+        Damping ratios of complex zero pairs, uniform.
+    coupling : float
+        Off-diagonal gain relative to the diagonal (0 = diagonal ``Psi``).
+    min_zero_distance : float
+        Required ``-Re`` of every transmission zero of ``Psi``, rad/s.
+    max_condition : float
+        Largest allowed condition number of ``Psi`` on the grid.
+    """
+
+    order_range: tuple[int, int] = (2, 4)
+    pole_frequency_range: tuple[float, float] = (0.3, 30.0)
+    pole_damping_range: tuple[float, float] = (0.1, 1.0)
+    complex_fraction: float = 0.5
+    zero_frequency_range: tuple[float, float] = (0.3, 30.0)
+    zero_damping_range: tuple[float, float] = (0.3, 1.0)
+    coupling: float = 0.3
+    min_zero_distance: float = 0.5
+    max_condition: float = 1e4
+
+    def __post_init__(self) -> None:
+        lo, hi = self.order_range
+        check_int("order_range[0]", lo, low=1, high=12)
+        check_int("order_range[1]", hi, low=lo, high=12)
+        for name in ("pole_frequency_range", "zero_frequency_range"):
+            a, b = getattr(self, name)
+            check_positive(f"{name}[0]", a)
+            check_real(f"{name}[1]", b, low=a)
+        for name in ("pole_damping_range", "zero_damping_range"):
+            a, b = getattr(self, name)
+            check_real(f"{name}[0]", a, low=0.0, low_open=True, high=1.0)
+            check_real(f"{name}[1]", b, low=a, high=1.0)
+        check_real("complex_fraction", self.complex_fraction, low=0.0, high=1.0)
+        check_real("coupling", self.coupling, low=0.0, high=1.0)
+        check_positive("min_zero_distance", self.min_zero_distance)
+        check_real("max_condition", self.max_condition, low=1.0, low_open=True)
+
+
+def _random_roots(n: int, freq_range, damping_range, complex_fraction, rng) -> np.ndarray:
+    """``n`` random left-half-plane roots (complex ones in conjugate pairs), rad/s."""
+    roots: list[complex] = []
+    lf = np.log(freq_range)
+    while len(roots) < n:
+        wn = 2 * np.pi * np.exp(rng.uniform(*lf))
+        if n - len(roots) >= 2 and rng.uniform() < complex_fraction:
+            zeta = rng.uniform(*damping_range)
+            wd = wn * np.sqrt(max(1.0 - zeta**2, 0.0))
+            roots += [complex(-zeta * wn, wd), complex(-zeta * wn, -wd)]
+        else:
+            roots.append(complex(-wn, 0.0))
+    return np.array(roots)
+
+
+@dataclass(frozen=True, eq=False)
+class Obfuscator:
+    """One draw of ``Psi``: continuous design and its discrete realisation.
+
+    Attributes
+    ----------
+    poles : (n,) complex ndarray
+        Common denominator roots, rad/s.
+    numerators : (2, 2, n+1) ndarray
+        Polynomial coefficients of each entry's numerator (highest power first).
+    system : StateSpaceData
+        Discrete realisation (bilinear), order ``2 n``.
+    """
+
+    poles: np.ndarray
+    numerators: np.ndarray
+    system: StateSpaceData
+
+    @property
+    def order(self) -> int:
+        return len(self.poles)
+
+    def zeros(self) -> np.ndarray:
+        """Transmission zeros of the continuous design, roots of ``det N(s)`` (rad/s)."""
+        N = self.numerators
+        det = np.polysub(np.polymul(N[0, 0], N[1, 1]), np.polymul(N[0, 1], N[1, 0]))
+        return np.roots(np.trim_zeros(det, "f"))
+
+
+def _realise(poles: np.ndarray, num: np.ndarray) -> tuple[np.ndarray, ...]:
+    """Continuous real modal realisation of ``N(s)/d(s)`` (2x2, ``d`` monic with distinct roots).
+
+    Partial fractions ``Psi(s) = D + sum_i R_i / (s - p_i)`` with ``R_i = N(p_i) / d'(p_i)``;
+    one 2-state block per real pole, one 4-state block per complex pair
+    (``A = [[sigma I, -omega I], [omega I, sigma I]]``, ``C = [2 Re R, -2 Im R]``), then each
+    state is scaled so its B row and C column have equal norms. A companion form would be
+    far worse conditioned for poles spread over two decades (its response error reached
+    1e-4 relative after a random similarity; this form keeps it near 1e-12).
+    """
+    den = np.real(np.poly(poles))
+    dden = np.polyder(den)
+    D = num[:, :, 0].copy()
+    blocks_A, blocks_B, blocks_C = [], [], []
+    for p in poles:
+        if p.imag < 0:
+            continue
+        R = np.array([[np.polyval(num[a, b], p) for b in range(2)] for a in range(2)]) / np.polyval(dden, p)
+        if p.imag == 0:
+            blocks_A.append(np.eye(2) * p.real)
+            blocks_B.append(np.eye(2))
+            blocks_C.append(R.real)
+        else:
+            s_, w_ = p.real, p.imag
+            blocks_A.append(np.block([[s_ * np.eye(2), -w_ * np.eye(2)], [w_ * np.eye(2), s_ * np.eye(2)]]))
+            blocks_B.append(np.vstack([np.eye(2), np.zeros((2, 2))]))
+            blocks_C.append(np.hstack([2 * R.real, -2 * R.imag]))
+    A = scipy.linalg.block_diag(*blocks_A)
+    B = np.vstack(blocks_B)
+    C = np.hstack(blocks_C)
+    # Diagonal balancing of input and output coupling per state.
+    # Clipped, since a state whose residue column vanishes would otherwise get a scale of 0.
+    ratio = np.linalg.norm(C, axis=0) / np.maximum(np.linalg.norm(B, axis=1), 1e-12)
+    ratio = np.clip(ratio, 1e-4 * ratio.max(), None) if ratio.max() > 0 else np.ones_like(ratio)
+    scale = np.sqrt(ratio / np.exp(np.mean(np.log(ratio))))
+    # Similarity x = diag(1/scale) x': A' = diag(scale) A diag(1/scale).
+    return scale[:, None] * A / scale[None, :], B * scale[:, None], C / scale[None, :], D
+
+
+def draw_obfuscator(spec: ObfuscationSpec, grid: SegmentGrid, *, rng=None,
+                    max_attempts: int = 200) -> Obfuscator:
+    """Draw one ``Psi`` from ``spec``, discretised for ``grid``.
+
+    Raises
+    ------
+    ParameterError
+        If no acceptable draw is found in ``max_attempts`` (the spec is too strict).
+    """
+    if not isinstance(spec, ObfuscationSpec):
+        raise ParameterError(f"spec must be an ObfuscationSpec, got {type(spec).__name__}")
+    rng = np.random.default_rng(rng)
+    dt = grid.dt
+    for _ in range(max_attempts):
+        n = int(rng.integers(spec.order_range[0], spec.order_range[1] + 1))
+        poles = _random_roots(n, spec.pole_frequency_range, spec.pole_damping_range, spec.complex_fraction, rng)
+        den = np.real(np.poly(poles))
+        num = np.zeros((2, 2, n + 1))
+        diag_gain = np.exp(rng.uniform(np.log(0.5), np.log(2.0), 2))
+        for a in range(2):
+            for b in range(2):
+                zeros = _random_roots(n, spec.zero_frequency_range, spec.zero_damping_range,
+                                      spec.complex_fraction, rng)
+                # Scale so |N_ab(j w)/d(j w)| ~ gain at high frequency and O(gain) at DC.
+                gain = diag_gain[a] if a == b else spec.coupling * rng.uniform(-1, 1) * np.sqrt(np.prod(diag_gain))
+                num[a, b] = gain * np.real(np.poly(zeros))
+        A, B, C, D = _realise(poles, num)
+        cand = Obfuscator(poles=poles, numerators=num, system=StateSpaceData(A, B, C, D, dt))
+        z = cand.zeros()
+        if z.size != 2 * n or np.max(z.real) > -spec.min_zero_distance:
+            continue
+        Ad, Bd, Cd, Dd, _ = scipy.signal.cont2discrete((A, B, C, D), dt, method="bilinear")
+        sysd = StateSpaceData(Ad, Bd, Cd, Dd, dt)
+        H = sysd.frequency_response(grid.omega_dt[grid.active])
+        sv = np.linalg.svd(H, compute_uv=False)
+        if np.max(sv[:, 0] / sv[:, -1]) > spec.max_condition:
+            continue
+        return Obfuscator(poles=poles, numerators=num, system=sysd)
+    raise ParameterError(f"no obfuscator satisfying spec was found in max_attempts={max_attempts} draws")
+
+
+def obfuscate(message: ExchangeMessage, grid: SegmentGrid, spec: ObfuscationSpec = ObfuscationSpec(), *,
+              rng=None) -> tuple[ExchangeMessage, Obfuscator, Obfuscator]:
+    """Apply Algorithm 2 to a plain message (eq. 17).
+
+    Parameters
+    ----------
+    message : ExchangeMessage
+        ``mechanism == "none"``.
+    grid : SegmentGrid
+    spec : ObfuscationSpec
+    rng : numpy.random.Generator | int | None
+
+    Returns
+    -------
+    (ExchangeMessage, Obfuscator, Obfuscator)
+        The obfuscated message (``mechanism == "paper"``) and the private draws ``Psi1``,
+        ``Psi2`` (kept by the sender, never sent).
+    """
+    if message.mechanism != "none":
+        raise ParameterError(f"message.mechanism must be 'none', got {message.mechanism!r}")
+    rng = np.random.default_rng(rng)
+    psi1 = draw_obfuscator(spec, grid, rng=rng)
+    psi2 = draw_obfuscator(spec, grid, rng=rng)
+    T_t = series(message.T, psi1.system)                       # Psi1 T
+    S_t = series(series(psi2.system, message.S), psi1.system)  # Psi1 S Psi2
+    T_t = similarity(T_t, random_orthogonal(T_t.order, rng))
+    S_t = similarity(S_t, random_orthogonal(S_t.order, rng))
+    act = grid.active
+    om = grid.omega_dt[act]
+    H1 = psi1.system.frequency_response(om)
+    H2inv = inv2x2(psi2.system.frequency_response(om))
+    E = grid.rfft(message.e)
+    Wf = grid.rfft(message.wf)
+    # Only the active bins matter to the receiver (W = 0 elsewhere); the others are still
+    # filtered so the time signals carry no unobfuscated component.
+    E_t = np.zeros_like(E)
+    Wf_t = np.zeros_like(Wf)
+    E_t[act] = matvec(H1, E[act])
+    Wf_t[act] = matvec(H2inv, Wf[act])
+    inact = ~act
+    if inact.any():
+        om_i = grid.omega_dt[inact]
+        E_t[inact] = matvec(psi1.system.frequency_response(om_i), E[inact])
+        Wf_t[inact] = matvec(inv2x2(psi2.system.frequency_response(om_i)), Wf[inact])
+    out = ExchangeMessage(mechanism="paper", sample_rate=message.sample_rate, n_samples=message.n_samples,
+                          T=T_t, S=S_t, e=grid.irfft(E_t), wf=grid.irfft(Wf_t))
+    return out, psi1, psi2
