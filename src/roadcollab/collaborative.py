@@ -70,6 +70,8 @@ class VehicleEstimate:
     ----------
     observer_only : (N, 2) ndarray
         ``D_j y_j``, m/s: the vehicle alone.
+    W_obs : (K, 2) complex ndarray
+        Spectrum of ``D_j y_j``.
     estimate : (N, 2) ndarray
         ``w_hat_j = D_j y_j + w^f_j``, m/s: Algorithm 1.
     W_hat, E, Wf : (K, 2) complex ndarray
@@ -78,6 +80,7 @@ class VehicleEstimate:
 
     observer_only: np.ndarray
     estimate: np.ndarray
+    W_obs: np.ndarray
     W_hat: np.ndarray
     E: np.ndarray
     Wf: np.ndarray
@@ -129,6 +132,10 @@ class CollaborativeEstimator:
         # -S_j^-1 T_j = P_hat^-1 (I - P_hat D) P_hat = (I - D P_hat): the map z_{j-1} -> w^f_j.
         self._minus_Sinv_T = -(inv2x2(self.S_f[act]) @ self.T_f[act])
         self.T_ss, self.S_ss = self._realisations()
+        # Responses of the realisations that are sent; the obfuscator and the receiver both
+        # use exactly these, so privacy changes no estimate beyond round-off.
+        self.T_ss_f = self.T_ss.frequency_response(om[act])
+        self.S_ss_f = self.S_ss.frequency_response(om[act])
         self._offset = self.estimator.steady_offset()
 
     # -- realisations sent to the next vehicle ------------------------------------------------
@@ -228,7 +235,7 @@ class CollaborativeEstimator:
         E = Y - matvec(self.P_f, W_hat)
         obs = self.grid.irfft(DY, n) + self._offset
         est = self.grid.irfft(W_hat, n) + self._offset
-        return VehicleEstimate(observer_only=obs, estimate=est, W_hat=W_hat, E=E, Wf=Wf)
+        return VehicleEstimate(observer_only=obs, estimate=est, W_obs=DY, W_hat=W_hat, E=E, Wf=Wf)
 
     def message(self, result: VehicleEstimate) -> ExchangeMessage:
         """The plain message ``(T_j, S_j, e_j, w^f_j)`` of Algorithm 1."""

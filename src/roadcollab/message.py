@@ -122,3 +122,32 @@ class ExchangeMessage:
     S: StateSpaceData
     e: np.ndarray
     wf: np.ndarray
+
+
+@dataclass(frozen=True, eq=False)
+class InversionMessage:
+    """Hardened exchange: the band-limited road-input estimate only, no dynamics.
+
+    With the optimal learning filters, everything vehicle ``j`` needs from vehicle ``j-1`` is
+    ``z_{j-1} = W T_{j-1}^-1 (e_{j-1} - S_{j-1} w^f_{j-1})``, which equals
+    ``W P_hat_{j-1}^-1 y_{j-1}`` (NOTES section 4); ``w^f_j = -S_j^-1 T_j z_{j-1}``.
+
+    Attributes
+    ----------
+    mechanism : str
+        ``"hardened"`` (Algorithm 1 with only ``z`` sent) or ``"fused"`` (running average).
+    sample_rate : float
+        Hz.
+    n_samples : int
+        Samples in the recorded window.
+    z : (nfft, 2) ndarray
+        ``z`` on the padded periodic grid, m/s.
+    count : int
+        Number of vehicles whose inversions ``z`` averages (1 for ``hardened``).
+    """
+
+    mechanism: str
+    sample_rate: float
+    n_samples: int
+    z: np.ndarray
+    count: int = 1

@@ -217,8 +217,16 @@ def draw_obfuscator(spec: ObfuscationSpec, grid: SegmentGrid, *, rng=None,
 
 
 def obfuscate(message: ExchangeMessage, grid: SegmentGrid, spec: ObfuscationSpec = ObfuscationSpec(), *,
-              rng=None) -> tuple[ExchangeMessage, Obfuscator, Obfuscator]:
+              rng=None, T_response: np.ndarray | None = None, S_response: np.ndarray | None = None
+              ) -> tuple[ExchangeMessage, Obfuscator, Obfuscator]:
     """Apply Algorithm 2 to a plain message (eq. 17).
+
+    ``e~`` is formed as ``T~ z + S~ w~f`` with ``z = T^-1 (e - S w^f)``, using the frequency
+    responses of the realisations actually sent. In exact arithmetic this is ``Psi1 e``
+    (since ``T~ = Psi1 T`` and ``S~ w~f = Psi1 S w^f``). Computed this way the receiver's
+    ``T~^-1 (e~ - S~ w~f)`` equals ``z`` to round-off even where the realisation of ``T~`` is
+    sensitive (``T`` has a triple zero at DC, so near the band edge rounding the similarity
+    transform alone moved ``T~`` by up to 4e-7 relative, which direct ``Psi1 e`` passed on).
 
     Parameters
     ----------
@@ -227,6 +235,8 @@ def obfuscate(message: ExchangeMessage, grid: SegmentGrid, spec: ObfuscationSpec
     grid : SegmentGrid
     spec : ObfuscationSpec
     rng : numpy.random.Generator | int | None
+    T_response, S_response : (K, 2, 2) complex ndarray, optional
+        Responses of ``message.T`` and ``message.S`` on the active bins, if already known.
 
     Returns
     -------
@@ -245,16 +255,17 @@ def obfuscate(message: ExchangeMessage, grid: SegmentGrid, spec: ObfuscationSpec
     S_t = similarity(S_t, random_orthogonal(S_t.order, rng))
     act = grid.active
     om = grid.omega_dt[act]
-    H1 = psi1.system.frequency_response(om)
-    H2inv = inv2x2(psi2.system.frequency_response(om))
+    T_f = message.T.frequency_response(om) if T_response is None else T_response
+    S_f = message.S.frequency_response(om) if S_response is None else S_response
     E = grid.rfft(message.e)
     Wf = grid.rfft(message.wf)
-    # Only the active bins matter to the receiver (W = 0 elsewhere); the others are still
-    # filtered so the time signals carry no unobfuscated component.
-    E_t = np.zeros_like(E)
-    Wf_t = np.zeros_like(Wf)
-    E_t[act] = matvec(H1, E[act])
-    Wf_t[act] = matvec(H2inv, Wf[act])
+    Wf_t = np.empty_like(Wf)
+    E_t = np.empty_like(E)
+    Wf_t[act] = matvec(inv2x2(psi2.system.frequency_response(om)), Wf[act])
+    z = matvec(inv2x2(T_f), E[act] - matvec(S_f, Wf[act]))
+    E_t[act] = matvec(T_t.frequency_response(om), z) + matvec(S_t.frequency_response(om), Wf_t[act])
+    # Bins outside the band carry nothing to the receiver (W = 0 there) but are obfuscated
+    # too, so the time signals hold no clear component.
     inact = ~act
     if inact.any():
         om_i = grid.omega_dt[inact]

@@ -1,0 +1,370 @@
+"""Monte Carlo reproduction of the paper's simulations (Figs. 4-7).
+
+One *run* draws a road (and, for a measured profile, its second track), the sensor noise of
+every vehicle and the obfuscators, and relays Algorithm 1 down the fleet twice on the same
+measurements: in the clear (``none``) and with Algorithm 2 (``paper``). The fleet (true and
+estimated parameters) is drawn once per reproduction, so "vehicle j" means the same car in
+every run. Every run gets its own :class:`numpy.random.SeedSequence` child, so results do not
+depend on how runs are scheduled.
+
+MSE (the same for every estimator): the mean over the scored segment (the window minus the
+lead-in and lead-out margins) and both tracks of the squared difference between the
+band-limited true road velocity and the band-limited estimate, (m/s)^2; the band is the
+weight ``W`` of :class:`~roadcollab.spectral.SegmentGrid` (DC and the lowest frequencies are
+invisible to accelerometers). NMSE divides by the band-limited truth's mean square.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass, field
+from typing import Callable
+
+import numpy as np
+
+from ._validation import check_int, check_nonnegative, check_positive, check_real
+from .collaborative import CollaborativeEstimator
+from .errors import ParameterError
+from .estimator import JDPNoise
+from .privacy import ObfuscationSpec, obfuscate
+from .road import RoadSpec, TimeRoad, generate_road, jump_statistics, measured_road, wiener_intensity
+from .simulation import add_sensor_noise, simulate_response
+from .spectral import SegmentGrid, inv2x2, matvec
+from .vehicle import FleetSpec, Vehicle, sample_fleet
+
+__all__ = ["ExperimentConfig", "FleetPipeline", "RunResult", "ReproductionResult", "run_reproduction",
+           "simulate_run"]
+
+
+@dataclass(frozen=True)
+class ExperimentConfig:
+    """Everything a reproduction depends on besides the seed (all SI units).
+
+    Parameters
+    ----------
+    n_vehicles : int
+        Fleet size (vehicles traverse the segment in index order).
+    n_runs : int
+        Monte Carlo runs.
+    speed : float
+        Vehicle speed, m/s.
+    sample_rate : float
+        Accelerometer sample rate, Hz.
+    segment_length : float
+        Scored segment length, m.
+    margin : float
+        Recorded lead-in and lead-out on each side of the segment, m. The vehicle starts at
+        rest at the start of the lead-in; the margins keep start-up and window-edge effects
+        of the offline filters out of the score.
+    iso_class : str
+        ISO 8608 roughness class of the synthetic road.
+    anomaly_density : float
+        Potholes and bumps per metre.
+    sensor_noise_std : float
+        Accelerometer noise standard deviation per sample, m/s^2.
+    fleet : FleetSpec
+        How true and estimated vehicle parameters are drawn.
+    gamma : float
+        Observer parameter of eq. 4; corner ``gamma (1 + gamma) / 2`` rad/s.
+    band_low_hz : float
+        Lower edge of the evaluation band, Hz.
+    obfuscation : ObfuscationSpec
+        Distribution of the obfuscating systems (Algorithm 2).
+    oracle : bool
+        Use each vehicle's true plant in ``T_j`` (analysis only).
+    road_profile : str | None
+        Path of a measured profile (``"packaged"`` for the shipped one); None: synthetic.
+    """
+
+    n_vehicles: int = 10
+    n_runs: int = 100
+    speed: float = 15.0
+    sample_rate: float = 200.0
+    segment_length: float = 300.0
+    margin: float = 15.0
+    iso_class: str = "C"
+    anomaly_density: float = 0.02
+    sensor_noise_std: float = 0.05
+    fleet: FleetSpec = field(default_factory=FleetSpec)
+    gamma: float = 32.0
+    band_low_hz: float = 0.5
+    obfuscation: ObfuscationSpec = field(default_factory=ObfuscationSpec)
+    oracle: bool = False
+    road_profile: str | None = None
+
+    def __post_init__(self) -> None:
+        check_int("n_vehicles", self.n_vehicles, low=1, high=1000)
+        check_int("n_runs", self.n_runs, low=1)
+        check_positive("speed", self.speed)
+        check_positive("sample_rate", self.sample_rate)
+        check_positive("segment_length", self.segment_length)
+        check_nonnegative("margin", self.margin)
+        check_nonnegative("sensor_noise_std", self.sensor_noise_std)
+        check_positive("gamma", self.gamma)
+        check_real("band_low_hz", self.band_low_hz, low=0.0, low_open=True, high=self.sample_rate / 2)
+        for name, typ in (("fleet", FleetSpec), ("obfuscation", ObfuscationSpec)):
+            if not isinstance(getattr(self, name), typ):
+                raise ParameterError(f"{name} must be a {typ.__name__}, got {type(getattr(self, name)).__name__}")
+        self.road_spec()  # validates iso_class and the anomaly settings
+
+    @property
+    def window_length(self) -> float:
+        """Recorded distance per vehicle, m."""
+        return self.segment_length + 2 * self.margin
+
+    @property
+    def n_samples(self) -> int:
+        """Samples in the recorded window."""
+        return int(np.floor(self.window_length / self.speed * self.sample_rate + 1e-9))
+
+    @property
+    def scored(self) -> slice:
+        """Sample indices of the scored segment inside the window."""
+        k0 = int(round(self.margin / self.speed * self.sample_rate))
+        k1 = k0 + int(round(self.segment_length / self.speed * self.sample_rate))
+        return slice(k0, min(k1, self.n_samples))
+
+    def road_spec(self) -> RoadSpec:
+        """Synthetic road of the window length, anomalies kept out of the margins."""
+        return RoadSpec(length=self.window_length + 1.0, iso_class=self.iso_class,
+                        anomaly_density=self.anomaly_density, anomaly_margin=max(self.margin, 1.0))
+
+    def noise_model(self) -> JDPNoise:
+        """Road and sensor statistics the estimators are designed for (Lemma 1).
+
+        The Wiener intensity is the ISO class's road-velocity intensity at ``speed``; the jump
+        part comes from the pothole edges; the measurement intensity is ``std^2 * dt``. A
+        floor of 1e-4 (m/s^2)^2 per sample keeps the design regular with noise-free sensors.
+        """
+        spec = self.road_spec()
+        jumps = jump_statistics(spec, self.speed)
+        r = max(self.sensor_noise_std, 1e-2) ** 2 / self.sample_rate
+        return JDPNoise(wiener_cov=wiener_intensity(spec, self.speed), jump_rate=jumps.rate,
+                        jump_mean=jumps.mean, jump_cov=jumps.covariance, measurement_cov=r * np.eye(2))
+
+    def grid(self) -> SegmentGrid:
+        return SegmentGrid(self.n_samples, self.sample_rate, band_low_hz=self.band_low_hz)
+
+    def to_dict(self) -> dict:
+        """JSON-ready configuration (nested dataclasses as dicts)."""
+        return dataclasses.asdict(self)
+
+
+class FleetPipeline:
+    """Per-vehicle setup for a configuration: estimators, grids, realisations.
+
+    Parameters
+    ----------
+    config : ExperimentConfig
+    fleet : list of Vehicle
+    """
+
+    def __init__(self, config: ExperimentConfig, fleet: list[Vehicle]) -> None:
+        if len(fleet) != config.n_vehicles:
+            raise ParameterError(f"fleet must have n_vehicles={config.n_vehicles} vehicles, got {len(fleet)}")
+        self.config = config
+        self.fleet = fleet
+        self.grid = config.grid()
+        noise = config.noise_model()
+        self.estimators = [CollaborativeEstimator(v, noise, self.grid, gamma=config.gamma, oracle=config.oracle)
+                           for v in fleet]
+        self.z_error_information = [self._z_information(e, noise) for e in self.estimators]
+
+    def _z_information(self, est: CollaborativeEstimator, noise: JDPNoise, n_models: int = 32) -> np.ndarray:
+        """Inverse error covariance (per active bin, 2x2) of ``z = P_hat^-1 y`` for the
+        centralised estimator.
+
+        ``z - w = (P_hat^-1 P - I) w + P_hat^-1 n``. The model-error term is estimated from
+        ``n_models`` plausible true plants drawn around the nominal model with the fleet's
+        parameter uncertainty (a fixed, documented seed: this is design, not data).
+        """
+        from .simulation import discretize_plant
+        from .vehicle import half_car_model
+
+        cfg, grid = self.config, self.grid
+        act = grid.active
+        om = grid.omega_dt[act]
+        Pinv = inv2x2(est.P_f[act])
+        rng = np.random.default_rng(12345)
+        names = list(est.vehicle.estimated_params.as_dict())
+        G2 = np.zeros((om.size, 2, 2), complex)
+        u = cfg.fleet.estimate_uncertainty
+        for _ in range(n_models):
+            f = 1.0 + u * np.clip(rng.standard_normal(len(names)), -3, 3)
+            model = half_car_model(est.vehicle.estimated_params.scaled(dict(zip(names, f))))
+            G = Pinv @ discretize_plant(model, grid.dt).frequency_response(om) - np.eye(2)
+            G2 += G @ G.conj().transpose(0, 2, 1) / n_models
+        var_w = float(np.trace(noise.sigma_bar)) / 2 * cfg.sample_rate     # per-sample variance of w
+        var_n = max(cfg.sensor_noise_std, 1e-3) ** 2
+        C = var_w * G2 + var_n * Pinv @ Pinv.conj().transpose(0, 2, 1)
+        return inv2x2(C)
+
+    def road(self, rng: np.random.Generator) -> TimeRoad:
+        """Draw the run's road and sample it for the fleet's speed."""
+        cfg = self.config
+        if cfg.road_profile is None:
+            profile = generate_road(cfg.road_spec(), rng=rng)
+        else:
+            path = None if cfg.road_profile == "packaged" else cfg.road_profile
+            profile = measured_road(path, rng=rng)
+            if profile.length < cfg.window_length:
+                raise ParameterError(f"road_profile covers {profile.length:.1f} m, the window needs "
+                                     f"segment_length + 2 * margin = {cfg.window_length:.1f} m")
+        return profile.sample(cfg.speed, cfg.sample_rate, duration=cfg.n_samples / cfg.sample_rate)
+
+
+@dataclass(frozen=True, eq=False)
+class RunResult:
+    """Per-vehicle metrics of one run (arrays of shape (n_vehicles,), (m/s)^2)."""
+
+    mse_observer: np.ndarray
+    mse_plain: np.ndarray
+    mse_private: np.ndarray
+    mse_fused: np.ndarray
+    mse_centralized: np.ndarray
+    max_rel_diff: np.ndarray
+    truth_power: float
+    traces: dict | None = None
+
+
+def simulate_run(pipe: FleetPipeline, rng, *, keep_traces: int = 0, privacy: bool = True) -> RunResult:
+    """One Monte Carlo run: road, measurements, Algorithm 1 with and without Algorithm 2.
+
+    Parameters
+    ----------
+    pipe : FleetPipeline
+    rng : numpy.random.Generator | int | numpy.random.SeedSequence
+    keep_traces : int
+        Keep the time series of the first ``keep_traces`` vehicles (for Figs. 5-7).
+    privacy : bool
+        Also run the obfuscated chain (Algorithm 2).
+    """
+    cfg, grid = pipe.config, pipe.grid
+    ss = rng if isinstance(rng, np.random.SeedSequence) else np.random.SeedSequence(
+        np.random.default_rng(rng).integers(2**63))
+    road_ss, noise_ss, priv_ss = ss.spawn(3)
+    road = pipe.road(np.random.default_rng(road_ss))
+    noise_rng = np.random.default_rng(noise_ss)
+    priv_rng = np.random.default_rng(priv_ss)
+    w = road.velocity
+    n, sl, act = grid.n_samples, cfg.scored, grid.active
+    Wgt = grid.weight[:, None]
+    truth = grid.irfft(Wgt * grid.rfft(w), n)[sl]
+    power = float(np.mean(truth**2))
+
+    def mse(X):  # X: spectrum of an estimate; band-limited like the truth
+        return float(np.mean((grid.irfft(Wgt * X, n)[sl] - truth) ** 2))
+
+    V = cfg.n_vehicles
+    out = {k: np.zeros(V) for k in ("obs", "plain", "priv", "fused", "central", "rel")}
+    msg_plain = msg_priv = None
+    z_sum = np.zeros((grid.n_bins, 2), complex)
+    num = np.zeros((int(act.sum()), 2), complex)
+    info = np.zeros((int(act.sum()), 2, 2), complex)
+    traces = {"time": road.time[sl], "truth": truth, "truth_raw": w[sl], "plain": [], "private": []} \
+        if keep_traces else None
+    for j, est in enumerate(pipe.estimators):
+        y = add_sensor_noise(simulate_response(est.true_plant, w), cfg.sensor_noise_std, rng=noise_rng)
+        r = est.estimate(y, msg_plain)
+        msg_plain = est.message(r)
+        out["obs"][j] = mse(r.W_obs)
+        out["plain"][j] = mse(r.W_hat)
+        if privacy:
+            rp = est.estimate(y, msg_priv)
+            msg_priv, _, _ = obfuscate(est.message(rp), grid, cfg.obfuscation, rng=priv_rng,
+                                       T_response=est.T_ss_f, S_response=est.S_ss_f)
+            out["priv"][j] = mse(rp.W_hat)
+            scale = max(float(np.max(np.abs(r.estimate))), 1e-300)
+            out["rel"][j] = float(np.max(np.abs(rp.estimate - r.estimate))) / scale
+        else:
+            rp = r
+            out["priv"][j] = out["plain"][j]
+        # Fused: the average of the band-limited inversions z_i = W P_hat_i^-1 y_i of
+        # vehicles 1..j. Only z crosses the network (no dynamics); independent parameter
+        # errors and noise average out.
+        Y = grid.rfft(y)
+        z_sum += est.invert(Y)
+        out["fused"][j] = mse(z_sum / (j + 1))
+        # Centralised: one party with every raw measurement, nominal model and the parameter
+        # uncertainty combines the inversions per bin with their error covariances (BLUE).
+        Ci = pipe.z_error_information[j]
+        info += Ci
+        num += matvec(Ci, est.invert(Y)[act])
+        Wc = np.zeros_like(Y)
+        Wc[act] = matvec(inv2x2(info), num)
+        out["central"][j] = mse(Wc)
+        if j < keep_traces:
+            traces["plain"].append(grid.irfft(Wgt * r.W_hat, n)[sl])
+            traces["private"].append(grid.irfft(Wgt * rp.W_hat, n)[sl])
+    return RunResult(mse_observer=out["obs"], mse_plain=out["plain"], mse_private=out["priv"],
+                     mse_fused=out["fused"], mse_centralized=out["central"], max_rel_diff=out["rel"],
+                     truth_power=power, traces=traces)
+
+
+@dataclass(frozen=True, eq=False)
+class ReproductionResult:
+    """All runs of a reproduction and their per-vehicle summary."""
+
+    config: ExperimentConfig
+    seed: int
+    fleet: list[Vehicle]
+    runs: list[RunResult]
+
+    def _stack(self, name: str) -> np.ndarray:
+        return np.vstack([getattr(r, name) for r in self.runs])
+
+    def table(self) -> list[dict]:
+        """Rows of ``mse.csv``: one per vehicle (1-based), MSE in (m/s)^2."""
+        pw = np.array([r.truth_power for r in self.runs])[:, None]
+        priv, plain = self._stack("mse_private"), self._stack("mse_plain")
+        obs, fused, cen = self._stack("mse_observer"), self._stack("mse_fused"), self._stack("mse_centralized")
+        rel = self._stack("max_rel_diff")
+        rows = []
+        for j in range(self.config.n_vehicles):
+            rows.append({
+                "vehicle": j + 1,
+                "mse_mean": priv[:, j].mean(), "mse_std": priv[:, j].std(ddof=1) if len(self.runs) > 1 else 0.0,
+                "mse_no_privacy_mean": plain[:, j].mean(),
+                "observer_only_mse_mean": obs[:, j].mean(),
+                "observer_only_mse_std": obs[:, j].std(ddof=1) if len(self.runs) > 1 else 0.0,
+                "fused_mse_mean": fused[:, j].mean(),
+                "centralized_mse_mean": cen[:, j].mean(),
+                "nmse_mean": (priv[:, j:j + 1] / pw).mean(),
+                "observer_only_nmse_mean": (obs[:, j:j + 1] / pw).mean(),
+                "fused_nmse_mean": (fused[:, j:j + 1] / pw).mean(),
+                "centralized_nmse_mean": (cen[:, j:j + 1] / pw).mean(),
+                "max_rel_diff_privacy": rel[:, j].max(),
+            })
+        return rows
+
+
+def run_reproduction(config: ExperimentConfig, seed: int, *, progress: Callable[[int], None] | None = None,
+                     privacy: bool = True) -> ReproductionResult:
+    """Run the Monte Carlo reproduction serially.
+
+    Parameters
+    ----------
+    config : ExperimentConfig
+    seed : int
+        Root seed; the fleet and each run get independent SeedSequence children.
+    progress : callable, optional
+        Called with the number of finished runs after each run.
+    privacy : bool
+        Run the obfuscated chain too.
+
+    Returns
+    -------
+    ReproductionResult
+    """
+    if not isinstance(config, ExperimentConfig):
+        raise ParameterError(f"config must be an ExperimentConfig, got {type(config).__name__}")
+    seed = check_int("seed", seed, low=0)
+    fleet_ss, runs_ss = np.random.SeedSequence(seed).spawn(2)
+    fleet = sample_fleet(config.n_vehicles, config.fleet, rng=np.random.default_rng(fleet_ss))
+    pipe = FleetPipeline(config, fleet)
+    runs = []
+    for i, rs in enumerate(runs_ss.spawn(config.n_runs)):
+        runs.append(simulate_run(pipe, rs, keep_traces=3 if i == 0 else 0, privacy=privacy))
+        if progress is not None:
+            progress(i + 1)
+    return ReproductionResult(config=config, seed=seed, fleet=fleet, runs=runs)
