@@ -33,6 +33,7 @@ __all__ = [
     "build_road_input_estimator",
     "zoh_discretize",
     "dlti_frequency_response",
+    "ss_response",
 ]
 
 
@@ -177,32 +178,52 @@ def dlti_frequency_response(Ad, Bd, Cd, Dd, omega_dt: np.ndarray) -> np.ndarray:
     -------
     (M, p, m) complex ndarray
     """
-    # Diagonalise once: (zI - A)^-1 = V diag(1/(z - lambda)) V^-1. Faster than M solves
-    # (measured 0.25 ms vs 4 ms for M = 4097, n = 6). Its error grows like cond(V) * eps, so
-    # realisations with close or repeated poles (series connections) go through the
-    # backward-stable complex Schur form instead.
-    z = np.exp(1j * np.asarray(omega_dt, dtype=float))
-    Ad = np.asarray(Ad, dtype=float)
-    lam, V = np.linalg.eig(Ad)
+    return ss_response(Ad, Bd, Cd, Dd, np.exp(1j * np.asarray(omega_dt, dtype=float)))
+
+
+def ss_response(A, B, C, D, points: np.ndarray) -> np.ndarray:
+    """``C (x I - A)^-1 B + D`` at complex points ``x`` (``s`` or ``z``), shape (M, p, m)."""
+    # Diagonalise once: (xI - A)^-1 = V diag(1/(x - lambda)) V^-1, so every output/input pair
+    # is one matrix product [1/(x - lambda)] @ [Cv_pn Bv_nm] (about 10x faster than M solves).
+    # Its error grows like cond(V) * eps, so realisations with close or repeated poles
+    # (series connections) go through the backward-stable complex Schur form instead.
+    x = np.asarray(points, dtype=complex).reshape(-1)
+    A, B, C, D = (np.asarray(a, dtype=float) for a in (A, B, C, D))
+    p, m = D.shape
+    if A.shape[0] == 0:
+        return np.broadcast_to(D.astype(complex), (x.size, p, m)).copy()
+    lam, V = np.linalg.eig(A)
     if np.linalg.cond(V) < 1e3:
-        Cv = Cd @ V
-        Bv = np.linalg.solve(V, Bd)
-        inv = 1.0 / (z[:, None] - lam[None, :])               # (M, n)
-        return np.einsum("pn,Mn,nm->Mpm", Cv, inv, Bv) + Dd
-    return _schur_frequency_response(Ad, Bd, Cd, Dd, z)
+        Cv = C @ V
+        Bv = np.linalg.solve(V, B)
+        R = (Cv[:, :, None] * Bv[None, :, :]).transpose(1, 0, 2).reshape(lam.size, p * m)
+        H = (1.0 / (x[:, None] - lam[None, :])) @ R
+        return H.reshape(x.size, p, m) + D
+    return _schur_frequency_response(A, B, C, D, x)
 
 
 def _schur_frequency_response(A, B, C, D, z):
-    """``C (zI - A)^-1 B + D`` via ``A = U T U^H``: one back substitution over all ``z``."""
+    """``C (zI - A)^-1 B + D`` via ``A = U T U^H``: one back substitution for all ``z``.
+
+    ``X`` is kept as (n, m, M) so each step is one BLAS product over every frequency
+    (about 10x faster than a per-row einsum; measured 1 ms vs 10 ms for n = 20, M = 3400).
+    """
     T, U = scipy.linalg.schur(A, output="complex")
     Bt = U.conj().T @ B
     Ct = C @ U
-    n = A.shape[0]
-    X = np.empty((z.size, n, B.shape[1]), complex)
+    n, m = B.shape
+    X = np.empty((n, m, z.size), complex)
+    inv_diag = 1.0 / (z[None, :] - np.diag(T)[:, None])          # (n, M), one pass
     for i in range(n - 1, -1, -1):
-        rhs = Bt[i][None, :] + np.einsum("k,Mkm->Mm", T[i, i + 1:], X[:, i + 1:, :])
-        X[:, i, :] = rhs / (z - T[i, i])[:, None]
-    return np.einsum("pn,Mnm->Mpm", Ct, X) + D
+        if i + 1 < n:
+            acc = (T[i, i + 1:] @ X[i + 1:].reshape(n - i - 1, m * z.size)).reshape(m, z.size)
+            acc += Bt[i][:, None]
+        else:
+            acc = np.repeat(Bt[i][:, None].astype(complex), z.size, axis=1)
+        acc *= inv_diag[i]
+        X[i] = acc
+    H = (Ct @ X.reshape(n, m * z.size)).reshape(C.shape[0], m, z.size)
+    return H.transpose(2, 0, 1) + D
 
 
 @dataclass(frozen=True, eq=False)
@@ -265,9 +286,7 @@ class RoadInputEstimator:
 
     def continuous_response(self, s: np.ndarray) -> np.ndarray:
         """``D_j(s)`` of the continuous design, shape (M, 2, 2)."""
-        s = np.asarray(s, dtype=complex).reshape(-1)
-        X = np.linalg.solve(s[:, None, None] * np.eye(6) - self.Ac, np.broadcast_to(self.Bc, (s.size, 6, 2)))
-        return self.Cc @ X + self.Dc
+        return ss_response(self.Ac, self.Bc, self.Cc, self.Dc, s)
 
     def filter(self, y, *, include_bias: bool = True) -> np.ndarray:
         """Run the discrete estimator causally over a measured signal.

@@ -28,7 +28,6 @@ from dataclasses import dataclass
 
 import numpy as np
 import scipy.linalg
-import scipy.signal
 
 from ._validation import check_int, check_positive, check_real
 from .errors import ParameterError
@@ -92,6 +91,19 @@ class ObfuscationSpec:
         check_real("max_condition", self.max_condition, low=1.0, low_open=True)
 
 
+def condition_2x2(H: np.ndarray) -> np.ndarray:
+    """2-norm condition numbers of a stack of 2x2 matrices, in closed form.
+
+    ``s1 s2 = |det H|`` and ``s1^2 + s2^2 = ||H||_F^2``; about 20x faster than a batched SVD.
+    """
+    fro2 = np.sum(np.abs(H) ** 2, axis=(-2, -1))
+    det = np.abs(H[..., 0, 0] * H[..., 1, 1] - H[..., 0, 1] * H[..., 1, 0])
+    disc = np.sqrt(np.maximum(fro2**2 - 4 * det**2, 0.0))
+    s1 = np.sqrt((fro2 + disc) / 2)
+    with np.errstate(divide="ignore"):
+        return np.where(det > 0, s1**2 / np.where(det > 0, det, 1.0), np.inf)
+
+
 def _random_roots(n: int, freq_range, damping_range, complex_fraction, rng) -> np.ndarray:
     """``n`` random left-half-plane roots (complex ones in conjugate pairs), rad/s."""
     roots: list[complex] = []
@@ -142,7 +154,7 @@ def _realise(poles: np.ndarray, num: np.ndarray) -> tuple[np.ndarray, ...]:
     Partial fractions ``Psi(s) = D + sum_i R_i / (s - p_i)`` with ``R_i = N(p_i) / d'(p_i)``;
     one 2-state block per real pole, one 4-state block per complex pair
     (``A = [[sigma I, -omega I], [omega I, sigma I]]``, ``C = [2 Re R, -2 Im R]``), then each
-    state is scaled so its B row and C column have equal norms. A companion form would be
+    each block is scaled so its B rows and C columns have equal norms. A companion form would be
     far worse conditioned for poles spread over two decades (its response error reached
     1e-4 relative after a random similarity; this form keeps it near 1e-12).
     """
@@ -163,16 +175,24 @@ def _realise(poles: np.ndarray, num: np.ndarray) -> tuple[np.ndarray, ...]:
             blocks_A.append(np.block([[s_ * np.eye(2), -w_ * np.eye(2)], [w_ * np.eye(2), s_ * np.eye(2)]]))
             blocks_B.append(np.vstack([np.eye(2), np.zeros((2, 2))]))
             blocks_C.append(np.hstack([2 * R.real, -2 * R.imag]))
-    A = scipy.linalg.block_diag(*blocks_A)
-    B = np.vstack(blocks_B)
-    C = np.hstack(blocks_C)
-    # Diagonal balancing of input and output coupling per state.
-    # Clipped, since a state whose residue column vanishes would otherwise get a scale of 0.
-    ratio = np.linalg.norm(C, axis=0) / np.maximum(np.linalg.norm(B, axis=1), 1e-12)
-    ratio = np.clip(ratio, 1e-4 * ratio.max(), None) if ratio.max() > 0 else np.ones_like(ratio)
-    scale = np.sqrt(ratio / np.exp(np.mean(np.log(ratio))))
-    # Similarity x = diag(1/scale) x': A' = diag(scale) A diag(1/scale).
-    return scale[:, None] * A / scale[None, :], B * scale[:, None], C / scale[None, :], D
+    # One scale per block (it commutes with the block, so A and its eigenvectors stay
+    # unchanged) balances the block's input and output coupling.
+    for k, (Bk, Ck) in enumerate(zip(blocks_B, blocks_C)):
+        sc = np.sqrt(max(np.linalg.norm(Ck), 1e-12) / np.linalg.norm(Bk))
+        blocks_B[k], blocks_C[k] = Bk * sc, Ck / sc
+    return scipy.linalg.block_diag(*blocks_A), np.vstack(blocks_B), np.hstack(blocks_C), D
+
+
+def _bilinear(A, B, C, D, dt):
+    """Bilinear (Tustin) discretisation, as ``scipy.signal.cont2discrete(method='bilinear')``
+    but with small dense solves (that routine's batched solver cost 1.7 ms per call here)."""
+    n = A.shape[0]
+    ima = np.eye(n) - 0.5 * dt * A
+    Ad = np.linalg.solve(ima, np.eye(n) + 0.5 * dt * A)
+    Bd = np.linalg.solve(ima, dt * B)
+    Cd = np.linalg.solve(ima.T, C.T).T
+    Dd = D + 0.5 * C @ Bd
+    return Ad, Bd, Cd, Dd
 
 
 def draw_obfuscator(spec: ObfuscationSpec, grid: SegmentGrid, *, rng=None,
@@ -206,11 +226,9 @@ def draw_obfuscator(spec: ObfuscationSpec, grid: SegmentGrid, *, rng=None,
         z = cand.zeros()
         if z.size != 2 * n or np.max(z.real) > -spec.min_zero_distance:
             continue
-        Ad, Bd, Cd, Dd, _ = scipy.signal.cont2discrete((A, B, C, D), dt, method="bilinear")
+        Ad, Bd, Cd, Dd = _bilinear(A, B, C, D, dt)
         sysd = StateSpaceData(Ad, Bd, Cd, Dd, dt)
-        H = sysd.frequency_response(grid.omega_dt[grid.active])
-        sv = np.linalg.svd(H, compute_uv=False)
-        if np.max(sv[:, 0] / sv[:, -1]) > spec.max_condition:
+        if np.max(condition_2x2(sysd.frequency_response(grid.omega_dt[grid.active]))) > spec.max_condition:
             continue
         return Obfuscator(poles=poles, numerators=num, system=sysd)
     raise ParameterError(f"no obfuscator satisfying spec was found in max_attempts={max_attempts} draws")

@@ -117,10 +117,9 @@ class HalfCarModel:
 
     def frequency_response(self, s: np.ndarray) -> np.ndarray:
         """``P(s)`` at complex frequencies ``s`` (shape (M,)); returns (M, 2, 2)."""
-        s = np.asarray(s, dtype=complex).reshape(-1)
-        eye = np.eye(4)
-        X = np.linalg.solve(s[:, None, None] * eye - self.A, np.broadcast_to(self.B, (s.size, 4, 2)))
-        return self.C @ X + self.D
+        from .estimator import ss_response
+
+        return ss_response(self.A, self.B, self.C, self.D, s)
 
 
 def half_car_model(params: HalfCarParameters) -> HalfCarModel:

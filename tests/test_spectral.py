@@ -1,0 +1,40 @@
+"""The DFT grid and the evaluation band."""
+
+import numpy as np
+import pytest
+
+from roadcollab import ParameterError, SegmentGrid
+from roadcollab.spectral import inv2x2
+
+
+def test_band_weight_is_zero_at_dc_half_at_the_edge_and_one_in_band():
+    g = SegmentGrid(4000, 200.0, band_low_hz=0.5)
+    assert g.nfft >= 6000
+    assert g.weight[0] == 0.0
+    k = np.argmin(np.abs(g.freqs - 0.5))
+    assert g.weight[k] == pytest.approx(1 / (1 + (0.5 / g.freqs[k]) ** 8))
+    assert np.all(g.weight[g.freqs > 2.0] > 1 - 1e-4)
+
+
+def test_band_limit_is_zero_phase_and_removes_a_constant():
+    g = SegmentGrid(2000, 200.0, band_low_hz=0.5)
+    t = np.arange(2000) / 200.0
+    x = np.column_stack([np.sin(2 * np.pi * 10 * t), np.ones_like(t)])
+    out = g.band_limit(x)
+    # A 10 Hz sine passes unchanged in the interior (zero phase); a constant is removed
+    # except for window-edge leakage.
+    np.testing.assert_allclose(out[500:1500, 0], x[500:1500, 0], atol=1e-3)
+    assert np.abs(out[500:1500, 1]).max() < 0.05
+
+
+def test_closed_form_2x2_inverse():
+    rng = np.random.default_rng(0)
+    M = rng.standard_normal((50, 2, 2)) + 1j * rng.standard_normal((50, 2, 2))
+    np.testing.assert_allclose(inv2x2(M), np.linalg.inv(M), rtol=1e-10)
+
+
+def test_bad_grids():
+    with pytest.raises(ParameterError, match="n_samples must be >= 16, got 3"):
+        SegmentGrid(3, 200.0)
+    with pytest.raises(ParameterError, match="band_low_hz must be <= 100"):
+        SegmentGrid(100, 200.0, band_low_hz=150.0)
