@@ -6,6 +6,7 @@ with Application to Road Anomaly Detection". See the README for the architecture
 
 from importlib import metadata as _metadata
 
+from . import protocol
 from .collaborative import CollaborativeEstimator, VehicleEstimate, learning_filters
 from .errors import MessageError, ParameterError
 from .estimator import JDPNoise, RoadInputEstimator, build_road_input_estimator, jdp_estimator_gain
