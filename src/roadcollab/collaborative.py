@@ -36,7 +36,7 @@ import numpy as np
 from ._validation import check_signal
 from .errors import MessageError, ParameterError
 from .estimator import JDPNoise, RoadInputEstimator, build_road_input_estimator
-from .message import ExchangeMessage, StateSpaceData, series
+from .message import ExchangeMessage, InversionMessage, StateSpaceData, series
 from .simulation import DiscretePlant, discretize_plant
 from .spectral import SegmentGrid, inv2x2, matvec
 from .vehicle import Vehicle
@@ -76,6 +76,8 @@ class VehicleEstimate:
         ``w_hat_j = D_j y_j + w^f_j``, m/s: Algorithm 1.
     W_hat, E, Wf : (K, 2) complex ndarray
         Spectra of ``w_hat_j``, ``e_j`` and ``w^f_j`` on the grid (all bins).
+    Y : (K, 2) complex ndarray
+        Spectrum of the measurement ``y_j``.
     """
 
     observer_only: np.ndarray
@@ -84,6 +86,7 @@ class VehicleEstimate:
     W_hat: np.ndarray
     E: np.ndarray
     Wf: np.ndarray
+    Y: np.ndarray
 
 
 class CollaborativeEstimator:
@@ -182,8 +185,17 @@ class CollaborativeEstimator:
         Z[self._act] = self._w_act[:, None] * matvec(inv2x2(self.P_f[self._act]), Y[self._act])
         return Z
 
-    def learn(self, message: ExchangeMessage) -> np.ndarray:
+    def _check_grid(self, message) -> None:
+        g = self.grid
+        if message.n_samples != g.n_samples or message.sample_rate != g.sample_rate:
+            raise MessageError(f"message is for a grid of {message.n_samples} samples at {message.sample_rate} Hz, "
+                               f"this vehicle uses {g.n_samples} at {g.sample_rate} Hz")
+
+    def learn(self, message: ExchangeMessage | InversionMessage) -> np.ndarray:
         """Learning update (eqs. 11-12): ``w^f_j = L1 w^f_{j-1} + L2 e_{j-1}`` (spectrum).
+
+        For an :class:`InversionMessage` (hardened or fused exchange) the update is
+        ``w^f_j = -S_j^-1 T_j z``, identical to the optimal filters applied to ``(T, S, e, w^f)``.
 
         Raises
         ------
@@ -191,12 +203,16 @@ class CollaborativeEstimator:
             If the message does not fit this vehicle's grid.
         """
         g = self.grid
+        if isinstance(message, InversionMessage):
+            if message.z.shape != (g.nfft, 2):
+                raise MessageError(f"message z must have shape ({g.nfft}, 2) on this segment grid, "
+                                   f"got {message.z.shape}")
+            self._check_grid(message)
+            return self.wf_from_z(g.rfft(message.z))
         if message.e.shape != (g.nfft, 2) or message.wf.shape != (g.nfft, 2):
             raise MessageError(f"message signals must have shape ({g.nfft}, 2) on this segment grid, "
                                f"got {message.e.shape} and {message.wf.shape}")
-        if message.n_samples != g.n_samples or message.sample_rate != g.sample_rate:
-            raise MessageError(f"message is for a grid of {message.n_samples} samples at {message.sample_rate} Hz, "
-                               f"this vehicle uses {g.n_samples} at {g.sample_rate} Hz")
+        self._check_grid(message)
         act = self._act
         om = g.omega_dt[act]
         T_prev = message.T.frequency_response(om)
@@ -235,7 +251,27 @@ class CollaborativeEstimator:
         E = Y - matvec(self.P_f, W_hat)
         obs = self.grid.irfft(DY, n) + self._offset
         est = self.grid.irfft(W_hat, n) + self._offset
-        return VehicleEstimate(observer_only=obs, estimate=est, W_obs=DY, W_hat=W_hat, E=E, Wf=Wf)
+        return VehicleEstimate(observer_only=obs, estimate=est, W_obs=DY, W_hat=W_hat, E=E, Wf=Wf, Y=Y)
+
+    def hardened_message(self, result: VehicleEstimate) -> InversionMessage:
+        """The hardened message: ``z_j = W P_hat_j^-1 y_j`` only (no dynamics)."""
+        g = self.grid
+        return InversionMessage(mechanism="hardened", sample_rate=g.sample_rate, n_samples=g.n_samples,
+                                z=g.irfft(self.invert(result.Y)), count=1)
+
+    def fused_message(self, result: VehicleEstimate, incoming: InversionMessage | None) -> InversionMessage:
+        """Running fleet average of ``z`` including this vehicle (the fused estimate)."""
+        g = self.grid
+        z = g.irfft(self.invert(result.Y))
+        if incoming is not None:
+            if incoming.mechanism != "fused" or incoming.z.shape != z.shape:
+                raise MessageError(f"expected a fused message with z of shape {z.shape}, got "
+                                   f"{incoming.mechanism!r} with {incoming.z.shape}")
+            self._check_grid(incoming)
+            z = (incoming.count * incoming.z + z) / (incoming.count + 1)
+        count = 1 if incoming is None else incoming.count + 1
+        return InversionMessage(mechanism="fused", sample_rate=g.sample_rate, n_samples=g.n_samples, z=z,
+                                count=count)
 
     def message(self, result: VehicleEstimate) -> ExchangeMessage:
         """The plain message ``(T_j, S_j, e_j, w^f_j)`` of Algorithm 1."""

@@ -225,6 +225,7 @@ class RunResult:
     mse_fused: np.ndarray
     mse_centralized: np.ndarray
     max_rel_diff: np.ndarray
+    max_rel_diff_hardened: np.ndarray
     truth_power: float
     traces: dict | None = None
 
@@ -258,9 +259,8 @@ def simulate_run(pipe: FleetPipeline, rng, *, keep_traces: int = 0, privacy: boo
         return float(np.mean((grid.irfft(Wgt * X, n)[sl] - truth) ** 2))
 
     V = cfg.n_vehicles
-    out = {k: np.zeros(V) for k in ("obs", "plain", "priv", "fused", "central", "rel")}
-    msg_plain = msg_priv = None
-    z_sum = np.zeros((grid.n_bins, 2), complex)
+    out = {k: np.zeros(V) for k in ("obs", "plain", "priv", "fused", "central", "rel", "rel_h")}
+    msg_plain = msg_priv = msg_hard = msg_fused = None
     num = np.zeros((int(act.sum()), 2), complex)
     info = np.zeros((int(act.sum()), 2, 2), complex)
     traces = {"time": road.time[sl], "truth": truth, "truth_raw": w[sl], "plain": [], "private": []} \
@@ -271,22 +271,26 @@ def simulate_run(pipe: FleetPipeline, rng, *, keep_traces: int = 0, privacy: boo
         msg_plain = est.message(r)
         out["obs"][j] = mse(r.W_obs)
         out["plain"][j] = mse(r.W_hat)
+        scale = max(float(np.max(np.abs(r.estimate))), 1e-300)
         if privacy:
             rp = est.estimate(y, msg_priv)
             msg_priv, _, _ = obfuscate(est.message(rp), grid, cfg.obfuscation, rng=priv_rng,
                                        T_response=est.T_ss_f, S_response=est.S_ss_f)
             out["priv"][j] = mse(rp.W_hat)
-            scale = max(float(np.max(np.abs(r.estimate))), 1e-300)
             out["rel"][j] = float(np.max(np.abs(rp.estimate - r.estimate))) / scale
         else:
             rp = r
             out["priv"][j] = out["plain"][j]
-        # Fused: the average of the band-limited inversions z_i = W P_hat_i^-1 y_i of
-        # vehicles 1..j. Only z crosses the network (no dynamics); independent parameter
-        # errors and noise average out.
-        Y = grid.rfft(y)
-        z_sum += est.invert(Y)
-        out["fused"][j] = mse(z_sum / (j + 1))
+        # Hardened exchange: only z = W P_hat^-1 y crosses the network; same estimates.
+        rh = est.estimate(y, msg_hard)
+        msg_hard = est.hardened_message(rh)
+        out["rel_h"][j] = float(np.max(np.abs(rh.estimate - r.estimate))) / scale
+        # Fused: the running average of the band-limited inversions z_i of vehicles 1..j.
+        # Only z crosses the network (no dynamics); independent parameter errors and noise
+        # average out.
+        msg_fused = est.fused_message(r, msg_fused)
+        Y = r.Y
+        out["fused"][j] = mse(grid.rfft(msg_fused.z))
         # Centralised: one party with every raw measurement, nominal model and the parameter
         # uncertainty combines the inversions per bin with their error covariances (BLUE).
         Ci = pipe.z_error_information[j]
@@ -300,6 +304,7 @@ def simulate_run(pipe: FleetPipeline, rng, *, keep_traces: int = 0, privacy: boo
             traces["private"].append(grid.irfft(Wgt * rp.W_hat, n)[sl])
     return RunResult(mse_observer=out["obs"], mse_plain=out["plain"], mse_private=out["priv"],
                      mse_fused=out["fused"], mse_centralized=out["central"], max_rel_diff=out["rel"],
+                     max_rel_diff_hardened=out["rel_h"],
                      truth_power=power, traces=traces)
 
 
