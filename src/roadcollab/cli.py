@@ -1,6 +1,6 @@
 """Command-line interface ``roadcollab``.
 
-Subcommands: ``reproduce`` (Figs. 4-7), ``message example``. Long work shows a progress bar.
+Subcommands: ``reproduce`` (Figs. 4-7), ``attack`` (security study), ``message example``. Long work shows a progress bar.
 """
 
 from __future__ import annotations
@@ -70,6 +70,13 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--iso-class", default=None, help="ISO 8608 roughness class of the synthetic road (default C)")
     p.add_argument("--oracle", action="store_true", help="use the true plants in T_j (analysis only)")
     _add_road_options(p)
+
+    p = sub.add_parser("attack", help="security study: attacks, linkability, exactness, baselines")
+    p.add_argument("--runs", type=_positive_int, default=20, help="segments (default 20, at least 2)")
+    p.add_argument("--vehicles", type=_positive_int, default=10, help="fleet size (default 10, at least 3)")
+    p.add_argument("--seed", type=_nonneg_int, default=0, help="root seed (default 0)")
+    p.add_argument("--out", type=Path, required=True, help="output folder")
+    p.add_argument("--paillier-bits", type=_positive_int, default=2048, help="Paillier key size (default 2048)")
 
     p = sub.add_parser("message", help="message utilities")
     msub = p.add_subparsers(dest="message_command", required=True)
@@ -145,6 +152,33 @@ def _cmd_reproduce(args, argv) -> int:
     return 0
 
 
+def _cmd_attack(args, argv) -> int:
+    from rich.console import Console
+    from rich.table import Table
+
+    from .experiment import ExperimentConfig
+    from .report import write_attack
+    from .security_study import AttackStudyConfig, run_attack_study
+
+    cfg = AttackStudyConfig(experiment=ExperimentConfig(n_vehicles=args.vehicles, n_runs=1), n_runs=args.runs,
+                            paillier_bits=args.paillier_bits)
+    prog, cb = _progress(cfg.n_runs, "attack")
+    t0 = time.perf_counter()
+    with prog:
+        result = run_attack_study(cfg, args.seed, progress=cb)
+    elapsed = time.perf_counter() - t0
+    command = "roadcollab " + " ".join(shlex.quote(a) for a in argv)
+    write_attack(result, args.out, command=command, elapsed=elapsed)
+    table = Table(title=f"Attacks on S_j's poles, {cfg.n_runs} segments, {elapsed:.1f} s")
+    for col in ("mechanism", "attack", "median rel. pole error", "success rate"):
+        table.add_column(col, justify="right")
+    for r in result.attack_rows:
+        table.add_row(r["mechanism"], r["attack"], f"{r['median_rel_pole_error']:.3g}", f"{r['success_rate']:.2f}")
+    Console().print(table)
+    print(f"wrote {args.out}/report.md")
+    return 0
+
+
 def _cmd_message(args) -> int:
     from .protocol import write_example
 
@@ -160,6 +194,8 @@ def main(argv: list[str] | None = None) -> int:
     try:
         if args.command == "reproduce":
             return _cmd_reproduce(args, argv)
+        if args.command == "attack":
+            return _cmd_attack(args, argv)
         if args.command == "message":
             return _cmd_message(args)
     except ValueError as err:  # ParameterError / MessageError: a clear message, no traceback
