@@ -46,6 +46,14 @@ def _positive_float(text: str) -> float:
     return v
 
 
+def _add_dask_options(p: argparse.ArgumentParser) -> None:
+    g = p.add_mutually_exclusive_group()
+    g.add_argument("--workers", type=_positive_int, default=None,
+                   help="run on a local Dask cluster with N worker processes (results are identical)")
+    g.add_argument("--scheduler", default=None, metavar="ADDRESS",
+                   help="run on an existing Dask cluster, e.g. tcp://host:8786")
+
+
 def _add_road_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--road-profile", metavar="FILE", default=None,
                    help="measured profile (rows 'distance_m elevation_m'); 'packaged' for the shipped one")
@@ -70,6 +78,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--iso-class", default=None, help="ISO 8608 roughness class of the synthetic road (default C)")
     p.add_argument("--oracle", action="store_true", help="use the true plants in T_j (analysis only)")
     _add_road_options(p)
+    _add_dask_options(p)
 
     p = sub.add_parser("attack", help="security study: attacks, linkability, exactness, baselines")
     p.add_argument("--runs", type=_positive_int, default=20, help="segments (default 20, at least 2)")
@@ -134,7 +143,7 @@ def _cmd_reproduce(args, argv) -> int:
     prog, cb = _progress(cfg.n_runs, "reproduce")
     t0 = time.perf_counter()
     with prog:
-        result = run_reproduction(cfg, args.seed, progress=cb)
+        result = run_reproduction(cfg, args.seed, progress=cb, workers=args.workers, scheduler=args.scheduler)
     elapsed = time.perf_counter() - t0
     command = "roadcollab " + " ".join(shlex.quote(a) for a in argv)
     summary = write_reproduction(result, args.out, command=command, elapsed=elapsed)

@@ -346,35 +346,67 @@ class ReproductionResult:
         return rows
 
 
+def _fleet(config: ExperimentConfig, seed: int) -> tuple[list[Vehicle], list[np.random.SeedSequence]]:
+    """The fleet (from the root seed's first child) and one SeedSequence per run."""
+    fleet_ss, runs_ss = np.random.SeedSequence(seed).spawn(2)
+    fleet = sample_fleet(config.n_vehicles, config.fleet, rng=np.random.default_rng(fleet_ss))
+    return fleet, runs_ss.spawn(config.n_runs)
+
+
+def pipeline_for(config: ExperimentConfig, seed: int) -> FleetPipeline:
+    """The (per-process cached) pipeline of a configuration and root seed."""
+    from .parallel import cached
+
+    return cached(("pipeline", repr(config), seed), lambda: FleetPipeline(config, _fleet(config, seed)[0]))
+
+
+@dataclass(frozen=True)
+class _ReproductionTask:
+    """Picklable task: runs ``indices`` of a reproduction (rebuilds its setup once per process)."""
+
+    config: ExperimentConfig
+    seed: int
+    privacy: bool
+
+    def __call__(self, indices) -> list[RunResult]:
+        pipe = pipeline_for(self.config, self.seed)
+        run_ss = _fleet(self.config, self.seed)[1]
+        return [simulate_run(pipe, run_ss[i], keep_traces=3 if i == 0 else 0, privacy=self.privacy)
+                for i in indices]
+
+
 def run_reproduction(config: ExperimentConfig, seed: int, *, progress: Callable[[int], None] | None = None,
-                     privacy: bool = True) -> ReproductionResult:
-    """Run the Monte Carlo reproduction serially.
+                     privacy: bool = True, workers: int | None = None, scheduler: str | None = None
+                     ) -> ReproductionResult:
+    """Run the Monte Carlo reproduction, serially or on Dask.
 
     Parameters
     ----------
     config : ExperimentConfig
     seed : int
-        Root seed; the fleet and each run get independent SeedSequence children.
+        Root seed; the fleet and each run get independent SeedSequence children, so the result
+        does not depend on ``workers`` or ``scheduler``.
     progress : callable, optional
-        Called with the number of finished runs after each run.
+        Called with the number of finished runs.
     privacy : bool
         Run the obfuscated chain too.
+    workers : int, optional
+        Local Dask cluster with this many worker processes.
+    scheduler : str, optional
+        Address of an existing Dask scheduler.
 
     Returns
     -------
     ReproductionResult
     """
+    from .parallel import map_runs
+
     if not isinstance(config, ExperimentConfig):
         raise ParameterError(f"config must be an ExperimentConfig, got {type(config).__name__}")
     seed = check_int("seed", seed, low=0)
-    fleet_ss, runs_ss = np.random.SeedSequence(seed).spawn(2)
-    fleet = sample_fleet(config.n_vehicles, config.fleet, rng=np.random.default_rng(fleet_ss))
-    pipe = FleetPipeline(config, fleet)
-    runs = []
-    for i, rs in enumerate(runs_ss.spawn(config.n_runs)):
-        runs.append(simulate_run(pipe, rs, keep_traces=3 if i == 0 else 0, privacy=privacy))
-        if progress is not None:
-            progress(i + 1)
+    fleet = _fleet(config, seed)[0]
+    runs = map_runs(_ReproductionTask(config, seed, privacy), config.n_runs, workers=workers, scheduler=scheduler,
+                    progress=progress)
     return ReproductionResult(config=config, seed=seed, fleet=fleet, runs=runs)
 
 
