@@ -29,3 +29,14 @@ def test_bad_parallel_arguments():
         map_runs(lambda idx: list(idx), 2, workers=1, scheduler="tcp://127.0.0.1:1")
     with pytest.raises(ParameterError, match="workers must be >= 1, got 0"):
         map_runs(lambda idx: list(idx), 2, workers=0)
+
+
+def test_attack_study_on_dask_matches_serial():
+    from roadcollab.security_study import AttackStudyConfig, run_attack_study
+
+    cfg = AttackStudyConfig(experiment=ExperimentConfig(n_vehicles=3, n_runs=1, segment_length=90.0), n_runs=2,
+                            paillier_bits=512, paillier_sample=2, physical_fit_runs=1, dp_epsilons=(1.0,))
+    a, b = run_attack_study(cfg, 5), run_attack_study(cfg, 5, workers=2)
+    assert a.attack_rows == b.attack_rows
+    assert a.linkability_rows == b.linkability_rows
+    assert [r["mse_vehicle2"] for r in a.baseline_rows] == [r["mse_vehicle2"] for r in b.baseline_rows]

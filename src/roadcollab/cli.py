@@ -86,6 +86,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--seed", type=_nonneg_int, default=0, help="root seed (default 0)")
     p.add_argument("--out", type=Path, required=True, help="output folder")
     p.add_argument("--paillier-bits", type=_positive_int, default=2048, help="Paillier key size (default 2048)")
+    _add_dask_options(p)
 
     p = sub.add_parser("message", help="message utilities")
     msub = p.add_subparsers(dest="message_command", required=True)
@@ -174,7 +175,7 @@ def _cmd_attack(args, argv) -> int:
     prog, cb = _progress(cfg.n_runs, "attack")
     t0 = time.perf_counter()
     with prog:
-        result = run_attack_study(cfg, args.seed, progress=cb)
+        result = run_attack_study(cfg, args.seed, progress=cb, workers=args.workers, scheduler=args.scheduler)
     elapsed = time.perf_counter() - t0
     command = "roadcollab " + " ".join(shlex.quote(a) for a in argv)
     write_attack(result, args.out, command=command, elapsed=elapsed)

@@ -43,7 +43,8 @@ from .message import ExchangeMessage, InversionMessage, StateSpaceData
 
 __all__ = ["PhysicalPrior", "pole_errors", "select_by_prior", "attack_model_reduction",
            "attack_pole_intersection", "attack_multiplicity", "arx_poles", "attack_signals_reduction",
-           "attack_signals_prior", "attack_signals_intersection", "attack_physical_fit", "SUCCESS_TOLERANCE",
+           "attack_signals_prior", "attack_signals_intersection", "attack_physical_fit", "intersect_pole_sets",
+           "SUCCESS_TOLERANCE",
            "ATTACKS"]
 
 #: Relative pole error below which a pole counts as recovered.
@@ -268,22 +269,28 @@ def attack_signals_prior(z: np.ndarray, w_band: np.ndarray, dt: float, prior: Ph
     return select_by_prior(arx_poles(u, y, dt, order, decimate), prior)
 
 
-def attack_signals_intersection(segments: list[tuple[np.ndarray, np.ndarray]], dt: float,
-                                prior: PhysicalPrior = PhysicalPrior(), order: int = 8,
-                                decimate: int = 2, rtol: float = 0.05) -> np.ndarray:
-    """Hardened ``multiplicity``: ARX poles that recur (within ``rtol``) in two segments of the
-    same vehicle, then the prior; averages the matched pairs."""
-    if len(segments) < 2:
-        raise ParameterError(f"segments must hold at least 2 (z, w) pairs, got {len(segments)}")
-    p1 = arx_poles(*_signals(*segments[0]), dt, order, decimate)
-    p2 = arx_poles(*_signals(*segments[1]), dt, order, decimate)
+def intersect_pole_sets(p1: np.ndarray, p2: np.ndarray, prior: PhysicalPrior = PhysicalPrior(),
+                        rtol: float = 0.05) -> np.ndarray:
+    """Poles of ``p1`` that recur in ``p2`` within ``rtol`` (averaged), then the prior."""
     common = []
-    for p in p1:
+    for p in np.asarray(p1, dtype=complex):
         if p2.size:
             q = p2[np.argmin(np.abs(p2 - p))]
             if abs(q - p) < rtol * abs(p):
                 common.append(0.5 * (p + q))
     return select_by_prior(np.array(common, dtype=complex), prior)
+
+
+def attack_signals_intersection(segments: list[tuple[np.ndarray, np.ndarray]], dt: float,
+                                prior: PhysicalPrior = PhysicalPrior(), order: int = 8,
+                                decimate: int = 2, rtol: float = 0.05) -> np.ndarray:
+    """Hardened ``multiplicity``: ARX poles of ``z -> w - z`` that recur (within ``rtol``) in two
+    segments of the same vehicle, then the prior."""
+    if len(segments) < 2:
+        raise ParameterError(f"segments must hold at least 2 (z, w) pairs, got {len(segments)}")
+    p1 = arx_poles(*_signals(*segments[0]), dt, order, decimate)
+    p2 = arx_poles(*_signals(*segments[1]), dt, order, decimate)
+    return intersect_pole_sets(p1, p2, prior, rtol)
 
 
 def _ratio_model(log_ratios: np.ndarray):

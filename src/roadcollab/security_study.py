@@ -17,13 +17,12 @@ import numpy as np
 from . import protocol
 from ._validation import check_int
 from .errors import ParameterError
-from .experiment import ExperimentConfig, FleetPipeline
+from .experiment import ExperimentConfig
 from .privacy import obfuscate
-from .security import (PhysicalPrior, SUCCESS_TOLERANCE, attack_model_reduction, attack_multiplicity,
-                       attack_physical_fit, attack_pole_intersection, attack_signals_intersection,
-                       attack_signals_prior, attack_signals_reduction, pole_errors)
+from .security import (PhysicalPrior, SUCCESS_TOLERANCE, arx_poles, attack_model_reduction, attack_multiplicity,
+                       attack_physical_fit, attack_pole_intersection, attack_signals_prior,
+                       attack_signals_reduction, intersect_pole_sets, pole_errors)
 from .simulation import add_sensor_noise, simulate_response
-from .vehicle import sample_fleet
 
 __all__ = ["AttackStudyConfig", "AttackStudyResult", "run_attack_study"]
 
@@ -133,143 +132,168 @@ def _linkability(features: dict[tuple[int, int], np.ndarray]) -> dict:
     return {"auc": float(auc), "top1_accuracy": top1, "chance": 1.0 / len(set(veh.tolist()))}
 
 
-def run_attack_study(config: AttackStudyConfig, seed: int, *, progress: Callable[[int], None] | None = None
-                     ) -> AttackStudyResult:
-    """Run the security study (see the module docstring)."""
+def _study_pipeline(config: AttackStudyConfig, seed: int):
+    from .experiment import pipeline_for
+
+    return pipeline_for(config.experiment, seed)
+
+
+def _run_seeds(config: AttackStudyConfig, seed: int):
+    # Same split as the reproduction: child 0 draws the fleet, child 1 the runs.
+    return np.random.SeedSequence(seed).spawn(2)[1].spawn(config.n_runs)
+
+
+@dataclass(frozen=True)
+class _AttackTask:
+    """Picklable task: the attacks of runs ``indices`` (setup cached once per process)."""
+
+    config: AttackStudyConfig
+    seed: int
+    key: bytes
+
+    def __call__(self, indices) -> list[dict]:
+        pipe = _study_pipeline(self.config, self.seed)
+        seeds = _run_seeds(self.config, self.seed)
+        return [_attack_run(pipe, self.config, r, seeds[r], self.key) for r in indices]
+
+
+def _attack_run(pipe, config: AttackStudyConfig, r: int, rs: np.random.SeedSequence, key: bytes) -> dict:
+    """Everything one segment contributes to the study."""
     from . import baselines
+
+    cfg, grid = config.experiment, pipe.grid
+    V = cfg.n_vehicles
+    targets = [e.S_ss.continuous_poles() for e in pipe.estimators]
+    eps_list = tuple(config.dp_epsilons)
+    sens = baselines.l2_sensitivity(pipe.estimators[0], config.dp_rho)
+    sigmas = {e: baselines.gaussian_sigma(e, config.dp_delta, sens) for e in eps_list}
+    out = {"errs": [], "feats": {}, "exact": {"none": 0.0, "paper": 0.0, "hardened": 0.0},
+           "mse": {}, "timing": {m: [] for m in ("none", "paper", "hardened", "dp", "aead")},
+           "nbytes": {m: [] for m in ("none", "paper", "hardened", "dp", "aead")},
+           "arx": {}, "examples": [], "sigmas": sigmas, "last_z": None}
+
+    def add(mech, attack, est, j):
+        out["errs"].append((mech, attack, pole_errors(est, targets[j])))
+
+    road_ss, noise_ss, priv_ss, dp_ss, own_ss = rs.spawn(5)
+    road = pipe.road(np.random.default_rng(road_ss))
+    noise_rng, priv_rng, dp_rng, own_rng = (np.random.default_rng(s) for s in (noise_ss, priv_ss, dp_ss, own_ss))
+    w = road.velocity
+    w_band = grid.irfft(grid.weight[:, None] * grid.rfft(w))          # nfft samples, like z
+    n, sl = grid.n_samples, cfg.scored
+    truth = w_band[:n][sl]
+
+    def seg_mse(X):
+        return float(np.mean((grid.irfft(grid.weight[:, None] * X, n)[sl] - truth) ** 2))
+
+    def timed(name, fn):
+        t0 = time.perf_counter()
+        msg, data = fn()
+        out["timing"][name].append((time.perf_counter() - t0) * 1e3)
+        out["nbytes"][name].append(len(data))
+        return msg
+
+    mse = {m: np.zeros(3) for m in ["none", "paper", "hardened"] + [f"dp_eps_{e:g}" for e in eps_list]}
+    plain_in = paper_in = hard_in = None
+    own_proxy = None
+    dp_in = {e: None for e in eps_list}
+    for j, est in enumerate(pipe.estimators):
+        y = add_sensor_noise(simulate_response(est.true_plant, w), cfg.sensor_noise_std, rng=noise_rng)
+        res = est.estimate(y, plain_in)
+        scale = max(float(np.max(np.abs(res.estimate))), 1e-300)
+        plain = timed("none", lambda: (lambda m: (m, protocol.encode(m)))(est.message(res)))
+        rp = est.estimate(y, paper_in)
+        paper = timed("paper", lambda: (lambda m: (m, protocol.encode(m)))(
+            obfuscate(est.message(rp), grid, cfg.obfuscation, rng=priv_rng,
+                      T_response=est.T_ss_f, S_response=est.S_ss_f)[0]))
+        if j == 0:
+            own_proxy = grid.irfft(est.invert(grid.rfft(y)))
+        rh = est.estimate(y, hard_in)
+        hard = timed("hardened", lambda: (lambda m: (m, protocol.encode(m)))(est.hardened_message(rh)))
+        timed("aead", lambda: (None, baselines.seal(key, protocol.encode(est.hardened_message(rh)))))
+        out["exact"]["paper"] = max(out["exact"]["paper"], float(np.max(np.abs(rp.estimate - res.estimate))) / scale)
+        out["exact"]["hardened"] = max(out["exact"]["hardened"],
+                                       float(np.max(np.abs(rh.estimate - res.estimate))) / scale)
+        if j < 3:
+            mse["none"][j], mse["paper"][j], mse["hardened"][j] = seg_mse(res.W_hat), seg_mse(rp.W_hat), \
+                seg_mse(rh.W_hat)
+        # Differential privacy: the hardened chain with Gaussian noise on every z sent.
+        for e in eps_list:
+            rd = est.estimate(y, dp_in[e])
+            if e == eps_list[0]:
+                dp_in[e] = timed("dp", lambda: (lambda m: (m, protocol.encode(m)))(
+                    baselines.dp_message(est.hardened_message(rd), sigmas[e], rng=dp_rng)))
+            else:
+                dp_in[e] = baselines.dp_message(est.hardened_message(rd), sigmas[e], rng=dp_rng)
+            if j < 3:
+                mse[f"dp_eps_{e:g}"][j] = seg_mse(rd.W_hat)
+        # Attacks on vehicle j's outgoing messages.
+        for mech, msg in (("none", plain), ("paper", paper)):
+            add(mech, "model_reduction", attack_model_reduction(msg), j)
+            add(mech, "pole_intersection", attack_pole_intersection(msg, config.prior), j)
+            mu = attack_multiplicity(msg, config.prior)
+            add(mech, "multiplicity", mu, j)
+        if r == 0 and j < 3:
+            out["examples"].append({"vehicle": j + 1, "true": targets[j], "model_reduction": attack_model_reduction(paper),
+                                    "pole_intersection": attack_pole_intersection(paper, config.prior),
+                                    "multiplicity": mu})
+        add("hardened", "model_reduction", attack_signals_reduction(hard.z, w_band, grid.dt), j)
+        add("hardened", "pole_intersection", attack_signals_prior(hard.z, w_band, grid.dt, config.prior), j)
+        out["arx"][j] = arx_poles(hard.z, w_band - hard.z, grid.dt, 8, 2)
+        if r < config.physical_fit_runs:
+            add("hardened", "physical_fit", attack_physical_fit(hard.z, w_band, grid, cfg.fleet.nominal), j)
+            # Without the true road: the next vehicle's own inversion stands in for it.
+            if j + 1 < V:
+                nxt = pipe.estimators[j + 1]
+                y_next = add_sensor_noise(simulate_response(nxt.true_plant, w), cfg.sensor_noise_std, rng=own_rng)
+                own = grid.irfft(nxt.invert(grid.rfft(y_next)))
+                add("hardened", "physical_fit_own_road", attack_physical_fit(hard.z, own, grid, cfg.fleet.nominal), j)
+            # Any exact mechanism hands the receiver z (Theorem 1): recover it from the
+            # obfuscated message and attack it the same way.
+            z_paper = grid.irfft(_recover_z(paper, grid))
+            add("paper", "physical_fit", attack_physical_fit(z_paper, w_band, grid, cfg.fleet.nominal), j)
+        # Reference: what the attacker knows with no message at all (the fleet's nominal).
+        add("no_message", "prior_guess", _nominal_poles(cfg.fleet.nominal), j)
+        out["feats"][("none", j)] = _feature_poles(plain.S.continuous_poles())
+        out["feats"][("paper", j)] = _feature_poles(mu)
+        out["feats"][("hardened", j)] = _spectral_feature(hard.z, w_band, grid)
+        # A receiver without the true road compares with its own inversion (vehicle 1's
+        # inversion stands in for a fixed receiver's here).
+        out["feats"][("hardened_own_road", j)] = _spectral_feature(hard.z, own_proxy, grid)
+        plain_in, paper_in, hard_in = plain, paper, hard
+        if r == 0 and j == V - 1:
+            out["last_z"] = hard.z
+    out["mse"] = mse
+    return out
+
+
+def run_attack_study(config: AttackStudyConfig, seed: int, *, progress: Callable[[int], None] | None = None,
+                     workers: int | None = None, scheduler: str | None = None) -> AttackStudyResult:
+    """Run the security study (see the module docstring), serially or on Dask.
+
+    Results do not depend on ``workers``/``scheduler`` except the timing columns.
+    """
+    from . import baselines
+    from .parallel import map_runs
 
     if not isinstance(config, AttackStudyConfig):
         raise ParameterError(f"config must be an AttackStudyConfig, got {type(config).__name__}")
     seed = check_int("seed", seed, low=0)
     cfg = config.experiment
-    fleet_ss, runs_ss = np.random.SeedSequence(seed).spawn(2)
-    fleet = sample_fleet(cfg.n_vehicles, cfg.fleet, rng=np.random.default_rng(fleet_ss))
-    pipe = FleetPipeline(cfg, fleet)
-    grid = pipe.grid
+    pipe = _study_pipeline(config, seed)
     V = cfg.n_vehicles
     targets = [e.S_ss.continuous_poles() for e in pipe.estimators]
+    runs = map_runs(_AttackTask(config, seed, baselines.new_key()), config.n_runs, workers=workers,
+                    scheduler=scheduler, progress=progress)
     errs: dict[tuple[str, str], list[np.ndarray]] = {}
-    feats: dict[str, dict] = {"none": {}, "paper": {}, "hardened": {}, "hardened_own_road": {}}
-    prev_seg: dict[int, tuple[np.ndarray, np.ndarray]] = {}
-    exact = {"none": 0.0, "paper": 0.0, "hardened": 0.0}
-    eps_list = tuple(config.dp_epsilons)
-    mse = {m: np.zeros((config.n_runs, 3)) for m in ["none", "paper", "hardened"] + [f"dp_eps_{e:g}" for e in eps_list]}
-    timing: dict[str, list[float]] = {m: [] for m in ("none", "paper", "hardened", "dp", "aead")}
-    nbytes: dict[str, list[int]] = {m: [] for m in ("none", "paper", "hardened", "dp", "aead")}
-    sigmas = {e: baselines.gaussian_sigma(e, config.dp_delta,
-                                          baselines.l2_sensitivity(pipe.estimators[0], config.dp_rho))
-              for e in eps_list}
-    key = baselines.new_key()
-    examples: list[dict] = []
-
-    def add(mech, attack, est, j):
-        errs.setdefault((mech, attack), []).append(pole_errors(est, targets[j]))
-
-    for r, rs in enumerate(runs_ss.spawn(config.n_runs)):
-        road_ss, noise_ss, priv_ss, dp_ss = rs.spawn(4)
-        road = pipe.road(np.random.default_rng(road_ss))
-        noise_rng, priv_rng, dp_rng = (np.random.default_rng(s) for s in (noise_ss, priv_ss, dp_ss))
-        w = road.velocity
-        w_band = grid.irfft(grid.weight[:, None] * grid.rfft(w))          # nfft samples, like z
-        n, sl = grid.n_samples, cfg.scored
-        truth = w_band[:n][sl]
-
-        def seg_mse(X):
-            return float(np.mean((grid.irfft(grid.weight[:, None] * X, n)[sl] - truth) ** 2))
-
-        plain_in = paper_in = hard_in = None
-        own_proxy = None
-        dp_in = {e: None for e in eps_list}
-        for j, est in enumerate(pipe.estimators):
-            y = add_sensor_noise(simulate_response(est.true_plant, w), cfg.sensor_noise_std, rng=noise_rng)
-            res = est.estimate(y, plain_in)
-            scale = max(float(np.max(np.abs(res.estimate))), 1e-300)
-            t0 = time.perf_counter()
-            plain = est.message(res)
-            data = protocol.encode(plain)
-            timing["none"].append((time.perf_counter() - t0) * 1e3)
-            nbytes["none"].append(len(data))
-            rp = est.estimate(y, paper_in)
-            t0 = time.perf_counter()
-            paper, _, _ = obfuscate(est.message(rp), grid, cfg.obfuscation, rng=priv_rng,
-                                    T_response=est.T_ss_f, S_response=est.S_ss_f)
-            data = protocol.encode(paper)
-            timing["paper"].append((time.perf_counter() - t0) * 1e3)
-            nbytes["paper"].append(len(data))
-            if j == 0:
-                own_proxy = grid.irfft(est.invert(grid.rfft(y)))
-            rh = est.estimate(y, hard_in)
-            t0 = time.perf_counter()
-            hard = est.hardened_message(rh)
-            data = protocol.encode(hard)
-            timing["hardened"].append((time.perf_counter() - t0) * 1e3)
-            nbytes["hardened"].append(len(data))
-            t0 = time.perf_counter()
-            sealed = baselines.seal(key, protocol.encode(est.hardened_message(rh)))
-            timing["aead"].append((time.perf_counter() - t0) * 1e3)
-            nbytes["aead"].append(len(sealed))
-            exact["paper"] = max(exact["paper"], float(np.max(np.abs(rp.estimate - res.estimate))) / scale)
-            exact["hardened"] = max(exact["hardened"], float(np.max(np.abs(rh.estimate - res.estimate))) / scale)
-            if j < 3:
-                mse["none"][r, j] = seg_mse(res.W_hat)
-                mse["paper"][r, j] = seg_mse(rp.W_hat)
-                mse["hardened"][r, j] = seg_mse(rh.W_hat)
-            # Differential privacy: the hardened chain with Gaussian noise on every z sent.
-            for e in eps_list:
-                rd = est.estimate(y, dp_in[e])
-                t0 = time.perf_counter()
-                dmsg = baselines.dp_message(est.hardened_message(rd), sigmas[e], rng=dp_rng)
-                data = protocol.encode(dmsg)
-                if e == eps_list[0]:
-                    timing["dp"].append((time.perf_counter() - t0) * 1e3)
-                    nbytes["dp"].append(len(data))
-                dp_in[e] = dmsg
-                if j < 3:
-                    mse[f"dp_eps_{e:g}"][r, j] = seg_mse(rd.W_hat)
-            # Attacks (on vehicle j's outgoing messages).
-            add("none", "model_reduction", attack_model_reduction(plain), j)
-            add("none", "pole_intersection", attack_pole_intersection(plain, config.prior), j)
-            add("none", "multiplicity", attack_multiplicity(plain, config.prior), j)
-            mr, pi, mu = (attack_model_reduction(paper), attack_pole_intersection(paper, config.prior),
-                          attack_multiplicity(paper, config.prior))
-            add("paper", "model_reduction", mr, j)
-            add("paper", "pole_intersection", pi, j)
-            add("paper", "multiplicity", mu, j)
-            if r == 0 and j < 3:
-                examples.append({"vehicle": j + 1, "true": targets[j], "model_reduction": mr,
-                                 "pole_intersection": pi, "multiplicity": mu})
-            add("hardened", "model_reduction", attack_signals_reduction(hard.z, w_band, grid.dt), j)
-            add("hardened", "pole_intersection", attack_signals_prior(hard.z, w_band, grid.dt, config.prior), j)
-            if j in prev_seg:
-                add("hardened", "multiplicity",
-                    attack_signals_intersection([prev_seg[j], (hard.z, w_band)], grid.dt, config.prior), j)
-            prev_seg[j] = (hard.z, w_band)
-            if r < config.physical_fit_runs:
-                add("hardened", "physical_fit", attack_physical_fit(hard.z, w_band, grid, cfg.fleet.nominal), j)
-                # Without the true road: the receiver's own inversion stands in for it.
-                if j + 1 < V:
-                    nxt = pipe.estimators[j + 1]
-                    y_next = add_sensor_noise(simulate_response(nxt.true_plant, w), cfg.sensor_noise_std,
-                                              rng=np.random.default_rng(dp_ss.spawn(1)[0]))
-                    own = grid.irfft(nxt.invert(grid.rfft(y_next)))
-                    add("hardened", "physical_fit_own_road",
-                        attack_physical_fit(hard.z, own, grid, cfg.fleet.nominal), j)
-                # Any exact mechanism hands the receiver z (Theorem 1): recover it from the
-                # obfuscated message and attack it the same way.
-                z_paper = grid.irfft(_recover_z(paper, grid))
-                add("paper", "physical_fit", attack_physical_fit(z_paper, w_band, grid, cfg.fleet.nominal), j)
-            # Reference: what the attacker knows with no message at all (the fleet's nominal).
-            add("no_message", "prior_guess", _nominal_poles(cfg.fleet.nominal), j)
-            feats["none"][(j, r)] = _feature_poles(plain.S.continuous_poles())
-            feats["paper"][(j, r)] = _feature_poles(mu)
-            feats["hardened"][(j, r)] = _spectral_feature(hard.z, w_band, grid)
-            # A receiver without the true road compares with its own inversion (vehicle 1's
-            # inversion stands in for every receiver's here, so the proxy is the same car).
-            feats["hardened_own_road"][(j, r)] = _spectral_feature(hard.z, own_proxy, grid)
-            plain_in, paper_in, hard_in = plain, paper, hard
-        if progress is not None:
-            progress(r + 1)
-
+    for run in runs:
+        for mech, attack, e in run["errs"]:
+            errs.setdefault((mech, attack), []).append(e)
+    # Hardened "multiplicity": ARX poles that recur over two consecutive segments of a vehicle.
+    for r in range(1, len(runs)):
+        for j in range(V):
+            est = intersect_pole_sets(runs[r - 1]["arx"][j], runs[r]["arx"][j], config.prior)
+            errs.setdefault(("hardened", "multiplicity"), []).append(pole_errors(est, targets[j]))
     attack_rows = []
     for (mech, attack), lst in errs.items():
         E = np.array(lst)
@@ -278,36 +302,40 @@ def run_attack_study(config: AttackStudyConfig, seed: int, *, progress: Callable
                             "median_rel_pole_error": float(np.median(per_msg)),
                             "success_rate": float(np.mean(np.all(E < SUCCESS_TOLERANCE, axis=1))),
                             "n_messages": int(E.shape[0])})
+    exact = {m: max(run["exact"][m] for run in runs) for m in ("none", "paper", "hardened")}
     exactness_rows = [{"mechanism": m, "max_rel_diff": v} for m, v in exact.items()]
     link_rows = []
     for mech, feature in (("none", "poles of S"), ("paper", "multiplicity-attack poles"),
                           ("hardened", "model-error spectrum (true road known)"),
                           ("hardened_own_road", "model-error spectrum vs a fixed receiver's own inversion")):
-        link_rows.append({"mechanism": mech, "feature": feature, **_linkability(feats[mech])})
-    # Paillier: one ciphertext per fixed-point number of the hardened message's z.
-    he = baselines.paillier_cost(hard.z.ravel(), key_bits=config.paillier_bits, sample=config.paillier_sample,
-                                 rng=np.random.default_rng(seed))
-    med = {m: float(np.median(v)) for m, v in timing.items()}
-    byt = {m: int(np.median(v)) for m, v in nbytes.items()}
+        feats = {(j, r): run["feats"][(mech, j)] for r, run in enumerate(runs) for j in range(V)}
+        link_rows.append({"mechanism": mech, "feature": feature, **_linkability(feats)})
+    # Paillier: one ciphertext per fixed-point number of a hardened message's z.
+    he = baselines.paillier_cost(runs[0]["last_z"].ravel(), key_bits=config.paillier_bits,
+                                 sample=config.paillier_sample, rng=np.random.default_rng(seed))
+    timing = {m: float(np.median([t for run in runs for t in run["timing"][m]])) for m in runs[0]["timing"]}
+    nbytes = {m: int(np.median([b for run in runs for b in run["nbytes"][m]])) for m in runs[0]["nbytes"]}
+    mse = {k: np.mean([run["mse"][k] for run in runs], axis=0) for k in runs[0]["mse"]}
+    sigmas = runs[0]["sigmas"]
     base_rows = []
 
     def brow(name, key_mse, ms, b, note=""):
-        m = mse[key_mse].mean(axis=0)
+        m = mse[key_mse]
         base_rows.append({"mechanism": name, "mse_vehicle1": m[0], "mse_vehicle2": m[1], "mse_vehicle3": m[2],
                           "ms_per_message": ms, "bytes_per_message": b, "note": note})
 
-    brow("none", "none", med["none"], byt["none"], "Algorithm 1 in the clear")
-    brow("paper", "paper", med["paper"], byt["paper"], "Algorithm 2 (obfuscation + encode)")
-    brow("hardened", "hardened", med["hardened"], byt["hardened"], "z only")
-    for e in eps_list:
-        brow(f"dp(eps={e:g})", f"dp_eps_{e:g}", med["dp"], byt["dp"],
+    brow("none", "none", timing["none"], nbytes["none"], "Algorithm 1 in the clear")
+    brow("paper", "paper", timing["paper"], nbytes["paper"], "Algorithm 2 (obfuscation + encode)")
+    brow("hardened", "hardened", timing["hardened"], nbytes["hardened"], "z only")
+    for e in config.dp_epsilons:
+        brow(f"dp(eps={e:g})", f"dp_eps_{e:g}", timing["dp"], nbytes["dp"],
              f"Gaussian mechanism on z, delta={config.dp_delta:g}, rho={config.dp_rho:g}, sigma={sigmas[e]:.3g}")
     brow("he", "hardened", he["ms_per_message"], int(he["bytes_per_message"]),
          f"Paillier {config.paillier_bits}-bit on z, extrapolated from {he.get('extrapolated_from', '')} values; "
          f"keygen {he['keygen_ms']:.0f} ms")
-    brow("aead", "hardened", med["aead"], byt["aead"], "ChaCha20-Poly1305 on the encoded hardened message")
+    brow("aead", "hardened", timing["aead"], nbytes["aead"], "ChaCha20-Poly1305 on the encoded hardened message")
     return AttackStudyResult(config=config, seed=seed, attack_rows=attack_rows, exactness_rows=exactness_rows,
-                             linkability_rows=link_rows, baseline_rows=base_rows, pole_examples=examples)
+                             linkability_rows=link_rows, baseline_rows=base_rows, pole_examples=runs[0]["examples"])
 
 
 def _recover_z(message, grid) -> np.ndarray:
