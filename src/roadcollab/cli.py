@@ -88,6 +88,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--paillier-bits", type=_positive_int, default=2048, help="Paillier key size (default 2048)")
     _add_dask_options(p)
 
+    p = sub.add_parser("bench", help="per-segment cost of one vehicle, and its scaling with segment length")
+    p.add_argument("--json", action="store_true", help="print one JSON line")
+    p.add_argument("--repeats", type=_positive_int, default=30, help="timed segments per point (default 30)")
+    p.add_argument("--quick", action="store_true", help="only up to 16k samples")
+
     p = sub.add_parser("message", help="message utilities")
     msub = p.add_subparsers(dest="message_command", required=True)
     q = msub.add_parser("example", help="write a valid example message")
@@ -189,6 +194,36 @@ def _cmd_attack(args, argv) -> int:
     return 0
 
 
+def _cmd_bench(args) -> int:
+    import json
+
+    from .bench import run_bench
+
+    sizes = (1000, 2000, 4000, 8000, 16000) if args.quick else (1000, 2000, 4000, 8000, 16000, 32000, 64000)
+    rec = run_bench(sizes=sizes, repeats=args.repeats)
+    if args.json:
+        print(json.dumps(rec))
+        return 0
+    from rich.console import Console
+    from rich.table import Table
+
+    t = Table(title=f"ms per vehicle-segment ({rec['samples_per_segment']} samples, 1 thread)")
+    for c in ("mechanism", "ms / vehicle-segment"):
+        t.add_column(c, justify="right")
+    for m, v in rec["ms_per_vehicle_segment_by_mechanism"].items():
+        t.add_row(m, f"{v:.2f}")
+    Console().print(t)
+    t = Table(title="scaling (cost per N log N relative to N = 4000)")
+    for c in ("N", "paper ms", "rel", "hardened ms", "rel"):
+        t.add_column(c, justify="right")
+    for s_ in rec["scaling"]:
+        t.add_row(str(s_["n_samples"]), f"{s_['ms_paper']:.2f}", f"{s_['paper_per_nlogn_rel']:.2f}",
+                  f"{s_['ms_hardened']:.2f}", f"{s_['hardened_per_nlogn_rel']:.2f}")
+    Console().print(t)
+    print(f"setup per vehicle: {rec['ms_per_vehicle_setup']:.1f} ms")
+    return 0
+
+
 def _cmd_message(args) -> int:
     from .protocol import write_example
 
@@ -206,6 +241,8 @@ def main(argv: list[str] | None = None) -> int:
             return _cmd_reproduce(args, argv)
         if args.command == "attack":
             return _cmd_attack(args, argv)
+        if args.command == "bench":
+            return _cmd_bench(args)
         if args.command == "message":
             return _cmd_message(args)
     except ValueError as err:  # ParameterError / MessageError: a clear message, no traceback

@@ -29,6 +29,7 @@ Vehicle 1 has ``w^f = 0``.
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import numpy as np
@@ -80,13 +81,27 @@ class VehicleEstimate:
         Spectrum of the measurement ``y_j``.
     """
 
-    observer_only: np.ndarray
-    estimate: np.ndarray
     W_obs: np.ndarray
     W_hat: np.ndarray
-    E: np.ndarray
     Wf: np.ndarray
     Y: np.ndarray
+    P_f: np.ndarray
+    grid: SegmentGrid
+    offset: np.ndarray
+
+    # Time signals and the residual are computed on first use: a car that only forwards a
+    # message needs neither (saves two inverse FFTs per segment).
+    @functools.cached_property
+    def observer_only(self) -> np.ndarray:
+        return self.grid.irfft(self.W_obs, self.grid.n_samples) + self.offset
+
+    @functools.cached_property
+    def estimate(self) -> np.ndarray:
+        return self.grid.irfft(self.W_hat, self.grid.n_samples) + self.offset
+
+    @functools.cached_property
+    def E(self) -> np.ndarray:
+        return self.Y - matvec(self.P_f, self.W_hat)
 
 
 class CollaborativeEstimator:
@@ -134,6 +149,7 @@ class CollaborativeEstimator:
         self._w_act = grid.weight[act]
         # -S_j^-1 T_j = P_hat^-1 (I - P_hat D) P_hat = (I - D P_hat): the map z_{j-1} -> w^f_j.
         self._minus_Sinv_T = -(inv2x2(self.S_f[act]) @ self.T_f[act])
+        self._W_Pinv = self._w_act[:, None, None] * inv2x2(self.P_f[act])     # z = W P_hat^-1 y
         self.T_ss, self.S_ss = self._realisations()
         # Responses of the realisations that are sent; the obfuscator and the receiver both
         # use exactly these, so privacy changes no estimate beyond round-off.
@@ -182,7 +198,7 @@ class CollaborativeEstimator:
     def invert(self, Y: np.ndarray) -> np.ndarray:
         """Band-limited offline model inversion ``z_j = W P_hat_j^-1 y_j`` (spectrum)."""
         Z = np.zeros_like(Y)
-        Z[self._act] = self._w_act[:, None] * matvec(inv2x2(self.P_f[self._act]), Y[self._act])
+        Z[self._act] = matvec(self._W_Pinv, Y[self._act])
         return Z
 
     def _check_grid(self, message) -> None:
@@ -243,15 +259,11 @@ class CollaborativeEstimator:
         VehicleEstimate
         """
         Y = self.spectrum(y)
-        n = self.grid.n_samples
         DY = matvec(self.D_f, Y)
         if Wf is None:
             Wf = self.learn(message) if message is not None else np.zeros_like(Y)
-        W_hat = DY + Wf
-        E = Y - matvec(self.P_f, W_hat)
-        obs = self.grid.irfft(DY, n) + self._offset
-        est = self.grid.irfft(W_hat, n) + self._offset
-        return VehicleEstimate(observer_only=obs, estimate=est, W_obs=DY, W_hat=W_hat, E=E, Wf=Wf, Y=Y)
+        return VehicleEstimate(W_obs=DY, W_hat=DY + Wf, Wf=Wf, Y=Y, P_f=self.P_f, grid=self.grid,
+                               offset=self._offset)
 
     def hardened_message(self, result: VehicleEstimate) -> InversionMessage:
         """The hardened message: ``z_j = W P_hat_j^-1 y_j`` only (no dynamics)."""

