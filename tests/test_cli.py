@@ -14,9 +14,11 @@ README = Path(__file__).resolve().parents[1] / "README.md"
 
 def test_reproduce_writes_all_outputs(tmp_path):
     out = tmp_path / "rep"
-    assert main(["reproduce", "--runs", "2", "--vehicles", "3", "--seed", "4", "--out", str(out)]) == 0
+    assert main(["reproduce", "--runs", "2", "--vehicles", "3", "--seed", "4", "--measured-runs", "2",
+                 "--out", str(out)]) == 0
     for name in ("mse.csv", "fig4_mse.png", "fig5_vehicle1.png", "fig6_vehicle2.png", "fig7_vehicle3.png",
-                 "fig5_vehicle1.csv", "fig_fusion.png", "fleet.csv", "config.json", "report.md"):
+                 "fig5_vehicle1.csv", "fig_fusion.png", "fleet.csv", "config.json", "report.md",
+                 "mse_measured.csv", "fig_measured_mse.png"):
         assert (out / name).stat().st_size > 0, name
     rows = list(csv.DictReader((out / "mse.csv").open()))
     assert [r["vehicle"] for r in rows] == ["1", "2", "3"]

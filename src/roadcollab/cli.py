@@ -77,6 +77,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help="relative parameter uncertainty of each vehicle's model (default 0.10)")
     p.add_argument("--iso-class", default=None, help="ISO 8608 roughness class of the synthetic road (default C)")
     p.add_argument("--oracle", action="store_true", help="use the true plants in T_j (analysis only)")
+    p.add_argument("--measured-runs", type=_nonneg_int, default=20,
+                   help="also run this many runs on the shipped measured profile for the report (default 20; 0: skip; "
+                        "ignored with --road-profile)")
     _add_road_options(p)
     _add_dask_options(p)
 
@@ -151,8 +154,19 @@ def _cmd_reproduce(args, argv) -> int:
     with prog:
         result = run_reproduction(cfg, args.seed, progress=cb, workers=args.workers, scheduler=args.scheduler)
     elapsed = time.perf_counter() - t0
+    measured = None
+    if args.road_profile is None and args.measured_runs > 0:
+        import argparse as _ap
+
+        margs = _ap.Namespace(**{**vars(args), "road_profile": "packaged", "runs": args.measured_runs})
+        mcfg = _config_from_args(margs)
+        prog, cb = _progress(mcfg.n_runs, "measured profile")
+        t1 = time.perf_counter()
+        with prog:
+            mres = run_reproduction(mcfg, args.seed, progress=cb, workers=args.workers, scheduler=args.scheduler)
+        measured = (mres, time.perf_counter() - t1)
     command = "roadcollab " + " ".join(shlex.quote(a) for a in argv)
-    summary = write_reproduction(result, args.out, command=command, elapsed=elapsed)
+    summary = write_reproduction(result, args.out, command=command, elapsed=elapsed, measured=measured)
     table = Table(title=f"MSE per vehicle ((m/s)^2), {cfg.n_runs} runs, {elapsed:.1f} s")
     for col in ("vehicle", "Alg. 1+2", "no privacy", "observer only", "fused", "centralised", "max rel diff"):
         table.add_column(col, justify="right")
