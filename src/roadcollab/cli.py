@@ -77,6 +77,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help="relative parameter uncertainty of each vehicle's model (default 0.10)")
     p.add_argument("--iso-class", default=None, help="ISO 8608 roughness class of the synthetic road (default C)")
     p.add_argument("--oracle", action="store_true", help="use the true plants in T_j (analysis only)")
+    p.add_argument("--redraw-fleet", action="store_true",
+                   help="draw a new fleet for every run (statistics over fleets)")
     p.add_argument("--measured-runs", type=_nonneg_int, default=20,
                    help="also run this many runs on the shipped measured profile for the report (default 20; 0: skip; "
                         "ignored with --road-profile)")
@@ -123,7 +125,7 @@ def _config_from_args(args):
     from .vehicle import FleetSpec
 
     kw = dict(n_runs=args.runs, n_vehicles=args.vehicles, speed=args.speed, oracle=args.oracle,
-              road_profile=args.road_profile)
+              road_profile=args.road_profile, redraw_fleet=getattr(args, "redraw_fleet", False))
     if args.noise is not None:
         kw["sensor_noise_std"] = args.noise
     if args.iso_class is not None:

@@ -75,6 +75,9 @@ class ExperimentConfig:
         Use each vehicle's true plant in ``T_j`` (analysis only).
     road_profile : str | None
         Path of a measured profile (``"packaged"`` for the shipped one); None: synthetic.
+    redraw_fleet : bool
+        Draw a new fleet for every run (statistics over fleets, e.g. how the fused estimate
+        improves with fleet size on average); by default one fleet serves every run.
     """
 
     n_vehicles: int = 10
@@ -92,6 +95,7 @@ class ExperimentConfig:
     obfuscation: ObfuscationSpec = field(default_factory=ObfuscationSpec)
     oracle: bool = False
     road_profile: str | None = None
+    redraw_fleet: bool = False
 
     def __post_init__(self) -> None:
         check_int("n_vehicles", self.n_vehicles, low=1, high=1000)
@@ -369,10 +373,17 @@ class _ReproductionTask:
     privacy: bool
 
     def __call__(self, indices) -> list[RunResult]:
-        pipe = pipeline_for(self.config, self.seed)
         run_ss = _fleet(self.config, self.seed)[1]
-        return [simulate_run(pipe, run_ss[i], keep_traces=3 if i == 0 else 0, privacy=self.privacy)
-                for i in indices]
+        out = []
+        for i in indices:
+            if self.config.redraw_fleet:
+                fleet_ss, sim_ss = run_ss[i].spawn(2)
+                pipe = FleetPipeline(self.config, sample_fleet(self.config.n_vehicles, self.config.fleet,
+                                                               rng=np.random.default_rng(fleet_ss)))
+            else:
+                pipe, sim_ss = pipeline_for(self.config, self.seed), run_ss[i]
+            out.append(simulate_run(pipe, sim_ss, keep_traces=3 if i == 0 else 0, privacy=self.privacy))
+        return out
 
 
 def run_reproduction(config: ExperimentConfig, seed: int, *, progress: Callable[[int], None] | None = None,
