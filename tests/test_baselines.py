@@ -41,7 +41,7 @@ HYP = settings(database=None, deadline=None, max_examples=60)
 # -------------------------------------------------------------------------------------------
 def tiny_grid() -> SegmentGrid:
     # nfft = 24, 13 rfft bins at 0, 5/12, ..., 5 Hz; W(f) = 1 / (1 + (1/f)^4), W(0) = 0.
-    return SegmentGrid(n_samples=16, sample_rate=10.0, band_low_hz=1.0, band_order=2)
+    return SegmentGrid(n_samples=16, sample_rate=10.0, band_low_hz=1.0, band_order=2, regularization_low_hz=1.0)
 
 
 def fake_estimator(P_f: np.ndarray, grid: SegmentGrid) -> SimpleNamespace:
@@ -54,7 +54,7 @@ def release(est, y: np.ndarray) -> np.ndarray:
     Y = g.rfft(y)
     act = g.active
     Z = np.zeros_like(Y)
-    Z[act] = g.weight[act, None] * matvec(inv2x2(est.P_f[act]), Y[act])
+    Z[act] = g.reg_weight[act, None] * matvec(inv2x2(est.P_f[act]), Y[act])
     return g.irfft(Z)
 
 
@@ -123,7 +123,7 @@ def test_sensitivity_closed_form_matches_svd():
     for _ in range(20):
         P = random_plant(g, rng)
         act = g.active
-        sv = np.linalg.svd(g.weight[act, None, None] * np.linalg.inv(P[act]), compute_uv=False)
+        sv = np.linalg.svd(g.reg_weight[act, None, None] * np.linalg.inv(P[act]), compute_uv=False)
         assert math.isclose(l2_sensitivity(fake_estimator(P, g), 1.0), sv[:, 0].max(), rel_tol=1e-10)
 
 
@@ -139,7 +139,7 @@ def test_sensitivity_bounds_the_release_and_is_attained_on_the_periodic_grid():
         assert np.linalg.norm(release(est, dy)) <= gain * np.linalg.norm(dy) * (1 + 1e-12)
     # A tone at the worst bin along its top right singular vector attains the bound (nfft samples).
     act = np.flatnonzero(g.active)
-    M = g.weight[act, None, None] * np.linalg.inv(P[act])
+    M = g.reg_weight[act, None, None] * np.linalg.inv(P[act])
     _, s, Vh = np.linalg.svd(M)
     i = int(np.argmax(s[:, 0]))
     k, v = act[i], Vh[i, 0].conj()
@@ -188,14 +188,16 @@ def test_sensitivity_of_a_real_vehicle_bounds_its_hardened_messages(vehicle):
     for _ in range(5):
         assert np.linalg.norm(z_of(rng.standard_normal(y.shape)) - z) <= sens * (1 + 1e-9)
     # Worst case: a tone at the worst bin along its top right singular vector, on N samples only
-    # (zero padding), comes within 1 % of the bound and never exceeds it.
+    # (zero padding), comes close to the bound and never exceeds it. The worst bin lies near the
+    # regulariser's 0.25 Hz corner, where a 20 s window holds only a few periods and leaks into
+    # neighbouring bins: measured 0.89 of the bound.
     act = np.flatnonzero(g.active)
-    _, s, Vh = np.linalg.svd(g.weight[act, None, None] * inv2x2(est.P_f[act]))
+    _, s, Vh = np.linalg.svd(g.reg_weight[act, None, None] * inv2x2(est.P_f[act]))
     i = int(np.argmax(s[:, 0]))
     n = np.arange(g.n_samples)
     tone = np.real(np.exp(2j * np.pi * act[i] * n / g.nfft)[:, None] * Vh[i, 0].conj()[None, :])
     dist = np.linalg.norm(z_of(tone) - z)
-    assert 0.99 * sens <= dist <= sens * (1 + 1e-9)
+    assert 0.8 * sens <= dist <= sens * (1 + 1e-9)
     sig = dp_sigmas(est, DPSpec())
     assert list(sig) == list(DPSpec().epsilons)
     assert all(math.isclose(sig[e], gaussian_sigma(e, 1e-5, sens)) for e in sig)

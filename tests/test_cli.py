@@ -52,3 +52,11 @@ def test_message_example_decodes(tmp_path, mechanism):
 def test_readme_api_example_runs():
     code = README.read_text().split("```python")[1].split("```")[0]
     exec(compile(code, "README.md", "exec"), {})
+
+
+def test_estimate_bad_drive_is_a_clear_error(tmp_path, capsys):
+    bad = tmp_path / "drive1.csv"
+    bad.write_text("time_s,accel_left\n0,1\n")
+    assert main(["estimate", "--drive", str(bad), "--out", str(tmp_path / "out")]) == 2
+    err = capsys.readouterr().err
+    assert "drive1.csv" in err and "roadcollab estimate: error:" in err

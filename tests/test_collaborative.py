@@ -35,7 +35,7 @@ def _rel(a, b):
 
 
 def test_algorithm1_equals_the_complementary_blend(pipe):
-    """NOTES section 4: w_hat_j = D_j y_j + (I - D_j P_hat_j) W P_hat_{j-1}^-1 y_{j-1}."""
+    """NOTES section 4: w_hat_j = D_j y_j + (I - D_j P_hat_j) W_reg P_hat_{j-1}^-1 y_{j-1}."""
     g = pipe.grid
     _, ys = _measure(pipe, 1)
     e1, e2, e3 = pipe.estimators
@@ -44,7 +44,8 @@ def test_algorithm1_equals_the_complementary_blend(pipe):
     r3 = e3.estimate(ys[2], e2.message(r2))
     for prev, cur, y_prev, y_cur, r in ((e1, e2, ys[0], ys[1], r2), (e2, e3, ys[1], ys[2], r3)):
         Y_prev, Y = g.rfft(y_prev), g.rfft(y_cur)
-        Z = prev.invert(Y_prev)                                   # W P_hat_{j-1}^-1 y_{j-1}
+        Z = np.zeros_like(Y_prev)                                 # W_reg P_hat_{j-1}^-1 y_{j-1}
+        Z[g.active] = g.reg_weight[g.active, None] * np.linalg.solve(prev.P_f[g.active], Y_prev[g.active][..., None])[..., 0]
         blend = matvec(cur.D_f, Y)
         blend += matvec(np.eye(2) - cur.D_f @ cur.P_f, Z)
         expect = g.irfft(blend, g.n_samples) + cur.estimator.steady_offset()
@@ -62,7 +63,7 @@ def test_learning_filters_equal_minus_Sinv_T_z(pipe):
     m2 = e2.message(r2)
     act = g.active
     T_prev, S_prev = m2.T.frequency_response(g.omega_dt[act]), m2.S.frequency_response(g.omega_dt[act])
-    Z = g.weight[act, None] * matvec(inv2x2(T_prev), g.rfft(m2.e)[act] - matvec(S_prev, g.rfft(m2.wf)[act]))
+    Z = g.reg_weight[act, None] * matvec(inv2x2(T_prev), g.rfft(m2.e)[act] - matvec(S_prev, g.rfft(m2.wf)[act]))
     Wf = e3.learn(m2)[act]
     expect = matvec(-inv2x2(e3.S_f[act]) @ e3.T_f[act], Z)
     assert np.max(np.abs(Wf - expect)) < 1e-9 * np.max(np.abs(expect))

@@ -193,7 +193,10 @@ def l2_sensitivity(estimator, rho: float) -> float:
     """
     rho = check_positive("rho", rho)
     grid = getattr(estimator, "grid", None)
-    weight = getattr(grid, "weight", None)
+    # The weight actually applied to z (the regulariser of the inverse), when the grid has one.
+    weight = getattr(grid, "reg_weight", None)
+    if weight is None:
+        weight = getattr(grid, "weight", None)
     if weight is None or not hasattr(estimator, "P_f"):
         raise ParameterError(f"estimator must have P_f and grid.weight, got {type(estimator).__name__}")
     weight = check_matrix("estimator.grid.weight", weight, (None,))

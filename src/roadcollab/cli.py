@@ -1,6 +1,7 @@
 """Command-line interface ``roadcollab``.
 
-Subcommands: ``reproduce`` (Figs. 4-7), ``attack`` (security study), ``message example``. Long work shows a progress bar.
+Subcommands: ``reproduce`` (Figs. 4-7), ``attack`` (security study), ``anomalies``, ``estimate``
+(recorded drives), ``bench``, ``message example``. Long work shows a progress bar.
 """
 
 from __future__ import annotations
@@ -97,6 +98,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--json", action="store_true", help="print one JSON line")
     p.add_argument("--repeats", type=_positive_int, default=30, help="timed segments per point (default 30)")
     p.add_argument("--quick", action="store_true", help="only up to 16k samples")
+
+    p = sub.add_parser("estimate", help="estimate the road from recorded drives (CSV + parameters)")
+    from .drives import add_estimate_arguments
+
+    add_estimate_arguments(p)
 
     p = sub.add_parser("message", help="message utilities")
     msub = p.add_subparsers(dest="message_command", required=True)
@@ -240,6 +246,17 @@ def _cmd_bench(args) -> int:
     return 0
 
 
+def _cmd_estimate(args, argv) -> int:
+    from .drives import estimate_command
+
+    command = "roadcollab " + " ".join(shlex.quote(a) for a in argv)
+    summary = estimate_command(args.drive, args.out, command=command)
+    for note in summary.get("notes", []):
+        print(f"note: {note}")
+    print(f"estimated {summary['n_drives']} drives over {summary['length_m']:.1f} m; wrote {args.out}/report.md")
+    return 0
+
+
 def _cmd_message(args) -> int:
     from .protocol import write_example
 
@@ -257,6 +274,8 @@ def main(argv: list[str] | None = None) -> int:
             return _cmd_reproduce(args, argv)
         if args.command == "attack":
             return _cmd_attack(args, argv)
+        if args.command == "estimate":
+            return _cmd_estimate(args, argv)
         if args.command == "bench":
             return _cmd_bench(args)
         if args.command == "message":

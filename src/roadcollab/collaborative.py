@@ -12,7 +12,7 @@ w^f_{j-1})`` from vehicle ``j-1`` and forms
 
 with ``T_j = (I - P_hat_j D_j) P_hat_j``, ``S_j = -P_hat_j`` from the vehicle's *nominal*
 model (it cannot know its true plant; ``oracle=True`` uses the true plant for analysis) and
-the optimal learning filters (eqs. 11-12), band-limited by the weight ``W`` of
+the optimal learning filters (eqs. 11-12), regularised at DC by the weight ``W`` (``W_reg``) of
 :class:`~roadcollab.spectral.SegmentGrid`:
 
 .. math::
@@ -146,7 +146,7 @@ class CollaborativeEstimator:
         self.S_f = -self.P_f
         act = grid.active
         self._act = act
-        self._w_act = grid.weight[act]
+        self._w_act = grid.reg_weight[act]
         # -S_j^-1 T_j = P_hat^-1 (I - P_hat D) P_hat = (I - D P_hat): the map z_{j-1} -> w^f_j.
         self._minus_Sinv_T = -(inv2x2(self.S_f[act]) @ self.T_f[act])
         self._W_Pinv = self._w_act[:, None, None] * inv2x2(self.P_f[act])     # z = W P_hat^-1 y

@@ -179,9 +179,10 @@ def _attack_run(pipe, config: AttackStudyConfig, r: int, rs: np.random.SeedSeque
     road = pipe.road(np.random.default_rng(road_ss))
     noise_rng, priv_rng, dp_rng, own_rng = (np.random.default_rng(s) for s in (noise_ss, priv_ss, dp_ss, own_ss))
     w = road.velocity
-    w_band = grid.irfft(grid.weight[:, None] * grid.rfft(w))          # nfft samples, like z
+    W_true = grid.rfft(w)
+    w_band = grid.irfft(grid.reg_weight[:, None] * W_true)      # nfft samples, band-limited like z
     n, sl = grid.n_samples, cfg.scored
-    truth = w_band[:n][sl]
+    truth = grid.irfft(grid.weight[:, None] * W_true, n)[sl]
 
     def seg_mse(X):
         return float(np.mean((grid.irfft(grid.weight[:, None] * X, n)[sl] - truth) ** 2))
@@ -347,7 +348,7 @@ def _recover_z(message, grid) -> np.ndarray:
     T, S = message.T.frequency_response(om), message.S.frequency_response(om)
     Z = np.zeros((grid.n_bins, 2), complex)
     E, Wf = grid.rfft(message.e)[act], grid.rfft(message.wf)[act]
-    Z[act] = grid.weight[act, None] * matvec(inv2x2(T), E - matvec(S, Wf))
+    Z[act] = grid.reg_weight[act, None] * matvec(inv2x2(T), E - matvec(S, Wf))
     return Z
 
 

@@ -13,7 +13,9 @@ are therefore evaluated, and every inverse is applied, through one zero-phase ba
 .. math:: W(f) = \\frac{1}{1 + (f_{lo}/f)^{2n}}\\cdot\\frac{1}{1 + (f/f_{hi})^{2n}},\\qquad W(0) = 0,
 
 the squared magnitude of an order-``n`` Butterworth band-pass. The MSE of every estimator is
-the mean squared difference of ``W``-filtered truth and ``W``-filtered estimate.
+the mean squared difference of ``W``-filtered truth and ``W``-filtered estimate. The inverses
+themselves are regularised by the same shape at half the corner (``W_reg``), so estimates
+that contain inverses are not weighted twice inside the band.
 """
 
 from __future__ import annotations
@@ -47,6 +49,11 @@ class SegmentGrid:
         Butterworth order ``n`` of the band edges.
     pad_factor : float
         ``nfft >= pad_factor * N`` (>= 1.25), rounded up to a fast FFT length.
+    regularization_low_hz : float | None
+        Corner of the weight ``W_reg`` that regularises every inverse at DC (default
+        ``band_low_hz / 2``). It sits below the evaluation band so that estimates built from
+        inverses are not weighted twice in band (``W W_reg`` is within 0.5 % of ``W`` from
+        ``band_low_hz`` up).
     """
 
     n_samples: int
@@ -55,6 +62,7 @@ class SegmentGrid:
     band_high_hz: float | None = None
     band_order: int = 4
     pad_factor: float = 1.5
+    regularization_low_hz: float | None = None
 
     def __post_init__(self) -> None:
         check_int("n_samples", self.n_samples, low=16)
@@ -74,16 +82,26 @@ class SegmentGrid:
         W[0] = 0.0
         if self.band_high_hz is not None:
             W = W / (1.0 + (f / self.band_high_hz) ** (2 * self.band_order))
-        # Bins where W is below round-off carry nothing; zeroing them keeps every inverse
-        # from amplifying round-off near the transmission zeros at DC.
+        # Bins where a weight is below round-off carry nothing; zeroing them keeps every
+        # inverse from amplifying round-off near the transmission zeros at DC.
         W[W < 1e-12] = 0.0
+        f_reg = self.band_low_hz / 2 if self.regularization_low_hz is None else check_real(
+            "regularization_low_hz", self.regularization_low_hz, low=0.0, low_open=True, high=self.band_low_hz)
+        with np.errstate(divide="ignore"):
+            Wr = 1.0 / (1.0 + (f_reg / np.where(f > 0, f, 1.0)) ** (2 * self.band_order))
+        Wr[0] = 0.0
+        if self.band_high_hz is not None:
+            Wr = Wr / (1.0 + (f / self.band_high_hz) ** (2 * self.band_order))
+        Wr[Wr < 1e-12] = 0.0
         object.__setattr__(self, "weight", W)
-        object.__setattr__(self, "active", W > 0)
+        object.__setattr__(self, "reg_weight", Wr)
+        object.__setattr__(self, "active", Wr > 0)
 
     nfft: int = 0          # set in __post_init__
     freqs: np.ndarray = None  # type: ignore[assignment]
     omega_dt: np.ndarray = None  # type: ignore[assignment]
     weight: np.ndarray = None  # type: ignore[assignment]
+    reg_weight: np.ndarray = None  # type: ignore[assignment]
     active: np.ndarray = None  # type: ignore[assignment]
 
     @property
