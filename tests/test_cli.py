@@ -60,3 +60,13 @@ def test_estimate_bad_drive_is_a_clear_error(tmp_path, capsys):
     assert main(["estimate", "--drive", str(bad), "--out", str(tmp_path / "out")]) == 2
     err = capsys.readouterr().err
     assert "drive1.csv" in err and "roadcollab estimate: error:" in err
+
+
+def test_anomalies_writes_detection_csv(tmp_path):
+    out = tmp_path / "an"
+    assert main(["anomalies", "--runs", "1", "--vehicles", "3", "--no-sweeps", "--out", str(out)]) == 0
+    rows = list(csv.DictReader((out / "detection.csv").open()))
+    assert [r["estimator"] for r in rows] == ["observer_only", "collaborative", "fused"]
+    for col in ("precision", "recall", "f1", "median_position_error_m"):
+        assert 0.0 <= float(rows[1][col]) <= 1.0 or col == "median_position_error_m"
+    assert (out / "fig_anomaly_map.png").stat().st_size > 0

@@ -94,6 +94,17 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--paillier-bits", type=_positive_int, default=2048, help="Paillier key size (default 2048)")
     _add_dask_options(p)
 
+    p = sub.add_parser("anomalies", help="road anomaly detection study (F1, position error, sweeps)")
+    p.add_argument("--runs", type=_positive_int, default=20, help="roads (default 20)")
+    p.add_argument("--vehicles", type=_positive_int, default=10, help="fleet size (default 10, at least 2)")
+    p.add_argument("--seed", type=_nonneg_int, default=0, help="root seed (default 0)")
+    p.add_argument("--out", type=Path, required=True, help="output folder")
+    p.add_argument("--noise", type=float, default=None, help="accelerometer noise std, m/s^2 (default 0.05)")
+    p.add_argument("--iso-class", default=None, help="ISO 8608 roughness class (default C)")
+    p.add_argument("--no-sweeps", action="store_true", help="skip the depth and noise sweeps")
+    _add_road_options(p)
+    _add_dask_options(p)
+
     p = sub.add_parser("bench", help="per-segment cost of one vehicle, and its scaling with segment length")
     p.add_argument("--json", action="store_true", help="print one JSON line")
     p.add_argument("--repeats", type=_positive_int, default=30, help="timed segments per point (default 30)")
@@ -216,6 +227,38 @@ def _cmd_attack(args, argv) -> int:
     return 0
 
 
+def _cmd_anomalies(args, argv) -> int:
+    import argparse as _ap
+
+    from .anomaly_study import AnomalyStudyConfig, run_anomaly_study
+    from .report import write_anomalies
+
+    ns = _ap.Namespace(runs=1, vehicles=args.vehicles, speed=args.speed, oracle=False, road_profile=args.road_profile,
+                       noise=args.noise, iso_class=args.iso_class, uncertainty=None)
+    exp = _config_from_args(ns)
+    kw = {"depths": (), "noise_levels": ()} if args.no_sweeps else {}
+    cfg = AnomalyStudyConfig(experiment=exp, n_runs=args.runs, **kw)
+    prog, cb = _progress(cfg.n_runs, "anomalies")
+    t0 = time.perf_counter()
+    with prog:
+        result = run_anomaly_study(cfg, args.seed, progress=cb, workers=args.workers, scheduler=args.scheduler)
+    elapsed = time.perf_counter() - t0
+    command = "roadcollab " + " ".join(shlex.quote(a) for a in argv)
+    write_anomalies(result, args.out, command=command, elapsed=elapsed)
+    from rich.console import Console
+    from rich.table import Table
+
+    t = Table(title=f"Anomaly detection, {cfg.n_runs} runs, {elapsed:.1f} s")
+    for c in ("estimator", "precision", "recall", "F1", "median position error (m)"):
+        t.add_column(c, justify="right")
+    for r in result.detection_rows:
+        t.add_row(r["estimator"], f"{r['precision']:.3f}", f"{r['recall']:.3f}", f"{r['f1']:.3f}",
+                  f"{r['median_position_error_m']:.3f}")
+    Console().print(t)
+    print(f"wrote {args.out}/report.md")
+    return 0
+
+
 def _cmd_bench(args) -> int:
     import json
 
@@ -274,6 +317,8 @@ def main(argv: list[str] | None = None) -> int:
             return _cmd_reproduce(args, argv)
         if args.command == "attack":
             return _cmd_attack(args, argv)
+        if args.command == "anomalies":
+            return _cmd_anomalies(args, argv)
         if args.command == "estimate":
             return _cmd_estimate(args, argv)
         if args.command == "bench":

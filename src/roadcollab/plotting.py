@@ -10,7 +10,8 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-__all__ = ["plot_mse", "plot_fusion", "plot_estimates", "plot_poles", "plot_attack_success"]
+__all__ = ["plot_mse", "plot_fusion", "plot_estimates", "plot_poles", "plot_attack_success",
+           "plot_anomaly_map", "plot_f1_vs_depth", "plot_f1_vs_noise"]
 
 _TRACKS = ("left track", "right track")
 
@@ -118,3 +119,101 @@ def plot_attack_success(rows: list[dict], path) -> Path:
     a2.legend()
     a2.grid(True, axis="y", alpha=0.3)
     return _save(fig, path)
+
+
+# --- road anomaly detection (roadcollab.anomaly_study) ----------------------------------------
+
+_ESTIMATOR_STYLE = {"observer_only": ("tab:gray", "s", "observer only"),
+                    "collaborative": ("tab:blue", "o", "collaborative (Algorithm 1)"),
+                    "fused": ("tab:green", "D", "fused (average of z)")}
+_KIND_COLOR = {"pothole": "tab:red", "bump": "tab:orange"}
+
+
+def plot_anomaly_map(map_example: dict, path) -> Path:
+    """Road map of true vs detected anomalies for one run and vehicle.
+
+    Top: position along the road (x) against the two wheel tracks (rows); true anomalies are
+    shaded spans coloured by kind (a ``"both"`` anomaly spans both rows), detections of each
+    estimator are markers (triangle down = pothole, up = bump) whose size grows with the
+    estimated depth. Bottom: signed depth in cm (potholes negative, bumps positive), true vs
+    estimated, so depth errors can be read off.
+    """
+    truth = map_example["truth"]
+    dets = map_example["detections"]
+    rows = {"left": (1.0,), "right": (0.0,), "both": (1.0, 0.0)}
+    fig, (ax, ax2) = plt.subplots(2, 1, figsize=(11, 5.5), sharex=True, gridspec_kw={"height_ratios": [1.2, 1]})
+    for a in truth:
+        for y in rows[a["side"]]:
+            ax.add_patch(plt.Rectangle((a["start"], y - 0.42), max(a["end"] - a["start"], 0.3), 0.84,
+                                       color=_KIND_COLOR[a["kind"]], alpha=0.35, lw=0))
+        ax.annotate(f"{100 * a['depth']:.1f}", (a["center"], 1.5), ha="center", fontsize=7,
+                    color=_KIND_COLOR[a["kind"]])
+        sign = -1.0 if a["kind"] == "pothole" else 1.0
+        ax2.bar(a["center"], sign * 100 * a["depth"], width=max(a["end"] - a["start"], 0.6),
+                color=_KIND_COLOR[a["kind"]], alpha=0.35)
+    names = [n for n in _ESTIMATOR_STYLE if n in dets] + [n for n in dets if n not in _ESTIMATOR_STYLE]
+    for i, name in enumerate(names):
+        color, _, label = _ESTIMATOR_STYLE.get(name, ("k", "x", name))
+        off = 0.25 * (i - (len(names) - 1) / 2)
+        for d in dets[name]:
+            marker = "v" if d["kind"] == "pothole" else "^"
+            size = 20 + 1500 * d["depth"]
+            for y in rows[d["side"]]:
+                ax.scatter(d["position"], y + off, s=size, marker=marker, color=color, edgecolor="k", lw=0.4,
+                           zorder=3)
+            sign = -1.0 if d["kind"] == "pothole" else 1.0
+            ax2.plot(d["position"], sign * 100 * d["depth"], marker, color=color, mec="k", mew=0.4, ms=6)
+        ax.scatter([], [], marker="o", color=color, label=label)
+    for kind, color in _KIND_COLOR.items():
+        ax.add_patch(plt.Rectangle((0, 0), 0, 0, color=color, alpha=0.35, label=f"true {kind} (depth in cm)"))
+    lo, hi = map_example.get("region", (None, None))
+    if lo is not None:
+        ax.set_xlim(lo, hi)
+    ax.set_ylim(-0.6, 1.8)
+    ax.set_yticks([0.0, 1.0])
+    ax.set_yticklabels(["right track", "left track"])
+    ax.legend(fontsize=7, ncol=3, loc="lower center", bbox_to_anchor=(0.5, 1.0))
+    ax.set_title(f"Run {map_example.get('run', 1)}, vehicle {map_example.get('vehicle', '?')}: "
+                 "true anomalies (spans) and detections (v pothole, ^ bump; size ~ depth)", fontsize=9, pad=36)
+    ax2.axhline(0, color="k", lw=0.5)
+    ax2.set_ylabel("depth (cm)\npothole < 0 < bump")
+    ax2.set_xlabel("position along the road (m)")
+    ax2.grid(True, alpha=0.3)
+    return _save(fig, path)
+
+
+def _plot_f1_vs(rows: list[dict], key: str, path, xlabel: str, *, scale: float = 1.0, logx: bool = False,
+                title: str = "") -> Path:
+    fig, ax = plt.subplots(figsize=(7, 4))
+    names = list(dict.fromkeys(r["estimator"] for r in rows))
+    for name in names:
+        sel = sorted((r for r in rows if r["estimator"] == name), key=lambda r: r[key])
+        x = np.array([r[key] for r in sel]) * scale
+        color, marker, label = _ESTIMATOR_STYLE.get(name, (None, "x", name))
+        ax.plot(x, [r["f1"] for r in sel], "-", marker=marker, color=color, label=f"{label}: F1")
+        ax.plot(x, [r["recall"] for r in sel], ":", marker=marker, color=color, alpha=0.6, mfc="none",
+                label=f"{label}: recall")
+    ax.axhline(0.9, color="k", ls="--", lw=0.8)
+    if logx:
+        ax.set_xscale("log")
+    ax.set_ylim(0, 1.02)
+    ax.set_xlabel(xlabel)
+    ax.set_ylabel("F1 / recall")
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend(fontsize=7)
+    ax.set_title(title, fontsize=9)
+    return _save(fig, path)
+
+
+def plot_f1_vs_depth(rows: list[dict], path) -> Path:
+    """F1 (solid) and recall (dotted) of anomaly detection per estimator vs anomaly depth;
+    ``rows`` as ``AnomalyStudyResult.depth_rows`` (``depth_m``, ``estimator``, ``f1``, ``recall``)."""
+    return _plot_f1_vs(rows, "depth_m", path, "anomaly depth / height (cm)", scale=100.0,
+                       title="Anomaly detection vs depth (dashed: F1 = 0.9)")
+
+
+def plot_f1_vs_noise(rows: list[dict], path) -> Path:
+    """F1 (solid) and recall (dotted) per estimator vs accelerometer noise std; ``rows`` as
+    ``AnomalyStudyResult.noise_rows`` (``sensor_noise_std``, ``estimator``, ``f1``, ``recall``)."""
+    return _plot_f1_vs(rows, "sensor_noise_std", path, "accelerometer noise std (m/s$^2$)", logx=True,
+                       title="Anomaly detection vs sensor noise (estimators designed for the default)")

@@ -13,6 +13,7 @@ from __future__ import annotations
 import bisect
 import math
 import os
+import dataclasses
 from dataclasses import dataclass
 from importlib import resources
 from pathlib import Path
@@ -27,7 +28,7 @@ from .errors import ParameterError
 __all__ = [
     "ISO_8608_GD0", "ISO_8608_N0", "road_velocity_psd", "wiener_intensity",
     "Anomaly", "RoadSpec", "JumpStatistics", "RoadProfile", "TimeRoad", "MeasuredProfile",
-    "generate_road", "jump_statistics", "load_profile", "measured_road", "packaged_profile_path",
+    "generate_road", "jump_statistics", "load_profile", "measured_road", "packaged_profile_path", "with_anomalies",
 ]
 
 #: Geometric-mean displacement PSD Gd(n0) (m^3) of the ISO 8608 classes at n0 = 0.1 cycle/m.
@@ -567,3 +568,43 @@ def measured_road(path=None, *, second_track="lateral", lateral_class="A", detre
             right = _detrend(distance, walk) if detrend else walk
     elevation = _moving_average(np.column_stack([left, right]), step, enveloping_length)
     return RoadProfile(distance, elevation, (), Path(measured.source).name)
+
+
+def with_anomalies(profile: RoadProfile, spec: RoadSpec, *, rng=None) -> RoadProfile:
+    """Add potholes and bumps drawn from ``spec`` to a (measured) profile, with ground truth.
+
+    Anomalies are drawn over the profile's length with ``spec``'s density, sizes, sides and
+    margins, enveloped like the tyre (``spec.enveloping_length``) and added to the elevation of
+    the tracks they sit on: measured roughness with known anomalies.
+
+    Parameters
+    ----------
+    profile : RoadProfile
+    spec : RoadSpec
+        Anomaly settings (its ``length`` and ``spacing`` are replaced by the profile's).
+    rng : numpy.random.Generator | int | None
+
+    Returns
+    -------
+    RoadProfile
+    """
+    if not isinstance(profile, RoadProfile):
+        raise ParameterError(f"profile must be a RoadProfile, got {type(profile).__name__}")
+    if not isinstance(spec, RoadSpec):
+        raise ParameterError(f"spec must be a RoadSpec, got {type(spec).__name__}")
+    rng = np.random.default_rng(rng)
+    d = profile.distance
+    spacing = float(np.median(np.diff(d)))
+    local = dataclasses.replace(spec, length=float(d[-1] - d[0]), spacing=spacing)
+    anomalies = _draw_anomalies(local, rng)
+    x = d - d[0]
+    bumps = np.zeros_like(profile.elevation)
+    for a in anomalies:
+        shape = a.elevation(x)
+        for t in a.tracks:
+            bumps[:, t] += shape
+    if spec.enveloping_length > 0:
+        bumps = _moving_average(bumps, spacing, spec.enveloping_length)
+    shifted = tuple(dataclasses.replace(a, position=a.position + float(d[0])) for a in anomalies)
+    return RoadProfile(d, profile.elevation + bumps, profile.anomalies + shifted,
+                       f"{profile.source} + synthetic anomalies")
