@@ -7,6 +7,7 @@ with Application to Road Anomaly Detection". See the README for the architecture
 from importlib import metadata as _metadata
 
 from . import protocol
+from .anomaly import Detection, DetectorSpec, detect_anomalies, match_detections
 from .collaborative import CollaborativeEstimator, VehicleEstimate, learning_filters
 from .errors import MessageError, ParameterError
 from .estimator import JDPNoise, RoadInputEstimator, build_road_input_estimator, jdp_estimator_gain
@@ -24,6 +25,7 @@ except _metadata.PackageNotFoundError:  # running from a source tree without ins
     __version__ = "0.0.0+unknown"
 
 __all__ = [
+    "Detection", "DetectorSpec", "detect_anomalies", "match_detections",
     "CollaborativeEstimator", "VehicleEstimate", "learning_filters",
     "MessageError", "ParameterError",
     "JDPNoise", "RoadInputEstimator", "build_road_input_estimator", "jdp_estimator_gain",
