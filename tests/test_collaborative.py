@@ -7,7 +7,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from roadcollab import CollaborativeEstimator, ExperimentConfig, MessageError, ObfuscationSpec, ParameterError, \
+from roadcollab import CollaborativeEstimator, learning_filters, ExperimentConfig, MessageError, ObfuscationSpec, ParameterError, \
     obfuscate, run_reproduction, sample_fleet
 from roadcollab.experiment import FleetPipeline
 from roadcollab.privacy import draw_obfuscator
@@ -67,6 +67,10 @@ def test_learning_filters_equal_minus_Sinv_T_z(pipe):
     Wf = e3.learn(m2)[act]
     expect = matvec(-inv2x2(e3.S_f[act]) @ e3.T_f[act], Z)
     assert np.max(np.abs(Wf - expect)) < 1e-9 * np.max(np.abs(expect))
+    # The explicit filters of eqs. 11-12 give the same update.
+    L1, L2 = learning_filters(e3.T_f[act], e3.S_f[act], T_prev, S_prev, g.reg_weight[act])
+    explicit = matvec(L1, g.rfft(m2.wf)[act]) + matvec(L2, g.rfft(m2.e)[act])
+    assert np.max(np.abs(Wf - explicit)) < 1e-9 * np.max(np.abs(expect))
 
 
 @settings(max_examples=8)
