@@ -3,7 +3,7 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: demo test bench clean
+.PHONY: demo study test bench clean
 
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
@@ -15,6 +15,10 @@ $(STAMP): $(BIN)/python pyproject.toml
 
 demo: $(STAMP)
 	$(BIN)/roadcollab reproduce --out results/demo
+
+study: $(STAMP)
+	$(BIN)/roadcollab attack --out results/attack
+	$(BIN)/roadcollab anomalies --out results/anomalies
 
 test: $(STAMP)
 	$(BIN)/python -m pytest
