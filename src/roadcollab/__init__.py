@@ -36,5 +36,5 @@ __all__ = [
     "discretize_plant", "simulate_response",
     "SegmentGrid",
     "FleetSpec", "HalfCarParameters", "Vehicle", "half_car_model", "sample_fleet",
-    "__version__",
+    "protocol", "__version__",
 ]

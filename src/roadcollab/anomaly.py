@@ -72,12 +72,10 @@ from scipy.optimize import linear_sum_assignment
 
 from ._validation import check_matrix, check_positive, check_probability, check_real, check_signal
 from .errors import ParameterError
-from .road import Anomaly
+from .road import Anomaly, check_anomaly_fields
 
 __all__ = ["Detection", "DetectorSpec", "detect_anomalies", "match_detections"]
 
-_SIDES = ("left", "right", "both")
-_KINDS = ("pothole", "bump")
 _SIDE_TRACKS = {"left": (0,), "right": (1,), "both": (0, 1)}
 _MAD_TO_STD = 1.4826            # sigma of a Gaussian per median absolute deviation
 _TEMPLATE_STEP = 0.005          # m, fine grid on which templates are built before sampling
@@ -108,12 +106,7 @@ class Detection:
     confidence: float
 
     def __post_init__(self):
-        object.__setattr__(self, "position", check_real("position", self.position))
-        if self.side not in _SIDES:
-            raise ParameterError(f"side must be one of {_SIDES}, got {self.side!r}")
-        if self.kind not in _KINDS:
-            raise ParameterError(f"kind must be one of {_KINDS}, got {self.kind!r}")
-        object.__setattr__(self, "depth", check_positive("depth", self.depth))
+        check_anomaly_fields(self)
         object.__setattr__(self, "confidence", check_probability("confidence", self.confidence))
 
     @property

@@ -24,6 +24,16 @@ def _save(fig, path) -> Path:
     return path
 
 
+def _mse_axes(ax, vehicles) -> None:
+    """Log MSE axis over vehicle numbers, shared by the MSE figures."""
+    ax.set_yscale("log")
+    ax.set_xlabel("vehicle")
+    ax.set_ylabel("road-velocity MSE ((m/s)$^2$)")
+    ax.set_xticks(vehicles)
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend()
+
+
 def plot_mse(rows: list[dict], path) -> Path:
     """Fig. 4: mean and standard deviation of the MSE per vehicle (with privacy), and the
     vehicles' own observers for reference."""
@@ -33,12 +43,7 @@ def plot_mse(rows: list[dict], path) -> Path:
                 label="Algorithm 1 + 2 (collaborative, private)")
     ax.errorbar(v + 0.1, [r["observer_only_mse_mean"] for r in rows], yerr=[r["observer_only_mse_std"] for r in rows],
                 fmt="s--", capsize=4, alpha=0.8, label="observer only (no collaboration)")
-    ax.set_yscale("log")
-    ax.set_xlabel("vehicle")
-    ax.set_ylabel("road-velocity MSE ((m/s)$^2$)")
-    ax.set_xticks(v)
-    ax.grid(True, which="both", alpha=0.3)
-    ax.legend()
+    _mse_axes(ax, v)
     ax.set_title("MSE per vehicle (mean $\\pm$ std over runs)")
     return _save(fig, path)
 
@@ -52,12 +57,7 @@ def plot_fusion(rows: list[dict], path) -> Path:
                               ("fused_mse_mean", "fused (average of z)", "^-"),
                               ("centralized_mse_mean", "centralised (all raw data)", "k:")):
         ax.plot(v, [r[key] for r in rows], style, label=label)
-    ax.set_yscale("log")
-    ax.set_xlabel("vehicle")
-    ax.set_ylabel("road-velocity MSE ((m/s)$^2$)")
-    ax.set_xticks(v)
-    ax.grid(True, which="both", alpha=0.3)
-    ax.legend()
+    _mse_axes(ax, v)
     return _save(fig, path)
 
 

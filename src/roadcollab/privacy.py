@@ -222,7 +222,6 @@ def draw_obfuscator(spec: ObfuscationSpec, grid: SegmentGrid, *, rng=None,
     for _ in range(max_attempts):
         n = int(rng.integers(spec.order_range[0], spec.order_range[1] + 1))
         poles = _random_roots(n, spec.pole_frequency_range, spec.pole_damping_range, spec.complex_fraction, rng)
-        den = np.real(np.poly(poles))
         num = np.zeros((2, 2, n + 1))
         diag_gain = np.exp(rng.uniform(np.log(0.5), np.log(2.0), 2))
         for a in range(2):

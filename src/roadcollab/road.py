@@ -99,12 +99,7 @@ class Anomaly:
     length: float     # m, > 0, extent along the road
 
     def __post_init__(self):
-        object.__setattr__(self, "position", check_real("position", self.position))
-        if self.side not in _SIDES:
-            raise ParameterError(f"side must be one of {_SIDES}, got {self.side!r}")
-        if self.kind not in _KINDS:
-            raise ParameterError(f"kind must be one of {_KINDS}, got {self.kind!r}")
-        object.__setattr__(self, "depth", check_positive("depth", self.depth))
+        check_anomaly_fields(self)
         object.__setattr__(self, "length", check_positive("length", self.length))
 
     @property
@@ -130,6 +125,17 @@ class Anomaly:
             # Half-open so that the two edges are single jumps of -depth and +depth.
             return np.where((u >= 0.0) & (u < 1.0), -self.depth, 0.0)
         return np.where((u >= 0.0) & (u <= 1.0), self.depth * 0.5 * (1.0 - np.cos(2 * np.pi * u)), 0.0)
+
+
+def check_anomaly_fields(obj) -> None:
+    """Validate (and normalise) ``position``, ``side``, ``kind`` and ``depth`` of a frozen
+    anomaly-like dataclass (a true :class:`Anomaly` or a detection)."""
+    object.__setattr__(obj, "position", check_real("position", obj.position))
+    if obj.side not in _SIDES:
+        raise ParameterError(f"side must be one of {_SIDES}, got {obj.side!r}")
+    if obj.kind not in _KINDS:
+        raise ParameterError(f"kind must be one of {_KINDS}, got {obj.kind!r}")
+    object.__setattr__(obj, "depth", check_positive("depth", obj.depth))
 
 
 def _check_range(name: str, value) -> tuple[float, float]:

@@ -39,7 +39,7 @@ import scipy.linalg
 import scipy.optimize
 
 from .errors import ParameterError
-from .message import ExchangeMessage, InversionMessage, StateSpaceData
+from .message import ExchangeMessage, StateSpaceData
 
 __all__ = ["PhysicalPrior", "pole_errors", "select_by_prior", "attack_model_reduction",
            "attack_pole_intersection", "attack_multiplicity", "arx_poles", "attack_signals_reduction",
@@ -144,7 +144,7 @@ def balanced_truncation_poles(sys: StateSpaceData, order: int) -> np.ndarray:
             warnings.simplefilter("ignore")
             nr, Ar, _, _, hsv = slycot.ab09ad("D", "B", "N", sys.order, sys.B.shape[1], sys.C.shape[0],
                                               sys.A.copy(), sys.B.copy(), sys.C.copy(), nr=order, tol=0.0)
-    except (ValueError, ArithmeticError, slycot.exceptions.SlycotError) as err:  # noqa: F841
+    except (ValueError, ArithmeticError, slycot.exceptions.SlycotError):
         return np.zeros(0, complex)
     if not np.all(np.isfinite(hsv)) or nr < 1:
         return np.zeros(0, complex)
