@@ -101,7 +101,31 @@ def bench_segment(n_samples: int = 4000, *, mechanism: str = "paper", repeats: i
 
 
 def run_bench(*, sizes=(1000, 2000, 4000, 8000, 16000, 32000, 64000), repeats: int = 30, seed: int = 0) -> dict:
-    """The benchmark record printed by ``roadcollab bench --json``."""
+    """The benchmark record printed by ``roadcollab bench --json``.
+
+    Single-threaded (BLAS limited to one thread): :func:`bench_segment` at 4000 samples for every
+    mechanism, then the ``paper`` and ``hardened`` mechanisms at every size of ``sizes``.
+
+    Parameters
+    ----------
+    sizes : sequence of int
+        Samples per segment of the scaling points (non-empty, each in [64, 2**20]). The 4000-sample
+        point (else the first) is the reference of the normalised costs.
+    repeats : int
+        Timed segments (>= 1) of the 4000-sample measurement; the scaling points use
+        ``max(3, repeats // 3)``.
+    seed : int
+        Seed of every :func:`bench_segment` call (fleet, roads, sensor noise, obfuscators).
+
+    Returns
+    -------
+    dict
+        ``ms_per_vehicle_segment`` (``paper`` mechanism, ms), ``ms_per_vehicle_segment_by_mechanism``
+        (``{mechanism: ms}``), ``ms_per_vehicle_setup`` (ms), ``samples_per_segment``, ``nfft``,
+        ``scaling`` (one dict per size: ``n_samples``, ``ms_paper``, ``ms_hardened`` in ms, and
+        ``paper_per_nlogn_rel``, ``hardened_per_nlogn_rel``: cost per ``N log2 N`` relative to the
+        reference point, 1 everywhere for ``N log N`` scaling) and ``threads`` (1).
+    """
     from threadpoolctl import threadpool_limits
 
     with threadpool_limits(limits=1):

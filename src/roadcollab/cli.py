@@ -59,6 +59,15 @@ def _add_road_options(p: argparse.ArgumentParser) -> None:
 
 
 def build_parser() -> argparse.ArgumentParser:
+    """The ``argparse`` parser of the ``roadcollab`` command.
+
+    Subcommands ``reproduce``, ``attack``, ``anomalies``, ``bench``, ``estimate`` and
+    ``message example``; the parsed subcommand is ``args.command``.
+
+    Returns
+    -------
+    argparse.ArgumentParser
+    """
     parser = argparse.ArgumentParser(prog="roadcollab", description=__doc__.splitlines()[0])
     from . import __version__
 
@@ -306,6 +315,24 @@ def _cmd_message(args) -> int:
 
 
 def main(argv: list[str] | None = None) -> int:
+    """Entry point of the ``roadcollab`` command: parse ``argv`` and run the subcommand.
+
+    Parameters
+    ----------
+    argv : list of str, optional
+        Arguments without the program name (default: ``sys.argv[1:]``).
+
+    Returns
+    -------
+    int
+        Exit status: 0 on success, 2 if the command rejects its input (a ``ValueError`` such as
+        ``ParameterError``; the message is printed to stderr, without a traceback).
+
+    Raises
+    ------
+    SystemExit
+        From argparse, for ``--help``, ``--version`` and invalid arguments.
+    """
     argv = list(sys.argv[1:] if argv is None else argv)
     parser = build_parser()
     args = parser.parse_args(argv)

@@ -542,7 +542,27 @@ def find_anomalies(est: DriveEstimates, spec=None) -> list[dict]:
 # --- writing -------------------------------------------------------------------------------------
 
 def write_drive_csv(path, time, accel) -> Path:
-    """Write a drive CSV in the documented format, full precision (``repr`` floats)."""
+    """Write a drive CSV in the documented format, full precision (``repr`` floats).
+
+    Parameters
+    ----------
+    path : str or Path
+        Output file (overwritten).
+    time : (N,) array_like
+        ``time_s`` column, s (uniform sampling is not checked here; :func:`read_drive_csv` checks it).
+    accel : (N, 2) array_like
+        Left and right body-tip vertical accelerations, m/s^2, finite.
+
+    Returns
+    -------
+    Path
+        ``path``.
+
+    Raises
+    ------
+    ParameterError
+        If ``accel`` is not a finite (N, 2) array or ``time`` does not have shape (N,).
+    """
     time = np.asarray(time, dtype=float)
     accel = check_signal("accel", accel, 2)
     if time.shape != (accel.shape[0],):
@@ -555,7 +575,33 @@ def write_drive_csv(path, time, accel) -> Path:
 
 def write_drive_params(path, *, speed: float, params: HalfCarParameters, sensor_noise_std: float | None = None,
                        start_m: float | None = None) -> Path:
-    """Write a parameters file (``.toml`` or ``.json`` by suffix), full precision."""
+    """Write a parameters file (``.toml`` or ``.json`` by suffix), full precision.
+
+    Values are not validated here; :func:`read_drive_params` checks them.
+
+    Parameters
+    ----------
+    path : str or Path
+        Output file (overwritten); the suffix ``.toml`` or ``.json`` (any case) picks the format.
+    speed : float
+        ``speed_mps``, m/s.
+    params : HalfCarParameters
+        The vehicle's estimated parameters, written as the ``vehicle`` table (SI units).
+    sensor_noise_std : float, optional
+        m/s^2; the key is omitted if None (readers then use 0.05).
+    start_m : float, optional
+        Road distance of the first sample, m; the key is omitted if None (readers then use 0).
+
+    Returns
+    -------
+    Path
+        ``path``.
+
+    Raises
+    ------
+    ParameterError
+        If the suffix is neither ``.toml`` nor ``.json`` (nothing is written).
+    """
     path = Path(path)
     top = {"speed_mps": float(speed)}
     if sensor_noise_std is not None:
@@ -622,6 +668,30 @@ def write_estimates(est: DriveEstimates, out, *, command: str, anomalies: list[d
     ``final_estimate.csv`` (the last drive's collaborative and fused estimates:
     ``w_<estimator>_<side>``, ``elevation_<estimator>_<side>``), ``anomalies.csv``,
     ``road_velocity.png``, ``elevation.png``, ``config.json`` and ``report.md``.
+
+    Parameters
+    ----------
+    est : DriveEstimates
+        From :func:`estimate_drives`.
+    out : str or Path
+        Output folder (created with its parents if missing; files in it are overwritten).
+    command : str
+        The command line, recorded in ``config.json`` and ``report.md``.
+    anomalies : list of dict or None
+        Rows of :func:`find_anomalies` (:data:`ANOMALY_COLUMNS`); None if detection was not run
+        (``anomalies.csv`` then holds the header only and the report says so).
+    anomaly_note : str, optional
+        Note for the report and ``config.json`` (e.g. why detection was not run).
+    elapsed : float, optional
+        Wall time of reading, estimating and detecting, s (recorded if given).
+
+    Returns
+    -------
+    dict
+        Summary: ``out_dir``, ``n_drives``, ``sample_rate_hz`` (Hz), ``speed_mps`` (m/s), ``start_m``
+        (m), ``n_samples``, ``samples_per_drive``, ``truncated``, ``duration_s`` (s), ``length_m`` (m),
+        ``n_anomalies`` (``{estimator: count}`` summed over drives; None if ``anomalies`` is None),
+        ``notes`` and ``files``.
     """
     from . import plotting_drives
     from .report import markdown_table, write_config, write_csv

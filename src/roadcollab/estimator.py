@@ -155,6 +155,25 @@ def zoh_discretize(A, B, C, D, dt: float):
 
     Returns ``(Ad, Bd, C, D)`` with ``Ad = e^{A dt}``, ``Bd = int_0^dt e^{A s} ds B``, computed
     from one matrix exponential of the augmented matrix ``[[A, B], [0, 0]]``.
+
+    Parameters
+    ----------
+    A : (n, n) array_like
+        Continuous state matrix, 1/s.
+    B : (n, m) ndarray
+        Continuous input matrix.
+    C : (p, n) array_like
+    D : (p, m) array_like
+    dt : float
+        Sample period (hold time), s.
+
+    Returns
+    -------
+    Ad : (n, n) ndarray
+    Bd : (n, m) ndarray
+    C : (p, n) ndarray
+    D : (p, m) ndarray
+        ``C`` and ``D`` unchanged, as float copies.
     """
     n, m = B.shape
     M = np.zeros((n + m, n + m))
@@ -182,7 +201,21 @@ def dlti_frequency_response(Ad, Bd, Cd, Dd, omega_dt: np.ndarray) -> np.ndarray:
 
 
 def ss_response(A, B, C, D, points: np.ndarray) -> np.ndarray:
-    """``C (x I - A)^-1 B + D`` at complex points ``x`` (``s`` or ``z``), shape (M, p, m)."""
+    """``C (x I - A)^-1 B + D`` at complex points ``x`` (``s`` or ``z``), shape (M, p, m).
+
+    Parameters
+    ----------
+    A, B, C, D : array_like
+        Realisation, shapes (n, n), (n, m), (p, n), (p, m); with ``n = 0`` the result is ``D``
+        at every point. Continuous (``A`` in 1/s) for ``s`` points, discrete for ``z`` points.
+    points : complex array_like
+        Evaluation points, flattened to (M,): ``s = j omega`` (rad/s) for a continuous
+        realisation, ``z = exp(j omega dt)`` for a discrete one.
+
+    Returns
+    -------
+    (M, p, m) complex ndarray
+    """
     # Diagonalise once: (xI - A)^-1 = V diag(1/(x - lambda)) V^-1, so every output/input pair
     # is one matrix product [1/(x - lambda)] @ [Cv_pn Bv_nm] (about 10x faster than M solves).
     # Its error grows like cond(V) * eps, so realisations with close or repeated poles

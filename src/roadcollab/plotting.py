@@ -63,7 +63,28 @@ def plot_fusion(rows: list[dict], path) -> Path:
 
 def plot_estimates(time, truth, plain, private, vehicle: int, path, *, window: tuple[float, float] | None = None
                    ) -> Path:
-    """Figs. 5-7: actual (band-limited) road input vs the estimates with and without privacy."""
+    """Figs. 5-7: actual (band-limited) road input vs the estimates with and without privacy.
+
+    Parameters
+    ----------
+    time : (N,) array_like
+        s.
+    truth : (N, 2) ndarray
+        Band-limited road velocity, m/s, columns ``[left, right]``.
+    plain, private : (N, 2) ndarray
+        The vehicle's estimates without and with privacy (Algorithm 2), m/s.
+    vehicle : int
+        Vehicle number (1-based), for the title.
+    path : str or Path
+        Output image (format from the suffix, 120 dpi).
+    window : (float, float), optional
+        Time span ``(start, end)`` to plot, s, both ends included (default: everything).
+
+    Returns
+    -------
+    Path
+        ``path``.
+    """
     time = np.asarray(time)
     sel = slice(None) if window is None else (time >= window[0]) & (time <= window[1])
     fig, axes = plt.subplots(2, 1, figsize=(8, 5), sharex=True)

@@ -23,6 +23,27 @@ def plot_tracks(positions, series: dict, path, *, ylabel: str, title: str = "",
 
     With ``zoom = (start_m, end_m)`` a second column shows that stretch of road (shaded in the
     first column).
+
+    Parameters
+    ----------
+    positions : (N,) array_like
+        Road position of every sample, m.
+    series : dict
+        ``{label: (N, 2) array_like}``, columns ``[left, right]``, in the unit of ``ylabel``;
+        drawn in insertion order.
+    path : str or Path
+        Output image (format from the suffix, 120 dpi).
+    ylabel : str
+        y-axis label with its unit, e.g. ``"road velocity (m/s)"``.
+    title : str
+        Title of the first column (none if empty).
+    zoom : (float, float), optional
+        ``(start_m, end_m)``, m, both ends included.
+
+    Returns
+    -------
+    Path
+        ``path``.
     """
     positions = np.asarray(positions, dtype=float)
     ncol = 1 if zoom is None else 2

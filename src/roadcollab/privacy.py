@@ -208,6 +208,25 @@ def draw_obfuscator(spec: ObfuscationSpec, grid: SegmentGrid, *, rng=None,
                     max_attempts: int = 200) -> Obfuscator:
     """Draw one ``Psi`` from ``spec``, discretised for ``grid``.
 
+    Parameters
+    ----------
+    spec : ObfuscationSpec
+        Distribution of the draw (anything else raises ParameterError).
+    grid : SegmentGrid
+        Its sample period ``dt`` (s) discretises the design (bilinear transform), and the
+        condition number of ``Psi`` is checked on its active bins.
+    rng : numpy.random.Generator | int | None
+    max_attempts : int
+        Draws tried. A draw is rejected if a transmission zero has real part above
+        ``-spec.min_zero_distance`` (rad/s) or the condition number on the grid exceeds
+        ``spec.max_condition``.
+
+    Returns
+    -------
+    Obfuscator
+        Continuous design (poles in rad/s, numerators) and its discrete realisation of order
+        ``2 n``, sample period ``grid.dt``.
+
     Raises
     ------
     ParameterError

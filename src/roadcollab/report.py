@@ -43,7 +43,23 @@ def fmt(value) -> str:
 
 
 def write_csv(path, rows: list[dict], columns: list[str] | None = None) -> Path:
-    """Write dict rows to CSV with full float precision (repr)."""
+    """Write dict rows to CSV with full float precision (repr).
+
+    Parameters
+    ----------
+    path : str or Path
+        Output file (overwritten).
+    rows : list of dict
+        One dict per row, holding every key of ``columns``. Python and numpy floats are written
+        as ``repr(float(v))``, other values as ``str(v)``.
+    columns : list of str, optional
+        Column order and header (default: the keys of the first row; none if ``rows`` is empty).
+
+    Returns
+    -------
+    Path
+        ``path``.
+    """
     path = Path(path)
     columns = columns or list(rows[0].keys()) if rows else (columns or [])
     with path.open("w", newline="") as fh:
@@ -55,7 +71,26 @@ def write_csv(path, rows: list[dict], columns: list[str] | None = None) -> Path:
 
 
 def write_config(path, *, command: str, seed: int | None, config: dict, extra: dict | None = None) -> Path:
-    """Write ``config.json``: command, seed, configuration, package and platform versions."""
+    """Write ``config.json``: command, seed, configuration, package and platform versions.
+
+    Parameters
+    ----------
+    path : str or Path
+        Output file (overwritten).
+    command : str
+        The command line of the run.
+    seed : int or None
+        Root seed (None if the run has none).
+    config : dict
+        Full configuration; numpy scalars and arrays, tuples and paths become JSON types.
+    extra : dict, optional
+        More top-level keys, converted the same way (they replace standard keys of the same name).
+
+    Returns
+    -------
+    Path
+        ``path``.
+    """
     from . import __version__
 
     record = {
@@ -75,7 +110,22 @@ def write_config(path, *, command: str, seed: int | None, config: dict, extra: d
 
 
 def markdown_table(rows: list[dict], columns: list[str], headers: list[str] | None = None) -> str:
-    """A GitHub-flavoured Markdown table."""
+    """A GitHub-flavoured Markdown table.
+
+    Parameters
+    ----------
+    rows : list of dict
+        One dict per table row, holding every key of ``columns``.
+    columns : list of str
+        Keys shown, in order; values formatted by :func:`fmt` (numbers to 4 significant digits).
+    headers : list of str, optional
+        Header text of each column (default: ``columns``).
+
+    Returns
+    -------
+    str
+        The table, one line per row, without a trailing newline.
+    """
     headers = headers or columns
     out = ["| " + " | ".join(headers) + " |", "|" + "---|" * len(headers)]
     for r in rows:

@@ -112,7 +112,25 @@ def pole_errors(estimated, true) -> np.ndarray:
 
 
 def select_by_prior(candidates, prior: PhysicalPrior = PhysicalPrior(), n_pairs: int = 2) -> np.ndarray:
-    """The ``n_pairs`` complex pairs among ``candidates`` that the prior finds most plausible."""
+    """The ``n_pairs`` complex pairs among ``candidates`` that the prior finds most plausible.
+
+    Parameters
+    ----------
+    candidates : complex array_like
+        Continuous-time poles, rad/s (any shape, flattened). Only poles with positive imaginary
+        part that :meth:`PhysicalPrior.admits` are considered.
+    prior : PhysicalPrior
+        Ranks the admitted poles by their distance to its most plausible mode.
+    n_pairs : int
+        Largest number of pairs returned. A pole within 1e-6 relative of one already chosen is
+        skipped (a double pole counts once).
+
+    Returns
+    -------
+    (2 k,) complex ndarray
+        The ``k <= n_pairs`` chosen upper-half-plane poles, most plausible first, then their
+        conjugates, rad/s; empty if the prior admits none.
+    """
     c = np.asarray(candidates, dtype=complex).reshape(-1)
     upper = [p for p in c if prior.admits(p)]
     upper.sort(key=prior.distance)
@@ -166,7 +184,24 @@ def _match_sets(a: np.ndarray, b: np.ndarray, rtol: float) -> np.ndarray:
 
 def attack_pole_intersection(message: ExchangeMessage, prior: PhysicalPrior = PhysicalPrior(),
                              rtol: float = 1e-5) -> np.ndarray:
-    """Poles common to ``T~`` and ``S~``, then the physical prior."""
+    """Poles common to ``T~`` and ``S~``, then the physical prior.
+
+    Parameters
+    ----------
+    message : ExchangeMessage
+        The received message (``mechanism`` ``"none"`` or ``"paper"``); the poles of its
+        discrete ``T`` and ``S`` are mapped to the s-plane, ``log(z) / dt`` (rad/s).
+    prior : PhysicalPrior
+        The attacker's prior on suspension modes.
+    rtol : float
+        Relative distance below which a pole of ``S~`` counts as a pole of ``T~``.
+
+    Returns
+    -------
+    (2 k,) complex ndarray
+        Estimated poles of ``S_j``, rad/s: ``k <= 2`` conjugate pairs chosen by
+        :func:`select_by_prior`; empty if none is found.
+    """
     pt = message.T.continuous_poles()
     ps = message.S.continuous_poles()
     return select_by_prior(_match_sets(ps, pt, rtol), prior)
@@ -174,7 +209,26 @@ def attack_pole_intersection(message: ExchangeMessage, prior: PhysicalPrior = Ph
 
 def attack_multiplicity(message: ExchangeMessage, prior: PhysicalPrior = PhysicalPrior(),
                         rtol: float = 1e-6) -> np.ndarray:
-    """Simple (multiplicity-one) poles of ``S~`` that also appear in ``T~``, then the prior."""
+    """Simple (multiplicity-one) poles of ``S~`` that also appear in ``T~``, then the prior.
+
+    Parameters
+    ----------
+    message : ExchangeMessage
+        The received message (``mechanism`` ``"none"`` or ``"paper"``); the poles of its
+        discrete ``T`` and ``S`` are mapped to the s-plane, ``log(z) / dt`` (rad/s).
+    prior : PhysicalPrior
+        The attacker's prior on suspension modes.
+    rtol : float
+        Relative distance below which two poles of ``S~`` count as one repeated pole. Simple
+        poles match poles of ``T~`` within 1e-5 relative; if none matches, all simple poles go
+        to the prior.
+
+    Returns
+    -------
+    (2 k,) complex ndarray
+        Estimated poles of ``S_j``, rad/s: ``k <= 2`` conjugate pairs chosen by
+        :func:`select_by_prior`; empty if none is found.
+    """
     ps = message.S.continuous_poles()
     d = np.abs(ps[:, None] - ps[None, :]) / np.maximum(np.abs(ps)[:, None], 1e-300)
     np.fill_diagonal(d, np.inf)
@@ -221,7 +275,26 @@ def _arx_fit(u: np.ndarray, y: np.ndarray, na: int, nb: int, decimate: int = 1):
 
 
 def arx_poles(u: np.ndarray, y: np.ndarray, dt: float, order: int, decimate: int = 2) -> np.ndarray:
-    """Continuous poles (rad/s) of a common-denominator ARX model of order ``order``."""
+    """Continuous poles (rad/s) of a common-denominator ARX model of order ``order``.
+
+    Parameters
+    ----------
+    u : (N, 2) ndarray
+        Input signal (in the study: a hardened message's ``z``, m/s).
+    y : (N, 2) ndarray
+        Output signal (in the study: ``w_band - z``, m/s).
+    dt : float
+        Sample period of ``u`` and ``y``, s.
+    order : int
+        Order of the common denominator and of the numerators.
+    decimate : int
+        Every ``decimate``-th sample is kept before the fit (sample period ``dt * decimate``).
+
+    Returns
+    -------
+    (order,) complex ndarray
+        Roots ``z`` of the denominator mapped to the s-plane, ``log(z) / (dt * decimate)``, rad/s.
+    """
     a, _ = _arx_fit(u, y, order, order, decimate)
     return _continuous(np.roots(np.concatenate([[1.0], a])), dt * decimate)
 
@@ -254,7 +327,27 @@ def _signals(z: np.ndarray, w_band: np.ndarray):
 def attack_signals_reduction(z: np.ndarray, w_band: np.ndarray, dt: float, order: int = 12,
                              decimate: int = 2) -> np.ndarray:
     """Hardened ``model_reduction``: high-order ARX fit of ``z -> w - z``, then balanced
-    truncation to 4 states."""
+    truncation to 4 states.
+
+    Parameters
+    ----------
+    z : (nfft, 2) ndarray
+        The hardened message's ``z`` (band-limited model inversion on the padded grid), m/s.
+    w_band : (nfft, 2) ndarray
+        True road velocity band-limited like ``z`` (granted to the attacker), m/s.
+    dt : float
+        Sample period, s (``grid.dt``).
+    order : int
+        ARX order (as :func:`arx_poles`).
+    decimate : int
+        Decimation before the fit (as :func:`arx_poles`).
+
+    Returns
+    -------
+    complex ndarray
+        At most 4 poles of the truncated model, rad/s (empty if the truncation fails). If the
+        fitted model is unstable, its poles chosen by the default :class:`PhysicalPrior` instead.
+    """
     u, y = _signals(z, w_band)
     sys = _arx_state_space(u, y, dt, order, decimate)
     if np.max(np.abs(np.linalg.eigvals(sys.A))) >= 1:
@@ -264,14 +357,55 @@ def attack_signals_reduction(z: np.ndarray, w_band: np.ndarray, dt: float, order
 
 def attack_signals_prior(z: np.ndarray, w_band: np.ndarray, dt: float, prior: PhysicalPrior = PhysicalPrior(),
                          order: int = 8, decimate: int = 2) -> np.ndarray:
-    """Hardened ``pole_intersection``: ARX poles of ``z -> w - z`` selected by the prior."""
+    """Hardened ``pole_intersection``: ARX poles of ``z -> w - z`` selected by the prior.
+
+    Parameters
+    ----------
+    z : (nfft, 2) ndarray
+        The hardened message's ``z`` (band-limited model inversion on the padded grid), m/s.
+    w_band : (nfft, 2) ndarray
+        True road velocity band-limited like ``z`` (granted to the attacker), m/s.
+    dt : float
+        Sample period, s (``grid.dt``).
+    prior : PhysicalPrior
+        The attacker's prior on suspension modes.
+    order : int
+        ARX order (as :func:`arx_poles`).
+    decimate : int
+        Decimation before the fit (as :func:`arx_poles`).
+
+    Returns
+    -------
+    (2 k,) complex ndarray
+        Estimated poles of ``S_j``, rad/s: ``k <= 2`` conjugate pairs chosen by
+        :func:`select_by_prior`; empty if none is found.
+    """
     u, y = _signals(z, w_band)
     return select_by_prior(arx_poles(u, y, dt, order, decimate), prior)
 
 
 def intersect_pole_sets(p1: np.ndarray, p2: np.ndarray, prior: PhysicalPrior = PhysicalPrior(),
                         rtol: float = 0.05) -> np.ndarray:
-    """Poles of ``p1`` that recur in ``p2`` within ``rtol`` (averaged), then the prior."""
+    """Poles of ``p1`` that recur in ``p2`` within ``rtol`` (averaged), then the prior.
+
+    Parameters
+    ----------
+    p1 : complex array_like
+        Poles of one segment, rad/s.
+    p2 : complex ndarray
+        Poles of another segment of the same vehicle, rad/s.
+    prior : PhysicalPrior
+        The attacker's prior on suspension modes.
+    rtol : float
+        A pole ``p`` of ``p1`` recurs if its nearest pole ``q`` of ``p2`` has
+        ``|q - p| < rtol |p|``; the pair is replaced by its mean.
+
+    Returns
+    -------
+    (2 k,) complex ndarray
+        Estimated poles of ``S_j``, rad/s: ``k <= 2`` conjugate pairs chosen by
+        :func:`select_by_prior`; empty if none is found.
+    """
     common = []
     for p in np.asarray(p1, dtype=complex):
         if p2.size:
@@ -285,7 +419,35 @@ def attack_signals_intersection(segments: list[tuple[np.ndarray, np.ndarray]], d
                                 prior: PhysicalPrior = PhysicalPrior(), order: int = 8,
                                 decimate: int = 2, rtol: float = 0.05) -> np.ndarray:
     """Hardened ``multiplicity``: ARX poles of ``z -> w - z`` that recur (within ``rtol``) in two
-    segments of the same vehicle, then the prior."""
+    segments of the same vehicle, then the prior.
+
+    Parameters
+    ----------
+    segments : list of (z, w_band) tuples
+        At least two segments of the same vehicle (only the first two are used); ``z`` and
+        ``w_band`` are (nfft, 2) ndarrays in m/s, as in :func:`attack_signals_prior`.
+    dt : float
+        Sample period, s (``grid.dt``).
+    prior : PhysicalPrior
+        The attacker's prior on suspension modes.
+    order : int
+        ARX order of each fit (as :func:`arx_poles`).
+    decimate : int
+        Decimation before each fit (as :func:`arx_poles`).
+    rtol : float
+        Relative tolerance of :func:`intersect_pole_sets`.
+
+    Returns
+    -------
+    (2 k,) complex ndarray
+        Estimated poles of ``S_j``, rad/s: ``k <= 2`` conjugate pairs chosen by
+        :func:`select_by_prior`; empty if none is found.
+
+    Raises
+    ------
+    ParameterError
+        If fewer than 2 segments are given.
+    """
     if len(segments) < 2:
         raise ParameterError(f"segments must hold at least 2 (z, w) pairs, got {len(segments)}")
     p1 = arx_poles(*_signals(*segments[0]), dt, order, decimate)
@@ -315,6 +477,28 @@ def attack_physical_fit(z: np.ndarray, w_band: np.ndarray, grid, nominal, *, ban
 
     Only ratios to the mass are identifiable (scaling m, I, k and c together leaves ``P``
     unchanged), so the fit is over ``log [k/m, c/m, I/m, L1, L2]`` for each model.
+
+    Parameters
+    ----------
+    z : (nfft, 2) ndarray
+        The hardened message's ``z`` (or ``z`` recovered from an exact message), m/s.
+    w_band : (nfft, 2) ndarray
+        Road velocity band-limited like ``z``, m/s: the true one, or a stand-in such as the
+        receiver's own inversion.
+    grid : SegmentGrid
+        The segment grid of ``z`` (signals of at most ``nfft`` samples).
+    nominal : HalfCarParameters
+        The fleet's nominal parameters: the starting point of both parameter sets.
+    band_hz : (float, float)
+        Active bins with frequency in this range (Hz, both ends included) are fitted.
+    max_bins : int
+        At most this many of those bins, evenly spread, are used.
+
+    Returns
+    -------
+    (4,) complex ndarray
+        Poles of the fitted ``P(theta_hat)``, rad/s, sorted by imaginary part; empty if the
+        fit fails.
     """
     from .spectral import matvec
 

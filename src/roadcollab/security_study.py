@@ -273,6 +273,29 @@ def run_attack_study(config: AttackStudyConfig, seed: int, *, progress: Callable
     """Run the security study (see the module docstring), serially or on Dask.
 
     Results do not depend on ``workers``/``scheduler`` except the timing columns.
+
+    Parameters
+    ----------
+    config : AttackStudyConfig
+    seed : int
+        Root seed (>= 0) of the fleet and of every run.
+    progress : callable, optional
+        Called with the number of finished runs.
+    workers : int, optional
+        Run on a local Dask cluster with this many worker processes.
+    scheduler : str, optional
+        Address of an existing Dask scheduler (e.g. ``tcp://host:8786``); not with ``workers``.
+
+    Returns
+    -------
+    AttackStudyResult
+        Attack, exactness, linkability and baseline rows, and the pole examples of the first run.
+
+    Raises
+    ------
+    ParameterError
+        If ``config`` is not an AttackStudyConfig, ``seed`` is negative, or both ``workers``
+        and ``scheduler`` are given.
     """
     from . import baselines
     from .parallel import map_runs

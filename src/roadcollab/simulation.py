@@ -109,7 +109,21 @@ def simulate_response(plant: DiscretePlant, w, *, x0=None) -> np.ndarray:
 
 
 def add_sensor_noise(y, noise_std: float, *, rng=None) -> np.ndarray:
-    """Add white Gaussian accelerometer noise of standard deviation ``noise_std`` (m/s^2)."""
+    """Add white Gaussian accelerometer noise of standard deviation ``noise_std`` (m/s^2).
+
+    Parameters
+    ----------
+    y : (N, p) array_like
+        Noise-free accelerations, m/s^2 (finite).
+    noise_std : float
+        Standard deviation of the noise, m/s^2, >= 0 (independent per sample and channel).
+    rng : numpy.random.Generator | int | None
+
+    Returns
+    -------
+    (N, p) ndarray
+        ``y`` plus the noise, m/s^2.
+    """
     y = check_signal("y", y)
     noise_std = check_nonnegative("noise_std", noise_std)
     rng = np.random.default_rng(rng)
