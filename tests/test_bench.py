@@ -6,7 +6,7 @@ from roadcollab import ParameterError
 from roadcollab.bench import bench_segment
 
 
-@pytest.mark.parametrize("mechanism", ["none", "paper", "hardened"])
+@pytest.mark.parametrize("mechanism", ["none", "paper", "paper_vehicle", "hardened"])
 def test_bench_segment_reports_its_fields(mechanism):
     rec = bench_segment(1000, mechanism=mechanism, repeats=2)
     assert rec["samples_per_segment"] == 1000 and rec["nfft"] >= 1500

@@ -159,3 +159,18 @@ def test_message_for_another_grid_is_refused(pipe):
         e.estimate(np.zeros((5, 2)))
     with pytest.raises(ParameterError, match="vehicle must be a Vehicle"):
         CollaborativeEstimator("car", CFG.noise_model(), pipe.grid, gamma=1.0)
+
+
+def test_theorem1_holds_with_a_channel_reused_over_segments():
+    from roadcollab.privacy import ObfuscationChannel
+
+    pipe = _PIPE
+    g = pipe.grid
+    e1, e2 = pipe.estimators[:2]
+    ch = ObfuscationChannel.draw(e1.T_ss, e1.S_ss, g, ObfuscationSpec(), rng=3)
+    for seed in (1, 2):
+        _, ys = _measure(pipe, seed)
+        m1 = e1.message(e1.estimate(ys[0]))
+        priv, psi1, _ = obfuscate(m1, g, rng=seed, T_response=e1.T_ss_f, S_response=e1.S_ss_f, channel=ch)
+        assert priv.T is ch.T and psi1 is ch.psi1
+        assert _rel(e2.estimate(ys[1], priv).estimate, e2.estimate(ys[1], m1).estimate) < 1e-9

@@ -34,7 +34,7 @@ from .errors import ParameterError
 from .message import ExchangeMessage, StateSpaceData, random_orthogonal, series, similarity
 from .spectral import SegmentGrid, inv2x2, matvec
 
-__all__ = ["ObfuscationSpec", "Obfuscator", "draw_obfuscator", "obfuscate"]
+__all__ = ["ObfuscationSpec", "Obfuscator", "ObfuscationChannel", "draw_obfuscator", "obfuscate"]
 
 
 @dataclass(frozen=True)
@@ -266,9 +266,73 @@ def draw_obfuscator(spec: ObfuscationSpec, grid: SegmentGrid, *, rng=None,
     raise ParameterError(f"no obfuscator satisfying spec was found in max_attempts={max_attempts} draws")
 
 
+@dataclass(frozen=True, eq=False)
+class ObfuscationChannel:
+    """One draw of Algorithm 2's private dynamics for a sender, with everything per-segment
+    obfuscation needs precomputed on the grid.
+
+    The paper redraws ``Psi`` for every message (:func:`obfuscate` without ``channel``); a
+    vehicle may instead keep one channel for many segments (``refresh="vehicle"``), which
+    turns obfuscation into a few per-bin products. Either way the realisations sent are the
+    same objects the responses were computed from, so Theorem 1 stays exact.
+
+    Attributes
+    ----------
+    psi1, psi2 : Obfuscator
+        The private draws (never sent).
+    T, S : StateSpaceData
+        ``Psi1 T`` and ``Psi1 S Psi2``, hidden by random orthogonal similarity transforms.
+    T_f, S_f, psi2_inv_f : (K, 2, 2) complex ndarray
+        Their responses, and that of ``Psi2^-1``, on the active bins.
+    psi1_out, psi2_inv_out : (K', 2, 2) complex ndarray
+        ``Psi1`` and ``Psi2^-1`` on the bins outside the band.
+    """
+
+    psi1: Obfuscator
+    psi2: Obfuscator
+    T: StateSpaceData
+    S: StateSpaceData
+    T_f: np.ndarray
+    S_f: np.ndarray
+    psi2_inv_f: np.ndarray
+    psi1_out: np.ndarray
+    psi2_inv_out: np.ndarray
+
+    @classmethod
+    def draw(cls, T: StateSpaceData, S: StateSpaceData, grid: SegmentGrid, spec: ObfuscationSpec = ObfuscationSpec(),
+             *, rng=None) -> "ObfuscationChannel":
+        """Draw ``Psi1``, ``Psi2`` and build ``T~``, ``S~`` for a sender's ``T`` and ``S``.
+
+        Parameters
+        ----------
+        T, S : StateSpaceData
+            The sender's clear ``T_j`` and ``S_j`` (2x2 discrete systems).
+        grid : SegmentGrid
+        spec : ObfuscationSpec
+        rng : numpy.random.Generator | int | None
+
+        Returns
+        -------
+        ObfuscationChannel
+        """
+        rng = np.random.default_rng(rng)
+        psi1 = draw_obfuscator(spec, grid, rng=rng)
+        psi2 = draw_obfuscator(spec, grid, rng=rng)
+        T_t = series(T, psi1.system)                        # Psi1 T
+        S_t = series(series(psi2.system, S), psi1.system)   # Psi1 S Psi2
+        T_t = similarity(T_t, random_orthogonal(T_t.order, rng))
+        S_t = similarity(S_t, random_orthogonal(S_t.order, rng))
+        act = grid.active
+        om, om_out = grid.omega_dt[act], grid.omega_dt[~act]
+        return cls(psi1=psi1, psi2=psi2, T=T_t, S=S_t, T_f=T_t.frequency_response(om),
+                   S_f=S_t.frequency_response(om), psi2_inv_f=inv2x2(psi2.system.frequency_response(om)),
+                   psi1_out=psi1.system.frequency_response(om_out),
+                   psi2_inv_out=inv2x2(psi2.system.frequency_response(om_out)))
+
+
 def obfuscate(message: ExchangeMessage, grid: SegmentGrid, spec: ObfuscationSpec = ObfuscationSpec(), *,
-              rng=None, T_response: np.ndarray | None = None, S_response: np.ndarray | None = None
-              ) -> tuple[ExchangeMessage, Obfuscator, Obfuscator]:
+              rng=None, T_response: np.ndarray | None = None, S_response: np.ndarray | None = None,
+              channel: ObfuscationChannel | None = None) -> tuple[ExchangeMessage, Obfuscator, Obfuscator]:
     """Apply Algorithm 2 to a plain message (eq. 17).
 
     ``e~`` is formed as ``T~ z + S~ w~f`` with ``z = T^-1 (e - S w^f)``, using the frequency
@@ -287,6 +351,9 @@ def obfuscate(message: ExchangeMessage, grid: SegmentGrid, spec: ObfuscationSpec
     rng : numpy.random.Generator | int | None
     T_response, S_response : (K, 2, 2) complex ndarray, optional
         Responses of ``message.T`` and ``message.S`` on the active bins, if already known.
+    channel : ObfuscationChannel, optional
+        Reuse this draw (it must have been drawn for ``message.T`` and ``message.S``); by
+        default a fresh one is drawn for every message, as in the paper.
 
     Returns
     -------
@@ -296,13 +363,7 @@ def obfuscate(message: ExchangeMessage, grid: SegmentGrid, spec: ObfuscationSpec
     """
     if message.mechanism != "none":
         raise ParameterError(f"message.mechanism must be 'none', got {message.mechanism!r}")
-    rng = np.random.default_rng(rng)
-    psi1 = draw_obfuscator(spec, grid, rng=rng)
-    psi2 = draw_obfuscator(spec, grid, rng=rng)
-    T_t = series(message.T, psi1.system)                       # Psi1 T
-    S_t = series(series(psi2.system, message.S), psi1.system)  # Psi1 S Psi2
-    T_t = similarity(T_t, random_orthogonal(T_t.order, rng))
-    S_t = similarity(S_t, random_orthogonal(S_t.order, rng))
+    ch = ObfuscationChannel.draw(message.T, message.S, grid, spec, rng=rng) if channel is None else channel
     act = grid.active
     om = grid.omega_dt[act]
     T_f = message.T.frequency_response(om) if T_response is None else T_response
@@ -311,16 +372,15 @@ def obfuscate(message: ExchangeMessage, grid: SegmentGrid, spec: ObfuscationSpec
     Wf = grid.rfft(message.wf)
     Wf_t = np.empty_like(Wf)
     E_t = np.empty_like(E)
-    Wf_t[act] = matvec(inv2x2(psi2.system.frequency_response(om)), Wf[act])
+    Wf_t[act] = matvec(ch.psi2_inv_f, Wf[act])
     z = matvec(inv2x2(T_f), E[act] - matvec(S_f, Wf[act]))
-    E_t[act] = matvec(T_t.frequency_response(om), z) + matvec(S_t.frequency_response(om), Wf_t[act])
+    E_t[act] = matvec(ch.T_f, z) + matvec(ch.S_f, Wf_t[act])
     # Bins outside the band carry nothing to the receiver (W = 0 there) but are obfuscated
     # too, so the time signals hold no clear component.
     inact = ~act
     if inact.any():
-        om_i = grid.omega_dt[inact]
-        E_t[inact] = matvec(psi1.system.frequency_response(om_i), E[inact])
-        Wf_t[inact] = matvec(inv2x2(psi2.system.frequency_response(om_i)), Wf[inact])
+        E_t[inact] = matvec(ch.psi1_out, E[inact])
+        Wf_t[inact] = matvec(ch.psi2_inv_out, Wf[inact])
     out = ExchangeMessage(mechanism="paper", sample_rate=message.sample_rate, n_samples=message.n_samples,
-                          T=T_t, S=S_t, e=grid.irfft(E_t), wf=grid.irfft(Wf_t))
-    return out, psi1, psi2
+                          T=ch.T, S=ch.S, e=grid.irfft(E_t), wf=grid.irfft(Wf_t))
+    return out, ch.psi1, ch.psi2
