@@ -35,7 +35,7 @@ def _rel(a, b):
 
 
 def test_algorithm1_equals_the_complementary_blend(pipe):
-    """NOTES section 4: w_hat_j = D_j y_j + (I - D_j P_hat_j) W_reg P_hat_{j-1}^-1 y_{j-1}."""
+    """Complementary blend: w_hat_j = D_j y_j + (I - D_j P_hat_j) W_reg P_hat_{j-1}^-1 y_{j-1}."""
     g = pipe.grid
     _, ys = _measure(pipe, 1)
     e1, e2, e3 = pipe.estimators

@@ -45,7 +45,7 @@ def test_closed_form_modes_for_symmetric_arms():
     np.testing.assert_allclose(wn, np.sort([wn_roll, wn_roll, wn_heave, wn_heave]), rtol=1e-10)
     zeta = -ev.real / np.abs(ev)
     np.testing.assert_allclose(np.sort(np.unique(zeta.round(12))), np.sort([zeta_roll, zeta_heave]), rtol=1e-9)
-    # Heave 1.42 Hz, zeta 0.335 (NOTES section 1); roll 1.19 Hz, zeta 0.28 from the same equations.
+    # Heave 1.42 Hz, zeta 0.335; roll 1.19 Hz, zeta 0.28 from the same equations.
     assert wn_heave / (2 * np.pi) == pytest.approx(1.4235, abs=1e-3)
     assert wn_roll / (2 * np.pi) == pytest.approx(1.1937, abs=1e-3)
 

@@ -38,7 +38,7 @@ Detector (per track, offline, non-causal)
 Calibration of the defaults
 ---------------------------
 Template grids, ``enveloping_length``, ``merge_tolerance``, ``crosstalk_ratio`` and
-``noise_floor`` follow from the road model and the estimators (NOTES section 6: potholes 0.1-1 m,
+``noise_floor`` follow from the road model and the estimators (typical sizes: potholes 0.1-1 m,
 bumps 0.5-3 m, 0.25 m enveloping; 10 % parameter errors leak well under 30 % between tracks).
 ``snr_threshold``, ``min_depth``, ``nms_guard`` and the confidence logistic were chosen on
 *training* runs only: root seeds 1000..1004 (``np.random.SeedSequence(s).spawn(2)`` -> fleet and

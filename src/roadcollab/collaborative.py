@@ -23,7 +23,7 @@ the optimal learning filters (eqs. 11-12), regularised at DC by the weight ``W``
 Equivalently ``w^f_j = -S_j^{-1} T_j z_{j-1}`` with
 ``z_{j-1} = W T_{j-1}^{-1}(e_{j-1} - S_{j-1} w^f_{j-1})``, which with nominal ``T`` equals
 ``W P_hat_{j-1}^{-1} y_{j-1}``: Algorithm 1 blends the vehicle's own observer (its low band)
-with the previous vehicle's offline model inversion (NOTES section 4).
+with the previous vehicle's offline model inversion (tested in ``tests/test_collaborative.py``).
 Vehicle 1 has ``w^f = 0``.
 """
 

@@ -161,7 +161,7 @@ class InversionMessage:
 
     With the optimal learning filters, everything vehicle ``j`` needs from vehicle ``j-1`` is
     ``z_{j-1} = W T_{j-1}^-1 (e_{j-1} - S_{j-1} w^f_{j-1})``, which equals
-    ``W P_hat_{j-1}^-1 y_{j-1}`` (NOTES section 4); ``w^f_j = -S_j^-1 T_j z_{j-1}``.
+    ``W P_hat_{j-1}^-1 y_{j-1}`` (with nominal ``T``); ``w^f_j = -S_j^-1 T_j z_{j-1}``.
 
     Attributes
     ----------

@@ -16,7 +16,7 @@ Each ``Psi`` has a common denominator of random order ``n`` with random left-hal
 poles, and four numerators (one per entry: the "four groups of zeros"), each of degree ``n``
 so ``Psi`` is biproper and ``Psi^-1`` proper. A draw is rejected unless every transmission
 zero of ``Psi`` has real part <= ``-min_zero_distance`` and ``Psi`` is well conditioned on the
-grid: otherwise exactness would become round-off amplification (NOTES section 5). The
+grid: otherwise exactness would become round-off amplification. The
 continuous design is discretised with the bilinear transform, which maps left-half-plane
 poles and zeros inside the unit circle. Realisations are hidden with a random orthogonal
 similarity so no block of ``T`` or ``S`` is visible verbatim.

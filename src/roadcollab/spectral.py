@@ -6,7 +6,7 @@ window of ``n_samples`` is padded to ``nfft`` samples and every LTI map is its f
 response at ``z = exp(j 2 pi k / nfft)``. Signals that cross the network live on this padded
 periodic grid (``nfft`` samples), which is what makes Theorem 1 exact to round-off.
 
-DC handling (NOTES section 1): accelerations cannot see a constant road velocity; ``P`` has
+DC handling: accelerations cannot see a constant road velocity; ``P`` has
 a double transmission zero at ``s = 0`` and every inverse is singular there. All estimators
 are therefore evaluated, and every inverse is applied, through one zero-phase band weight
 
