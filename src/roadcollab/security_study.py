@@ -228,6 +228,10 @@ def _attack_run(pipe, config: AttackStudyConfig, r: int, rs: np.random.SeedSeque
                 dp_in[e] = baselines.dp_message(est.hardened_message(rd), sigmas[e], rng=dp_rng)
             if j < 3:
                 mse[f"dp_eps_{e:g}"][j] = seg_mse(rd.W_hat)
+            # The strongest signal attack on the noisy z: the privacy/accuracy trade-off.
+            if r < config.physical_fit_runs:
+                add(f"dp(eps={e:g})", "physical_fit",
+                    attack_physical_fit(dp_in[e].z, w_band, grid, cfg.fleet.nominal), j)
         # Attacks on vehicle j's outgoing messages.
         for mech, msg in (("none", plain), ("paper", paper)):
             add(mech, "model_reduction", attack_model_reduction(msg), j)
