@@ -234,14 +234,15 @@ def _attack_run(pipe, config: AttackStudyConfig, r: int, rs: np.random.SeedSeque
                     attack_physical_fit(dp_in[e].z, w_band, grid, cfg.fleet.nominal), j)
         # Attacks on vehicle j's outgoing messages.
         for mech, msg in (("none", plain), ("paper", paper)):
-            add(mech, "model_reduction", attack_model_reduction(msg), j)
-            add(mech, "pole_intersection", attack_pole_intersection(msg, config.prior), j)
-            mu = attack_multiplicity(msg, config.prior)
-            add(mech, "multiplicity", mu, j)
+            est_poles = {"model_reduction": attack_model_reduction(msg),
+                         "pole_intersection": attack_pole_intersection(msg, config.prior),
+                         "multiplicity": attack_multiplicity(msg, config.prior)}
+            for attack, poles in est_poles.items():
+                add(mech, attack, poles, j)
+        # est_poles now holds the attacks on the paper's message (the last in the loop).
+        mu = est_poles["multiplicity"]
         if r == 0 and j < 3:
-            out["examples"].append({"vehicle": j + 1, "true": targets[j], "model_reduction": attack_model_reduction(paper),
-                                    "pole_intersection": attack_pole_intersection(paper, config.prior),
-                                    "multiplicity": mu})
+            out["examples"].append({"vehicle": j + 1, "true": targets[j], **est_poles})
         add("hardened", "model_reduction", attack_signals_reduction(hard.z, w_band, grid.dt), j)
         add("hardened", "pole_intersection", attack_signals_prior(hard.z, w_band, grid.dt, config.prior), j)
         out["arx"][j] = arx_poles(hard.z, w_band - hard.z, grid.dt, 8, 2)
