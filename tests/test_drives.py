@@ -85,12 +85,6 @@ def test_command_reproduces_in_memory_estimates(simulated):
     final = _read_columns(out / "final_estimate.csv")
     assert _rel(final["w_collaborative_left"], ref.collaborative[-1, :, 0]) < 1e-9
     assert _rel(final["w_fused_right"], ref.fused[-1, :, 1]) < 1e-9
-    # Collaboration helps on the simulated road: the last drive beats its own observer.
-    sl = ref.scored
-    mse = {name: float(np.mean((arr[-1, sl] - ref.truth[sl]) ** 2))
-           for name, arr in (("single", ref.observer_only), ("collaborative", ref.collaborative),
-                             ("fused", ref.fused))}
-    assert mse["collaborative"] < mse["single"] and mse["fused"] < mse["single"]
 
 
 def test_command_writes_all_outputs(simulated):

@@ -68,14 +68,51 @@ def test_observer_step_response_is_first_order():
     np.testing.assert_allclose(obs, -6.0 * np.eye(2))
 
 
-def test_discretisation_matches_continuous_design_at_low_frequency_and_runs_causally():
+@pytest.mark.parametrize("gamma", [1.0, 8.0, 32.0, 512.0])
+def test_discretisation_matches_continuous_design_without_lag(gamma):
+    """Bilinear map vs the continuous design, 200 Hz: within 2 % and 2 degrees up to 10 Hz.
+
+    Measured for the default gamma = 512 (largest over entries, magnitude / phase): 10 Hz
+    0.03 % / 0.13 deg, 20 Hz 0.2 % / 0.6 deg, 30 Hz 0.9 % / 1.7 deg, 40 Hz 3.0 % / 3.7 deg
+    (frequency warping). A zero-order hold on y added half a sample of delay: 9 degrees at 10 Hz.
+    """
     dt = 0.005
-    est = build_road_input_estimator(MODEL, JDPNoise(**NOISE), gamma=8.0, dt=dt)
-    f = np.array([0.2, 1.0, 3.0])
+    est = build_road_input_estimator(MODEL, JDPNoise(**NOISE), gamma=gamma, dt=dt)
+    f = np.linspace(0.2, 10.0, 50)
     Dd = est.frequency_response(2 * np.pi * f * dt)
     Dc = est.continuous_response(2j * np.pi * f)
-    # ZOH on y: the discrete response is the continuous one with about half a sample of delay.
-    np.testing.assert_allclose(Dd, Dc * np.exp(-1j * np.pi * f * dt)[:, None, None], rtol=2e-2, atol=1e-4)
+    big = np.abs(Dc) > 1e-3 * np.abs(Dc).max(axis=(1, 2), keepdims=True)
+    assert np.max(np.abs(np.abs(Dd[big]) / np.abs(Dc[big]) - 1)) < 0.02
+    assert np.max(np.abs(np.degrees(np.angle(Dd[big] / Dc[big])))) < 2.0
+    # Feed-through: w_hat[k] uses y[k].
+    assert np.max(np.abs(est.Dd)) > 0
+
+
+def test_online_estimate_peaks_at_lag_zero_against_the_truth():
+    """The causal online estimate is aligned with the road velocity it estimates."""
+    from roadcollab.road import RoadSpec, generate_road
+    from roadcollab.simulation import discretize_plant, simulate_response
+
+    dt = 0.005
+    est = build_road_input_estimator(MODEL, JDPNoise(**NOISE), gamma=512.0, dt=dt)
+    road = generate_road(RoadSpec(length=300.0, anomaly_density=0.0), rng=4).sample(15.0, 1 / dt)
+    w = road.velocity
+    y = simulate_response(discretize_plant(MODEL, dt), w)
+    w_hat = est.filter(y, include_bias=False)
+    a, b = w[400:, 0] - w[400:, 0].mean(), w_hat[400:, 0] - w_hat[400:, 0].mean()
+    lags = np.arange(-5, 6)
+    xc = [np.dot(a[10:-10], np.roll(b, -k)[10:-10]) for k in lags]
+    ac = [np.dot(a[10:-10], np.roll(a, -k)[10:-10]) for k in lags]
+    assert lags[int(np.argmax(xc))] == 0
+    # The shape around the peak is the road's own autocorrelation (tyre enveloping smooths it
+    # over about 3 samples): a lag of one sample would move it by a whole step.
+    for k in (4, 6):
+        assert abs(xc[k] / xc[5] - ac[k] / ac[5]) < 0.05
+
+
+def test_discrete_filter_is_causal_and_agrees_with_the_grid():
+    dt = 0.005
+    est = build_road_input_estimator(MODEL, JDPNoise(**NOISE), gamma=8.0, dt=dt)
     # The causal filter and the DFT-grid application agree for a zero-padded input.
     # The estimator has a slow pole (about -0.03 rad/s, mirroring the plant's zeros at DC), so
     # the padding must cover many time constants for the circular and linear results to meet.

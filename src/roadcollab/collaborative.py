@@ -171,7 +171,7 @@ class CollaborativeEstimator:
         dt = self.grid.dt
         P = StateSpaceData(p.Ad, p.Bd, p.C, p.D, dt)
         e = self.estimator
-        Dj = StateSpaceData(e.Ad, e.Bd, e.Cc, e.Dc, dt)
+        Dj = StateSpaceData(e.Ad, e.Bd, e.Cd, e.Dd, dt)
         PD = series(Dj, P)
         I_minus_PD = StateSpaceData(PD.A, PD.B, -PD.C, np.eye(2) - PD.D, dt)
         T_full = series(P, I_minus_PD)
@@ -243,8 +243,8 @@ class CollaborativeEstimator:
         Wf[act] = matvec(self._minus_Sinv_T, z)
         return Wf
 
-    def estimate(self, y, message: ExchangeMessage | None = None, *, Wf: np.ndarray | None = None
-                 ) -> VehicleEstimate:
+    def estimate(self, y, message: ExchangeMessage | None = None, *, Wf: np.ndarray | None = None,
+                 Y: np.ndarray | None = None) -> VehicleEstimate:
         """Run Algorithm 1 for this vehicle on one segment.
 
         Parameters
@@ -256,12 +256,17 @@ class CollaborativeEstimator:
         Wf : (K, 2) ndarray, optional
             A feed-forward spectrum computed elsewhere (e.g. the fused estimate); overrides
             ``message``.
+        Y : (K, 2) complex ndarray, optional
+            The spectrum of ``y`` on the grid, if already computed (``y`` is then not used).
 
         Returns
         -------
         VehicleEstimate
         """
-        Y = self.spectrum(y)
+        if Y is None:
+            Y = self.spectrum(y)
+        elif Y.shape != (self.grid.n_bins, 2):
+            raise ParameterError(f"Y must have shape ({self.grid.n_bins}, 2), got {Y.shape}")
         DY = matvec(self.D_f, Y)
         if Wf is None:
             Wf = self.learn(message) if message is not None else np.zeros_like(Y)

@@ -6,10 +6,15 @@ compound-Poisson jumps ``eta`` (rate ``lambda``, jump mean ``mu_eta``, jump cova
 ``Sigma_eta``) and a Wiener part of intensity ``sigma sigma^T``.
 
 Discretisation (a design decision, tested in ``tests/test_estimator.py``): the estimator and
-observer are designed in continuous time and discretised with a zero-order hold on ``y``,
-the same rule that discretises the plant exactly for piecewise-linear road elevation. Both
-the causal time-domain filter (:meth:`RoadInputEstimator.filter`) and its frequency response
-on a DFT grid (:meth:`RoadInputEstimator.frequency_response`) come from that one discrete
+observer are designed in continuous time and discretised with the bilinear (Tustin)
+transform. A zero-order hold on ``y`` would make the discrete map ``y -> w_hat`` strictly
+proper, so ``w_hat[k]`` would see ``y`` only up to ``k - 1``; the road velocity is broadband and
+that one sample of lag alone multiplied vehicle 1's error by about 20. The plant is biproper
+(``D`` invertible), so ``y[k]`` carries ``w[k]``; the bilinear map keeps that feed-through, is
+causal, and matches the continuous design within 0.2 % in magnitude and 0.3 degrees in
+phase up to 10 Hz at 200 Hz (the test reports the figures to 40 Hz). Both the causal
+time-domain filter (:meth:`RoadInputEstimator.filter`) and its frequency response on a DFT
+grid (:meth:`RoadInputEstimator.frequency_response`) come from that one discrete
 realisation, so online and offline use agree.
 """
 
@@ -32,6 +37,7 @@ __all__ = [
     "RoadInputEstimator",
     "build_road_input_estimator",
     "zoh_discretize",
+    "bilinear_discretize",
     "dlti_frequency_response",
     "ss_response",
 ]
@@ -183,6 +189,43 @@ def zoh_discretize(A, B, C, D, dt: float):
     return E[:n, :n], E[:n, n:], np.array(C, dtype=float), np.array(D, dtype=float)
 
 
+def bilinear_discretize(A, B, C, D, dt: float):
+    """Bilinear (Tustin) discretisation ``s = (2/dt) (z - 1)/(z + 1)``, no prewarping.
+
+    The same map as ``scipy.signal.cont2discrete(method='bilinear')``, written with small dense
+    solves because that routine's batched solver cost 1.7 ms per call here. Left-half-plane
+    poles and zeros map inside the unit circle, and a biproper or strictly proper continuous
+    system becomes a biproper discrete one (no added delay).
+
+    Parameters
+    ----------
+    A : (n, n) array_like
+        Continuous state matrix, 1/s; ``I - A dt / 2`` must be invertible.
+    B : (n, m) array_like
+    C : (p, n) array_like
+    D : (p, m) array_like
+    dt : float
+        Sample period, s.
+
+    Returns
+    -------
+    Ad : (n, n) ndarray
+    Bd : (n, m) ndarray
+    Cd : (p, n) ndarray
+    Dd : (p, m) ndarray
+        Discrete realisation whose response at ``z = e^{j omega dt}`` is the continuous one at
+        ``s = j (2/dt) tan(omega dt / 2)``.
+    """
+    A, B, C, D = (np.asarray(a, dtype=float) for a in (A, B, C, D))
+    n = A.shape[0]
+    ima = np.eye(n) - 0.5 * dt * A
+    Ad = np.linalg.solve(ima, np.eye(n) + 0.5 * dt * A)
+    Bd = np.linalg.solve(ima, dt * B)
+    Cd = np.linalg.solve(ima.T, C.T).T
+    Dd = D + 0.5 * C @ Bd
+    return Ad, Bd, Cd, Dd
+
+
 def dlti_frequency_response(Ad, Bd, Cd, Dd, omega_dt: np.ndarray) -> np.ndarray:
     """Frequency response ``C (zI - A)^-1 B + D`` at ``z = exp(j omega dt)``.
 
@@ -286,8 +329,11 @@ class RoadInputEstimator:
         Sample period, s.
     Ac, Bc, Cc, Dc, bias_c : ndarray
         Continuous realisation (6x6, 6x2, 2x6, 2x2) and constant input term (6,).
-    Ad, Bd, bias_d : ndarray
-        ZOH discretisation; ``bias_d`` is the per-sample constant drive.
+    Ad, Bd, Cd, Dd : ndarray
+        Bilinear discretisation (6x6, 6x2, 2x6, 2x2); ``Dd`` is non-zero, so ``w_hat[k]`` uses
+        ``y[k]`` (no lag).
+    bias_d, bias_out : ndarray
+        Per-sample constant drive of the state (6,) and of the output (2,).
     """
 
     model: HalfCarModel
@@ -301,7 +347,10 @@ class RoadInputEstimator:
     bias_c: np.ndarray
     Ad: np.ndarray
     Bd: np.ndarray
+    Cd: np.ndarray
+    Dd: np.ndarray
     bias_d: np.ndarray
+    bias_out: np.ndarray
 
     @property
     def corner(self) -> float:
@@ -311,11 +360,11 @@ class RoadInputEstimator:
     def steady_offset(self) -> np.ndarray:
         """Steady-state ``w_hat`` (m/s) that the constant ``lambda mu_eta`` term produces with ``y = 0``."""
         x = np.linalg.solve(np.eye(6) - self.Ad, self.bias_d)
-        return self.Cc @ x
+        return self.Cd @ x + self.bias_out
 
     def frequency_response(self, omega_dt: np.ndarray) -> np.ndarray:
         """``D_j(e^{j omega dt})``, shape (M, 2, 2), of the discrete estimator."""
-        return dlti_frequency_response(self.Ad, self.Bd, self.Cc, self.Dc, omega_dt)
+        return dlti_frequency_response(self.Ad, self.Bd, self.Cd, self.Dd, omega_dt)
 
     def continuous_response(self, s: np.ndarray) -> np.ndarray:
         """``D_j(s)`` of the continuous design, shape (M, 2, 2)."""
@@ -339,14 +388,14 @@ class RoadInputEstimator:
         y = check_signal("y", y, 2)
         u = np.hstack([y, np.ones((y.shape[0], 1))]) if include_bias else y
         B = np.hstack([self.Bd, self.bias_d[:, None]]) if include_bias else self.Bd
-        D = np.hstack([self.Dc, np.zeros((2, 1))]) if include_bias else self.Dc
-        _, out, _ = scipy.signal.dlsim((self.Ad, B, self.Cc, D, self.dt), u)
+        D = np.hstack([self.Dd, self.bias_out[:, None]]) if include_bias else self.Dd
+        _, out, _ = scipy.signal.dlsim((self.Ad, B, self.Cd, D, self.dt), u)
         return out
 
 
 def build_road_input_estimator(model: HalfCarModel, noise: JDPNoise, *, gamma: float,
                                dt: float) -> RoadInputEstimator:
-    """Design ``D_j`` for a (nominal) model: Lemma 1 gain, eq. 4 observer, ZOH discretisation.
+    """Design ``D_j`` for a (nominal) model: Lemma 1 gain, eq. 4 observer, bilinear discretisation.
 
     Parameters
     ----------
@@ -380,6 +429,8 @@ def build_road_input_estimator(model: HalfCarModel, noise: JDPNoise, *, gamma: f
     Dc = np.zeros((2, 2))
     lm = noise.input_mean
     bias_c = np.concatenate([(B + F @ D) @ lm, g * (np.eye(2) + KF @ D) @ lm])
-    Ad, Bfull, _, _ = zoh_discretize(Ac, np.hstack([Bc, bias_c[:, None]]), Cc, np.zeros((2, 3)), dt)
+    # The constant drive is a third input held at 1, discretised with the same rule.
+    Ad, Bfull, Cd, Dfull = bilinear_discretize(Ac, np.hstack([Bc, bias_c[:, None]]), Cc, np.zeros((2, 3)), dt)
     return RoadInputEstimator(model=model, F=F, gamma=float(gamma), dt=dt, Ac=Ac, Bc=Bc, Cc=Cc, Dc=Dc,
-                              bias_c=bias_c, Ad=Ad, Bd=Bfull[:, :2], bias_d=Bfull[:, 2])
+                              bias_c=bias_c, Ad=Ad, Bd=Bfull[:, :2], Cd=Cd, Dd=Dfull[:, :2],
+                              bias_d=Bfull[:, 2], bias_out=Dfull[:, 2])

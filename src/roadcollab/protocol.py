@@ -263,7 +263,7 @@ def _check_system(name: str, A: np.ndarray, B: np.ndarray, C: np.ndarray, D: np.
     except (np.linalg.LinAlgError, ValueError) as err:
         raise MessageError(f"{name}.A: eigenvalues could not be computed ({err})") from err
     if not radius < 1.0:
-        raise MessageError(f"{name} must be discrete-time stable (spectral radius of A < 1), got {radius!r}")
+        raise MessageError(f"{name} must be discrete-time stable (spectral radius of A < 1), got {radius:.6g}")
 
 
 def _check_payload(h: _Header, arrays: dict[str, np.ndarray]) -> None:

@@ -10,8 +10,11 @@ road (no unsprung mass: the "reduced" model). With the road elevation ``zr_i`` u
     q_1 = z_1 - z_{r1},\\quad q_2 = z_2 - z_{r2},\\qquad
     \\dot q_1 = \\dot z + L_1\\dot\\theta - w_l,\\quad \\dot q_2 = \\dot z - L_2\\dot\\theta - w_r
 
-    m_b \\ddot z = F_1 + F_2,\\quad I_x \\ddot\\theta = L_1 F_1 - L_2 F_2,\\quad
+    m_b \\ddot z = F_1 + F_2,\\quad \\tfrac12 I_x \\ddot\\theta = L_1 F_1 - L_2 F_2,\\quad
     F_i = -k_s q_i - c_s \\dot q_i
+
+The roll equation is eq. 1 as printed: the front half-car carries half of the vehicle's roll
+inertia ``I_x`` (``roll_inertia``), so its roll mode is ``omega^2 = 2 k_s (L1^2 + L2^2) / I_x``.
 
 Substituting ``q_dot`` into the force equations gives non-zero B rows 3-4, and the body-tip
 accelerations ``y = [z1_ddot, z2_ddot]`` have a direct feed-through ``D`` that is invertible,
@@ -47,7 +50,8 @@ class HalfCarParameters:
     sprung_mass : float
         ``m_b``, body mass carried by the front axle, kg.
     roll_inertia : float
-        ``I_x``, roll moment of inertia about the centre of gravity, kg m^2.
+        ``I_x``, the *vehicle's* roll moment of inertia about the centre of gravity, kg m^2.
+        The front half-car carries half of it (eq. 1: ``(1/2) I_x theta''``).
     left_arm, right_arm : float
         ``L1``, ``L2``, lateral distance from the centre of gravity to the left/right body
         tip (suspension mount), m.
@@ -147,11 +151,12 @@ def half_car_model(params: HalfCarParameters) -> HalfCarModel:
     """
     if not isinstance(params, HalfCarParameters):
         raise ParameterError(f"params must be a HalfCarParameters, got {type(params).__name__}")
-    m, I = params.sprung_mass, params.roll_inertia
+    # Eq. 1: (1/2) I_x theta'' = L1 F1 - L2 F2; the front half carries half the roll inertia.
+    m, I = params.sprung_mass, 0.5 * params.roll_inertia
     L1, L2 = params.left_arm, params.right_arm
     k, c = params.stiffness, params.damping
     # Rows 1-2: q_dot = [1, L1; 1, -L2] [zdot, thetadot] - w.
-    # Rows 3-4: [m zddot; I thetaddot] = [1, 1; L1, -L2] (-k q - c q_dot); q_dot carries -w,
+    # Rows 3-4: [m zddot; (I_x/2) thetaddot] = [1, 1; L1, -L2] (-k q - c q_dot); q_dot carries -w,
     # hence the non-zero B rows 3-4.
     G = np.array([[1.0, L1], [1.0, -L2]])          # tip velocity = G [zdot, thetadot]
     M_inv = np.diag([1.0 / m, 1.0 / I])
