@@ -23,7 +23,7 @@ from ._validation import check_int
 from .errors import ParameterError
 from .experiment import ExperimentConfig, FleetPipeline
 from .message import clear_response_cache
-from .privacy import obfuscate
+from .relay import Exchange, Relay
 from .simulation import add_sensor_noise, simulate_response
 from .vehicle import sample_fleet
 
@@ -59,7 +59,7 @@ def bench_segment(n_samples: int = 4000, *, mechanism: str = "paper", repeats: i
     rng = np.random.default_rng(seed)
     fleet = sample_fleet(2, cfg.fleet, rng=rng)
     t0 = time.perf_counter()
-    pipe = FleetPipeline(cfg, fleet)     # includes the centralised-bound statistics (experiment only)
+    pipe = FleetPipeline(cfg, fleet)     # the linear MMSE statistics are lazy: not built here
     setup_total = time.perf_counter() - t0
     from .collaborative import CollaborativeEstimator
 
@@ -70,11 +70,10 @@ def bench_segment(n_samples: int = 4000, *, mechanism: str = "paper", repeats: i
         setups.append((time.perf_counter() - t0) * 1e3)
     prev, car = pipe.estimators
     grid = pipe.grid
-    from .privacy import ObfuscationChannel
-
-    # Per-vehicle channels (paper_vehicle): drawn once, in setup.
-    ch_prev = ObfuscationChannel.draw(prev.T_ss, prev.S_ss, grid, cfg.obfuscation, rng=rng)
-    ch_car = ObfuscationChannel.draw(car.T_ss, car.S_ss, grid, cfg.obfuscation, rng=rng)
+    relay = Relay(pipe.estimators, Exchange(mechanism, cfg.obfuscation), rng=rng)
+    if mechanism == "paper_vehicle":     # per-vehicle channels are drawn once, in setup
+        relay.channel(0)
+        relay.channel(1)
     persistent = mechanism in ("none", "paper_vehicle")
     times = []
     for _ in range(repeats):
@@ -82,15 +81,7 @@ def bench_segment(n_samples: int = 4000, *, mechanism: str = "paper", repeats: i
         w = road.velocity[:grid.n_samples]
         # The previous vehicle's message (not timed: that is its own work).
         y_prev = add_sensor_noise(simulate_response(prev.true_plant, w), cfg.sensor_noise_std, rng=rng)
-        r_prev = prev.estimate(y_prev)
-        if mechanism == "none":
-            incoming = protocol.encode(prev.message(r_prev))
-        elif mechanism in ("paper", "paper_vehicle"):
-            incoming = protocol.encode(obfuscate(prev.message(r_prev), grid, cfg.obfuscation, rng=rng,
-                                                 T_response=prev.T_ss_f, S_response=prev.S_ss_f,
-                                                 channel=ch_prev if mechanism == "paper_vehicle" else None)[0])
-        else:
-            incoming = protocol.encode(prev.hardened_message(r_prev))
+        incoming = protocol.encode(relay.send(0, prev.estimate(y_prev)).message)
         clear_response_cache()
         if persistent:   # a receiver that cached the unchanged sender systems (untimed)
             warm = protocol.decode(incoming)
@@ -100,15 +91,7 @@ def bench_segment(n_samples: int = 4000, *, mechanism: str = "paper", repeats: i
         t0 = time.perf_counter()
         msg_in = protocol.decode(incoming)
         y = add_sensor_noise(simulate_response(car.true_plant, w), cfg.sensor_noise_std, rng=rng)
-        res = car.estimate(y, msg_in)
-        if mechanism == "none":
-            out = car.message(res)
-        elif mechanism in ("paper", "paper_vehicle"):
-            out = obfuscate(car.message(res), grid, cfg.obfuscation, rng=rng, T_response=car.T_ss_f,
-                            S_response=car.S_ss_f, channel=ch_car if mechanism == "paper_vehicle" else None)[0]
-        else:
-            out = car.hardened_message(res)
-        protocol.encode(out)
+        protocol.encode(relay.step(1, y, msg_in).message)
         times.append((time.perf_counter() - t0) * 1e3)
     return {"mechanism": mechanism, "samples_per_segment": grid.n_samples, "nfft": grid.nfft,
             "ms_per_vehicle_segment": statistics.median(times), "ms_per_vehicle_setup": statistics.median(setups),

@@ -453,18 +453,20 @@ def estimate_drives(drives: list[Drive], *, gamma: float | None = None, band_low
                     ) -> DriveEstimates:
     """Run the single-vehicle, collaborative (Algorithm 1) and fused estimators down the drives.
 
-    Mirrors :func:`roadcollab.experiment.run_estimates` step by step (same estimator design, grid,
-    message relay and band limiting), so simulated drives give the in-memory estimates.
+    Relays through the same engine as :func:`roadcollab.experiment.run_estimates`
+    (:class:`roadcollab.relay.Relay`, same estimator design, grid and band limiting), so
+    simulated drives give the in-memory estimates.
 
     Parameters
     ----------
     drives : list of Drive
         In driving order, sharing sample rate, speed and start (see :func:`load_drives`).
     gamma, band_low_hz : float, optional
-        Default: the :class:`~roadcollab.experiment.ExperimentConfig` defaults (32, 0.5 Hz).
+        Default: the :class:`~roadcollab.experiment.ExperimentConfig` defaults (512, 0.5 Hz).
     """
     from .collaborative import CollaborativeEstimator
     from .experiment import ExperimentConfig
+    from .relay import Relay
     from .spectral import SegmentGrid
 
     if not drives or not all(isinstance(d, Drive) for d in drives):
@@ -485,8 +487,7 @@ def estimate_drives(drives: list[Drive], *, gamma: float | None = None, band_low
         return grid.irfft(Wgt * X, n)
 
     noise_models: dict[float, object] = {}
-    out = {k: [] for k in ESTIMATORS}
-    msg = fused = None
+    cars = []
     for j, d in enumerate(drives):
         if d.sensor_noise_std not in noise_models:
             try:
@@ -496,13 +497,14 @@ def estimate_drives(drives: list[Drive], *, gamma: float | None = None, band_low
                 raise ParameterError(f"{d.params_path}: {err}") from None
             noise_models[d.sensor_noise_std] = cfg.noise_model()
         vehicle = Vehicle(index=j, true_params=d.params, estimated_params=d.params)
-        est = CollaborativeEstimator(vehicle, noise_models[d.sensor_noise_std], grid, gamma=gamma)
-        r = est.estimate(d.accel[:n], msg)
-        msg = est.message(r)
-        fused = est.fused_message(r, fused)
-        out["single"].append(band(r.W_obs))
-        out["collaborative"].append(band(r.W_hat))
-        out["fused"].append(band(grid.rfft(fused.z)))
+        cars.append(CollaborativeEstimator(vehicle, noise_models[d.sensor_noise_std], grid, gamma=gamma))
+    ys = [d.accel[:n] for d in drives]
+    Ys = [grid.rfft(y) for y in ys]
+    plain = Relay(cars, "none").run(ys, spectra=Ys)
+    fused = Relay(cars, "fused").run(ys, spectra=Ys)
+    out = {"single": [band(s.result.W_obs) for s in plain],
+           "collaborative": [band(s.result.W_hat) for s in plain],
+           "fused": [band(s.estimate_spectrum) for s in fused]}
     velocity = {k: np.array(v) for k, v in out.items()}
     elevation = {k: np.array([integrate_elevation(x, fs) for x in v]) for k, v in velocity.items()}
     t = np.arange(n) / fs

@@ -236,8 +236,10 @@ class RunResult:
     max_rel_diff_hardened : (n_vehicles,) ndarray
         The same for the hardened exchange.
     theorem1_e, theorem1_wf : (n_vehicles,) ndarray
-        Per-bin relative error of the sent ``e~`` against ``Psi1 e`` and of ``w~f`` against
-        ``Psi2^-1 w^f`` in band (:func:`~roadcollab.privacy.theorem1_errors`).
+        Largest per-bin relative error of the sent ``e~`` against ``Psi1 e`` and of ``w~f``
+        against ``Psi2^-1 w^f`` in band (:func:`~roadcollab.privacy.theorem1_errors`).
+    theorem1_e_band, theorem1_wf_band : (n_vehicles,) ndarray
+        The same errors relative over the whole band (2-norms).
     truth_power : float
         Mean square of the band-limited true road velocity, (m/s)^2.
     traces : dict | None
@@ -249,6 +251,8 @@ class RunResult:
     max_rel_diff_hardened: np.ndarray
     theorem1_e: np.ndarray
     theorem1_wf: np.ndarray
+    theorem1_e_band: np.ndarray
+    theorem1_wf_band: np.ndarray
     truth_power: float
     traces: dict | None = None
 
@@ -296,7 +300,7 @@ def simulate_run(pipe: FleetPipeline, rng, *, keep_traces: int = 0, privacy: boo
         ys, spectra=Ys) if privacy else plain
     V = cfg.n_vehicles
     out = {k: np.zeros(V) for k in ESTIMATORS}
-    rel, rel_h, t1e, t1w = (np.zeros(V) for _ in range(4))
+    rel, rel_h, t1e, t1w, t1e_b, t1w_b = (np.zeros(V) for _ in range(6))
     for j, est in enumerate(ests):
         r = plain[j].result
         out["observer_only"][j] = mse(r.W_obs)
@@ -310,13 +314,14 @@ def simulate_run(pipe: FleetPipeline, rng, *, keep_traces: int = 0, privacy: boo
         rel[j] = float(np.max(np.abs(priv[j].result.estimate - r.estimate))) / scale
         rel_h[j] = float(np.max(np.abs(hard[j].result.estimate - r.estimate))) / scale
         if privacy:
-            t1e[j], t1w[j] = theorem1_errors(priv[j].clear, priv[j].message, *priv[j].psi, grid)
+            t1e[j], t1w[j], t1e_b[j], t1w_b[j] = theorem1_errors(priv[j].clear, priv[j].message, *priv[j].psi, grid)
     traces = None
     if keep_traces:
         traces = {"time": road.time[sl], "truth": truth, "truth_raw": w[sl],
                   "plain": [grid.irfft(Wgt * s.result.W_hat, n)[sl] for s in plain[:keep_traces]],
                   "private": [grid.irfft(Wgt * s.result.W_hat, n)[sl] for s in priv[:keep_traces]]}
     return RunResult(mse=out, max_rel_diff=rel, max_rel_diff_hardened=rel_h, theorem1_e=t1e, theorem1_wf=t1w,
+                     theorem1_e_band=t1e_b, theorem1_wf_band=t1w_b,
                      truth_power=float(np.mean(truth**2)), traces=traces)
 
 
@@ -348,6 +353,7 @@ class ReproductionResult:
         R = len(self.runs)
         std = (lambda x: x.std(ddof=1)) if R > 1 else (lambda x: 0.0)
         rel, t1e, t1w = self._stack("max_rel_diff"), self._stack("theorem1_e"), self._stack("theorem1_wf")
+        t1e_b, t1w_b = self._stack("theorem1_e_band"), self._stack("theorem1_wf_band")
         rows = []
         for j in range(self.config.n_vehicles):
             row = {"vehicle": j + 1, "mse_mean": priv[:, j].mean(), "mse_std": std(priv[:, j]),
@@ -361,6 +367,8 @@ class ReproductionResult:
             row["max_rel_diff_privacy"] = rel[:, j].max()
             row["theorem1_e_max"] = t1e[:, j].max()
             row["theorem1_wf_max"] = t1w[:, j].max()
+            row["theorem1_e_band_max"] = t1e_b[:, j].max()
+            row["theorem1_wf_band_max"] = t1w_b[:, j].max()
             rows.append(row)
         return rows
 

@@ -35,27 +35,59 @@ def _mse_axes(ax, vehicles) -> None:
 
 
 def plot_mse(rows: list[dict], path) -> Path:
-    """Fig. 4: mean and standard deviation of the MSE per vehicle (with privacy), and the
-    vehicles' own observers for reference."""
+    """Fig. 4: MSE per vehicle of every estimator (mean over runs; std bars for Algorithm 1 + 2
+    and the online observer).
+
+    Parameters
+    ----------
+    rows : list of dict
+        ``mse.csv`` rows.
+    path : str or Path
+        Output image.
+
+    Returns
+    -------
+    Path
+    """
     v = np.array([r["vehicle"] for r in rows])
-    fig, ax = plt.subplots(figsize=(7, 4))
+    fig, ax = plt.subplots(figsize=(8, 4.8))
     ax.errorbar(v, [r["mse_mean"] for r in rows], yerr=[r["mse_std"] for r in rows], fmt="o-", capsize=4,
                 label="Algorithm 1 + 2 (collaborative, private)")
     ax.errorbar(v + 0.1, [r["observer_only_mse_mean"] for r in rows], yerr=[r["observer_only_mse_std"] for r in rows],
-                fmt="s--", capsize=4, alpha=0.8, label="observer only (no collaboration)")
+                fmt="s--", capsize=4, alpha=0.8, label="observer only (own, online)")
+    for key, label, style in (("own_inversion_mse_mean", "own inversion (own, offline)", "d:"),
+                              ("fused_mse_mean", "fused (average of z, vehicles 1..j)", "^-"),
+                              ("centralized_mse_mean", "centralized linear MMSE (1..j)", "v-."),
+                              ("oracle_bound_mse_mean", "oracle bound (true models, 1..j)", "k:")):
+        ax.plot(v, [r[key] for r in rows], style, label=label)
     _mse_axes(ax, v)
-    ax.set_title("MSE per vehicle (mean $\\pm$ std over runs)")
+    ax.legend(fontsize=7, loc="best")
+    ax.set_title("MSE per vehicle (mean over runs; bars: std)")
     return _save(fig, path)
 
 
 def plot_fusion(rows: list[dict], path) -> Path:
-    """MSE vs vehicle for observer-only, Algorithm 1, fused and centralised estimates."""
+    """MSE vs vehicle for the fleet estimates: observer only, Algorithm 1, fused, centralized
+    and the oracle bound.
+
+    Parameters
+    ----------
+    rows : list of dict
+        ``mse.csv`` rows.
+    path : str or Path
+        Output image.
+
+    Returns
+    -------
+    Path
+    """
     v = np.array([r["vehicle"] for r in rows])
     fig, ax = plt.subplots(figsize=(7, 4))
     for key, label, style in (("observer_only_mse_mean", "observer only", "s--"),
                               ("mse_mean", "Algorithm 1", "o-"),
                               ("fused_mse_mean", "fused (average of z)", "^-"),
-                              ("centralized_mse_mean", "centralised (all raw data)", "k:")):
+                              ("centralized_mse_mean", "centralized linear MMSE", "v-."),
+                              ("oracle_bound_mse_mean", "oracle bound", "k:")):
         ax.plot(v, [r[key] for r in rows], style, label=label)
     _mse_axes(ax, v)
     return _save(fig, path)

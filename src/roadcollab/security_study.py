@@ -18,7 +18,7 @@ from . import protocol
 from ._validation import check_int
 from .errors import ParameterError
 from .experiment import ExperimentConfig
-from .privacy import obfuscate
+from .relay import Exchange, Relay
 from .security import (PhysicalPrior, SUCCESS_TOLERANCE, arx_poles, attack_model_reduction, attack_multiplicity,
                        attack_physical_fit, attack_pole_intersection, attack_signals_prior,
                        attack_signals_reduction, intersect_pole_sets, pole_errors)
@@ -157,6 +157,11 @@ class _AttackTask:
         return [_attack_run(pipe, self.config, r, seeds[r], self.key) for r in indices]
 
 
+def _encoded(message) -> tuple:
+    """``(message, its encoding)``: what is timed per message."""
+    return message, protocol.encode(message)
+
+
 def _attack_run(pipe, config: AttackStudyConfig, r: int, rs: np.random.SeedSequence, key: bytes) -> dict:
     """Everything one segment contributes to the study."""
     from . import baselines
@@ -194,6 +199,10 @@ def _attack_run(pipe, config: AttackStudyConfig, r: int, rs: np.random.SeedSeque
         out["nbytes"][name].append(len(data))
         return msg
 
+    ests = pipe.estimators
+    relays = {"none": Relay(ests, "none"), "paper": Relay(ests, Exchange("paper", cfg.obfuscation), rng=priv_rng),
+              "hardened": Relay(ests, "hardened")}
+    dp_relays = {e: Relay(ests, Exchange("dp", dp_sigma=sigmas[e]), rng=dp_rng) for e in eps_list}
     mse = {m: np.zeros(3) for m in ["none", "paper", "hardened"] + [f"dp_eps_{e:g}" for e in eps_list]}
     plain_in = paper_in = hard_in = None
     own_proxy = None
@@ -202,16 +211,14 @@ def _attack_run(pipe, config: AttackStudyConfig, r: int, rs: np.random.SeedSeque
         y = add_sensor_noise(simulate_response(est.true_plant, w), cfg.sensor_noise_std, rng=noise_rng)
         res = est.estimate(y, plain_in)
         scale = max(float(np.max(np.abs(res.estimate))), 1e-300)
-        plain = timed("none", lambda: (lambda m: (m, protocol.encode(m)))(est.message(res)))
+        plain = timed("none", lambda: _encoded(relays["none"].send(j, res).message))
         rp = est.estimate(y, paper_in)
-        paper = timed("paper", lambda: (lambda m: (m, protocol.encode(m)))(
-            obfuscate(est.message(rp), grid, cfg.obfuscation, rng=priv_rng,
-                      T_response=est.T_ss_f, S_response=est.S_ss_f)[0]))
+        paper = timed("paper", lambda: _encoded(relays["paper"].send(j, rp).message))
         if j == 0:
             own_proxy = grid.irfft(est.invert(grid.rfft(y)))
         rh = est.estimate(y, hard_in)
-        hard = timed("hardened", lambda: (lambda m: (m, protocol.encode(m)))(est.hardened_message(rh)))
-        timed("aead", lambda: (None, baselines.seal(key, protocol.encode(est.hardened_message(rh)))))
+        hard = timed("hardened", lambda: _encoded(relays["hardened"].send(j, rh).message))
+        timed("aead", lambda: (None, baselines.seal(key, protocol.encode(relays["hardened"].send(j, rh).message))))
         out["exact"]["paper"] = max(out["exact"]["paper"], float(np.max(np.abs(rp.estimate - res.estimate))) / scale)
         out["exact"]["hardened"] = max(out["exact"]["hardened"],
                                        float(np.max(np.abs(rh.estimate - res.estimate))) / scale)
@@ -222,10 +229,9 @@ def _attack_run(pipe, config: AttackStudyConfig, r: int, rs: np.random.SeedSeque
         for e in eps_list:
             rd = est.estimate(y, dp_in[e])
             if e == eps_list[0]:
-                dp_in[e] = timed("dp", lambda: (lambda m: (m, protocol.encode(m)))(
-                    baselines.dp_message(est.hardened_message(rd), sigmas[e], rng=dp_rng)))
+                dp_in[e] = timed("dp", lambda: _encoded(dp_relays[e].send(j, rd).message))
             else:
-                dp_in[e] = baselines.dp_message(est.hardened_message(rd), sigmas[e], rng=dp_rng)
+                dp_in[e] = dp_relays[e].send(j, rd).message
             if j < 3:
                 mse[f"dp_eps_{e:g}"][j] = seg_mse(rd.W_hat)
             # The strongest signal attack on the noisy z: the privacy/accuracy trade-off.
