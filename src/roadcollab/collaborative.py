@@ -37,10 +37,11 @@ import numpy as np
 from ._validation import check_signal
 from .errors import MessageError, ParameterError
 from .estimator import JDPNoise, RoadInputEstimator, build_road_input_estimator
+from .fusion import DESIGN_SEED, posterior_responses
 from .message import ExchangeMessage, InversionMessage, StateSpaceData, series
 from .simulation import DiscretePlant, discretize_plant
 from .spectral import SegmentGrid, inv2x2, matvec
-from .vehicle import Vehicle
+from .vehicle import FleetSpec, Vehicle
 
 __all__ = ["VehicleEstimate", "CollaborativeEstimator", "learning_filters"]
 
@@ -121,10 +122,14 @@ class CollaborativeEstimator:
         Observer parameter of eq. 4.
     oracle : bool
         Use the true plant in ``T_j``, ``S_j`` and ``e_j`` (analysis only).
+    fleet : FleetSpec, optional
+        The fleet distribution the vehicle's parameter estimate came from. Needed only for the
+        posterior inversion (``invert(..., posterior=True)``), which inverts ``E[P | theta_hat]``
+        instead of the nominal ``P_hat``.
     """
 
     def __init__(self, vehicle: Vehicle, noise: JDPNoise, grid: SegmentGrid, *, gamma: float,
-                 oracle: bool = False) -> None:
+                 oracle: bool = False, fleet: FleetSpec | None = None) -> None:
         if not isinstance(vehicle, Vehicle):
             raise ParameterError(f"vehicle must be a Vehicle, got {type(vehicle).__name__}")
         if not isinstance(grid, SegmentGrid):
@@ -132,6 +137,7 @@ class CollaborativeEstimator:
         self.vehicle = vehicle
         self.grid = grid
         self.oracle = bool(oracle)
+        self.fleet = fleet
         dt = grid.dt
         self.estimator: RoadInputEstimator = build_road_input_estimator(
             vehicle.nominal_model, noise, gamma=gamma, dt=dt)
@@ -195,10 +201,38 @@ class CollaborativeEstimator:
         Wf[self._act] = matvec(self._minus_Sinv_T, Z[self._act])
         return Wf
 
-    def invert(self, Y: np.ndarray) -> np.ndarray:
-        """Band-limited offline model inversion ``z_j = W P_hat_j^-1 y_j`` (spectrum)."""
+    @functools.cached_property
+    def posterior_responses(self) -> np.ndarray:
+        """Plausible true plants given this vehicle's estimate, (n, K_active, 2, 2) (see
+        :func:`roadcollab.fusion.posterior_responses`); needs ``fleet``."""
+        if self.fleet is None:
+            raise ParameterError("the posterior inversion needs the fleet distribution: pass fleet= to "
+                                 "CollaborativeEstimator")
+        return posterior_responses(self.vehicle.estimated_params, self.grid, self.fleet,
+                                   rng=[DESIGN_SEED, self.vehicle.index])
+
+    @functools.cached_property
+    def _W_Pbar_inv(self) -> np.ndarray:
+        return self._w_act[:, None, None] * inv2x2(self.posterior_responses.mean(axis=0))
+
+    def invert(self, Y: np.ndarray, *, posterior: bool = False) -> np.ndarray:
+        """Band-limited offline model inversion ``z_j = W P_hat_j^-1 y_j`` (spectrum).
+
+        Parameters
+        ----------
+        Y : (K, 2) complex ndarray
+            Record spectrum on the grid.
+        posterior : bool
+            Invert the posterior-mean plant ``E[P | theta_hat]`` (needs ``fleet``) instead of the
+            nominal ``P_hat``.
+
+        Returns
+        -------
+        (K, 2) complex ndarray
+            Road-velocity spectrum, zero outside the active bins.
+        """
         Z = np.zeros_like(Y)
-        Z[self._act] = matvec(self._W_Pinv, Y[self._act])
+        Z[self._act] = matvec(self._W_Pbar_inv if posterior else self._W_Pinv, Y[self._act])
         return Z
 
     def _check_grid(self, message) -> None:
@@ -279,10 +313,26 @@ class CollaborativeEstimator:
         return InversionMessage(mechanism="hardened", sample_rate=g.sample_rate, n_samples=g.n_samples,
                                 z=g.irfft(self.invert(result.Y)), count=1)
 
-    def fused_message(self, result: VehicleEstimate, incoming: InversionMessage | None) -> InversionMessage:
-        """Running fleet average of ``z`` including this vehicle (the fused estimate)."""
+    def fused_message(self, result: VehicleEstimate, incoming: InversionMessage | None, *,
+                      posterior: bool = False) -> InversionMessage:
+        """Running fleet average of ``z`` including this vehicle (the fused estimate).
+
+        Parameters
+        ----------
+        result : VehicleEstimate
+            This vehicle's estimate on the segment (for its record spectrum).
+        incoming : InversionMessage | None
+            The running average of the vehicles before (None for the first).
+        posterior : bool
+            Average posterior inversions (see :meth:`invert`).
+
+        Returns
+        -------
+        InversionMessage
+            ``mechanism == "fused"``, ``count`` = vehicles averaged.
+        """
         g = self.grid
-        z = g.irfft(self.invert(result.Y))
+        z = g.irfft(self.invert(result.Y, posterior=posterior))
         if incoming is not None:
             if incoming.mechanism != "fused" or incoming.z.shape != z.shape:
                 raise MessageError(f"expected a fused message with z of shape {z.shape}, got "

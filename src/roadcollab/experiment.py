@@ -27,7 +27,7 @@ from ._validation import check_int, check_nonnegative, check_positive, check_rea
 from .collaborative import CollaborativeEstimator
 from .errors import ParameterError
 from .estimator import JDPNoise
-from .fusion import DESIGN_SEED, LinearMMSE, plant_moments, road_second_moment
+from .fusion import LinearMMSE, plant_moments, road_second_moment
 from .privacy import ObfuscationSpec, theorem1_errors
 from .relay import Exchange, Relay, simulate_measurements
 from .road import RoadSpec, TimeRoad, generate_road, jump_statistics, measured_road, wiener_intensity
@@ -174,8 +174,8 @@ class FleetPipeline:
         self.fleet = fleet
         self.grid = config.grid()
         noise = config.noise_model()
-        self.estimators = [CollaborativeEstimator(v, noise, self.grid, gamma=config.gamma, oracle=config.oracle)
-                           for v in fleet]
+        self.estimators = [CollaborativeEstimator(v, noise, self.grid, gamma=config.gamma, oracle=config.oracle,
+                                                  fleet=config.fleet) for v in fleet]
 
     @functools.cached_property
     def road_moment(self) -> np.ndarray:
@@ -190,17 +190,16 @@ class FleetPipeline:
     @functools.cached_property
     def centralized(self) -> LinearMMSE:
         """Linear MMSE from every record with the nominal models and the parameter uncertainty."""
-        u = self.config.fleet.estimate_uncertainty
         S = self.road_moment
-        moments = [plant_moments(v.estimated_params, self.grid, S, uncertainty=u, rng=[DESIGN_SEED, j])
-                   for j, v in enumerate(self.fleet)]
+        moments = [plant_moments(e.posterior_responses, S) for e in self.estimators]
         return LinearMMSE(self.grid, S, moments, [self.config.sensor_noise_std] * len(self.fleet))
 
     @functools.cached_property
     def oracle_bound(self) -> LinearMMSE:
         """Linear MMSE from every record with the true models (the bound)."""
         S = self.road_moment
-        moments = [plant_moments(v.true_params, self.grid, S, uncertainty=0.0) for v in self.fleet]
+        moments = [plant_moments(e.true_plant.frequency_response(self.grid.omega_dt[self.grid.active]), S)
+                   for e in self.estimators]
         return LinearMMSE(self.grid, S, moments, [self.config.sensor_noise_std] * len(self.fleet))
 
     def road(self, rng: np.random.Generator) -> TimeRoad:
@@ -218,8 +217,8 @@ class FleetPipeline:
 
 
 #: Estimators scored by the reproduction, in the order of ``mse.csv`` and Fig. 4.
-ESTIMATORS = ("observer_only", "own_inversion", "algorithm1", "algorithm1_private", "fused", "centralized",
-              "oracle_bound")
+ESTIMATORS = ("observer_only", "own_inversion", "algorithm1", "algorithm1_private", "fused", "fused_posterior",
+              "centralized", "oracle_bound")
 
 
 @dataclass(frozen=True, eq=False)
@@ -296,6 +295,7 @@ def simulate_run(pipe: FleetPipeline, rng, *, keep_traces: int = 0, privacy: boo
     plain = Relay(ests, "none").run(ys, spectra=Ys)
     hard = Relay(ests, "hardened").run(ys, spectra=Ys)
     fused = Relay(ests, "fused").run(ys, spectra=Ys)
+    fused_post = Relay(ests, "fused_posterior").run(ys, spectra=Ys)
     priv = Relay(ests, Exchange("paper", cfg.obfuscation), rng=np.random.default_rng(priv_ss)).run(
         ys, spectra=Ys) if privacy else plain
     V = cfg.n_vehicles
@@ -308,6 +308,7 @@ def simulate_run(pipe: FleetPipeline, rng, *, keep_traces: int = 0, privacy: boo
         out["algorithm1"][j] = mse(r.W_hat)
         out["algorithm1_private"][j] = mse(priv[j].result.W_hat)
         out["fused"][j] = mse(fused[j].estimate_spectrum)
+        out["fused_posterior"][j] = mse(fused_post[j].estimate_spectrum)
         out["centralized"][j] = mse(pipe.centralized.estimate(Ys[:j + 1]))
         out["oracle_bound"][j] = mse(pipe.oracle_bound.estimate(Ys[:j + 1]))
         scale = max(float(np.max(np.abs(r.estimate))), 1e-300)
@@ -359,7 +360,7 @@ class ReproductionResult:
             row = {"vehicle": j + 1, "mse_mean": priv[:, j].mean(), "mse_std": std(priv[:, j]),
                    "mse_no_privacy_mean": self.mse("algorithm1")[:, j].mean(),
                    "nmse_mean": (priv[:, j:j + 1] / pw).mean()}
-            for name in ("observer_only", "own_inversion", "fused", "centralized", "oracle_bound"):
+            for name in ("observer_only", "own_inversion", "fused", "fused_posterior", "centralized", "oracle_bound"):
                 m = self.mse(name)
                 row[f"{name}_mse_mean"] = m[:, j].mean()
                 row[f"{name}_mse_std"] = std(m[:, j])

@@ -16,9 +16,8 @@ where ``P_bar_i = E[P_i]`` and the expectations run over what is *not* known abo
 Two estimators come from this one formula:
 
 - ``centralized``: one party with every raw record and every vehicle's nominal model. The true
-  plant is uncertain: the vehicle's parameter estimate is ``theta_hat = theta (1 + u n)``
-  (:class:`~roadcollab.vehicle.FleetSpec`), so the plausible plants are
-  ``theta_hat / (1 + u n)``, ``n ~ N(0, 1)`` truncated at 3, averaged over ``n_models`` draws.
+  plant is uncertain: the expectations run over the exact posterior of the true parameters given
+  the estimate under the fleet model (:func:`posterior_draws`).
 - ``oracle_bound``: the same with the *true* plants (``P_bar_i = P_i``). No linear estimator
   that acts per bin on the same records can beat it on average; every estimator of this project
   is of that kind, and the reproduction checks that none does.
@@ -37,13 +36,13 @@ from typing import Callable, Sequence
 import numpy as np
 from scipy.ndimage import uniform_filter1d
 
-from ._validation import check_int, check_nonnegative
+from ._validation import check_int
 from .errors import ParameterError
 from .simulation import discretize_plant
 from .spectral import SegmentGrid
-from .vehicle import HalfCarParameters, half_car_model
+from .vehicle import FleetSpec, HalfCarParameters, half_car_model
 
-__all__ = ["road_second_moment", "plant_moments", "LinearMMSE"]
+__all__ = ["road_second_moment", "posterior_draws", "posterior_responses", "plant_moments", "LinearMMSE"]
 
 #: Root entropy of the design draws (road statistics, plausible plants); the runs use other seeds.
 DESIGN_SEED = 20_261_123
@@ -89,26 +88,90 @@ def road_second_moment(draw_velocity: Callable[[np.random.Generator], np.ndarray
     return 0.5 * (S + S.conj().transpose(0, 2, 1))
 
 
-def plant_moments(params: HalfCarParameters, grid: SegmentGrid, S: np.ndarray, *, uncertainty: float,
-                  n_models: int = 32, rng=DESIGN_SEED) -> tuple[np.ndarray, np.ndarray]:
-    """First and second moments of a plant whose parameters are known up to ``uncertainty``.
+def posterior_draws(estimate: HalfCarParameters, fleet: FleetSpec, n_models: int, *, rng=DESIGN_SEED
+                    ) -> list[HalfCarParameters]:
+    """Plausible true parameters given a vehicle's estimate, drawn from the exact posterior.
+
+    The fleet model (:func:`~roadcollab.vehicle.sample_fleet`) draws each true parameter
+    uniformly within ``nominal (1 +- spread)`` and the estimate as ``theta_hat = theta (1 + u n)``,
+    ``n ~ N(0, 1)`` truncated at 3. Per parameter the posterior density is therefore
+    ``p(theta | theta_hat) ~ phi((theta_hat / theta - 1) / u) / theta`` on the prior's support
+    (``|theta_hat / theta - 1| <= 3 u``). It is tabulated on 4001 points and sampled by inverse
+    CDF at stratified quantiles (``(k + 1/2) / n_models``, independently permuted per parameter), so
+    the draws' marginals are accurate with few models.
 
     Parameters
     ----------
-    params : HalfCarParameters
-        The parameter estimate ``theta_hat``.
+    estimate : HalfCarParameters
+        The vehicle's estimate ``theta_hat``.
+    fleet : FleetSpec
+        The fleet's (public) distribution: nominal, spread and estimate uncertainty ``u > 0``.
+        Symmetric fleets are treated as if their arms were independent.
+    n_models : int
+        Draws.
+    rng : numpy.random.Generator | int | None
+        Randomness of the permutations.
+
+    Returns
+    -------
+    list of HalfCarParameters
+    """
+    n_models = check_int("n_models", n_models, low=1)
+    u = fleet.estimate_uncertainty
+    if u <= 0:
+        raise ParameterError(f"fleet.estimate_uncertainty must be > 0 for a posterior, got {u}")
+    rng = np.random.default_rng(rng)
+    q = (np.arange(n_models) + 0.5) / n_models
+    cols = {}
+    for f in fields(HalfCarParameters):
+        nom, hat = getattr(fleet.nominal, f.name), getattr(estimate, f.name)
+        lo, hi = nom * (1 - fleet.spread), nom * (1 + fleet.spread)
+        lo, hi = max(lo, hat / (1 + 3 * u)), min(hi, hat / max(1 - 3 * u, 1e-9))
+        if not lo < hi:        # the estimate is outside what the fleet model can produce
+            lo, hi = hat / (1 + 3 * u), hat / max(1 - 3 * u, 1e-9)
+        theta = np.linspace(lo, hi, 4001)
+        dens = np.exp(-0.5 * ((hat / theta - 1) / u) ** 2) / theta
+        cdf = np.concatenate([[0.0], np.cumsum(0.5 * (dens[1:] + dens[:-1]) * np.diff(theta))])
+        cols[f.name] = rng.permutation(np.interp(q * cdf[-1], cdf, theta))
+    return [HalfCarParameters(**{k: float(v[i]) for k, v in cols.items()}) for i in range(n_models)]
+
+
+def posterior_responses(estimate: HalfCarParameters, grid: SegmentGrid, fleet: FleetSpec, *, n_models: int = 32,
+                        rng=DESIGN_SEED) -> np.ndarray:
+    """Responses of plausible true plants given a vehicle's estimate (:func:`posterior_draws`).
+
+    Parameters
+    ----------
+    estimate : HalfCarParameters
+        The vehicle's parameter estimate ``theta_hat``.
     grid : SegmentGrid
         Responses of the ZOH-exact discrete plant on its active bins.
+    fleet : FleetSpec
+        The fleet distribution the estimate came from.
+    n_models : int
+        Posterior draws.
+    rng : numpy.random.Generator | int | None
+        Design randomness (one stream per vehicle).
+
+    Returns
+    -------
+    (n_models, K_active, 2, 2) complex ndarray
+        ``P(e^{j omega dt})`` per draw: body-tip acceleration (m/s^2) per road velocity (m/s).
+    """
+    om = grid.omega_dt[grid.active]
+    draws = posterior_draws(estimate, fleet, n_models, rng=rng)
+    return np.stack([discretize_plant(half_car_model(p), grid.dt).frequency_response(om) for p in draws])
+
+
+def plant_moments(responses: np.ndarray, S: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """First and second moments of an uncertain plant on the active bins.
+
+    Parameters
+    ----------
+    responses : (n_models, K_active, 2, 2) or (K_active, 2, 2) complex ndarray
+        Plausible plants (:func:`posterior_responses`), or the one known plant.
     S : (K_active, 2, 2) ndarray
         Road second moment per bin (:func:`road_second_moment`).
-    uncertainty : float
-        ``u``: relative standard deviation of the estimate. 0 means the plant is known.
-    n_models : int
-        Plausible plants ``theta_hat / (1 + u n)`` averaged (ignored for ``u = 0``), drawn in
-        antithetic pairs ``(n, -n)`` so the first-order Monte Carlo error of ``E[P]`` cancels.
-    rng : numpy.random.Generator | int | None
-        Design randomness. Give each vehicle its own stream: shared draws would shift every
-        vehicle's ``E[P]`` the same way, an error that does not average out over the fleet.
 
     Returns
     -------
@@ -117,24 +180,11 @@ def plant_moments(params: HalfCarParameters, grid: SegmentGrid, S: np.ndarray, *
     second : (K_active, 2, 2) complex ndarray
         ``E[P S P^H]``.
     """
-    uncertainty = check_nonnegative("uncertainty", uncertainty)
-    om = grid.omega_dt[grid.active]
-    if uncertainty == 0:
-        P = discretize_plant(half_car_model(params), grid.dt).frequency_response(om)
-        return P, P @ S @ P.conj().transpose(0, 2, 1)
-    n_models = check_int("n_models", n_models, low=2)
-    rng = np.random.default_rng(rng)
-    names = [f.name for f in fields(HalfCarParameters)]
-    mean = np.zeros((om.size, 2, 2), complex)
-    second = np.zeros_like(mean)
-    half = np.clip(rng.standard_normal((n_models // 2, len(names))), -3, 3)
-    for n in np.concatenate([half, -half]):
-        f = 1.0 / (1.0 + uncertainty * n)
-        P = discretize_plant(half_car_model(params.scaled(dict(zip(names, f)))), grid.dt).frequency_response(om)
-        mean += P
-        second += P @ S @ P.conj().transpose(0, 2, 1)
-    k = 2 * (n_models // 2)
-    return mean / k, second / k
+    P = responses if responses.ndim == 4 else responses[None]
+    if P.shape[1:] != S.shape:
+        raise ParameterError(f"responses must have shape (n, {S.shape[0]}, 2, 2), got {responses.shape}")
+    second = np.mean(P @ S[None] @ P.conj().transpose(0, 1, 3, 2), axis=0)
+    return P.mean(axis=0), second
 
 
 class LinearMMSE:

@@ -57,6 +57,7 @@ def plot_mse(rows: list[dict], path) -> Path:
                 fmt="s--", capsize=4, alpha=0.8, label="observer only (own, online)")
     for key, label, style in (("own_inversion_mse_mean", "own inversion (own, offline)", "d:"),
                               ("fused_mse_mean", "fused (average of z, vehicles 1..j)", "^-"),
+                              ("fused_posterior_mse_mean", "fused, posterior inversions (1..j)", "<-"),
                               ("centralized_mse_mean", "centralized linear MMSE (1..j)", "v-."),
                               ("oracle_bound_mse_mean", "oracle bound (true models, 1..j)", "k:")):
         ax.plot(v, [r[key] for r in rows], style, label=label)
@@ -86,6 +87,7 @@ def plot_fusion(rows: list[dict], path) -> Path:
     for key, label, style in (("observer_only_mse_mean", "observer only", "s--"),
                               ("mse_mean", "Algorithm 1", "o-"),
                               ("fused_mse_mean", "fused (average of z)", "^-"),
+                              ("fused_posterior_mse_mean", "fused (posterior inversions)", "<-"),
                               ("centralized_mse_mean", "centralized linear MMSE", "v-."),
                               ("oracle_bound_mse_mean", "oracle bound", "k:")):
         ax.plot(v, [r[key] for r in rows], style, label=label)

@@ -11,6 +11,8 @@ on. How that message looks is the *exchange mechanism*:
 ``hardened``   Only ``z_j = W_reg P_hat_j^-1 y_j`` (no dynamics); the same estimates.
 ``fused``      The running fleet average of the ``z_i`` of vehicles ``1..j``; the estimate is
                that average.
+``fused_posterior`` The same with each vehicle inverting its posterior-mean plant
+               ``E[P_i | theta_hat_i]`` under the (public) fleet distribution.
 ``dp``         ``hardened`` with the Gaussian mechanism on every sample of ``z``.
 ============== ==================================================================================
 
@@ -36,7 +38,7 @@ from .simulation import add_sensor_noise, simulate_response
 __all__ = ["MECHANISMS", "Exchange", "RelayStep", "Relay", "simulate_measurements"]
 
 #: Exchange mechanisms the relay knows.
-MECHANISMS = ("none", "paper", "paper_vehicle", "hardened", "fused", "dp")
+MECHANISMS = ("none", "paper", "paper_vehicle", "hardened", "fused", "fused_posterior", "dp")
 
 
 @dataclass(frozen=True)
@@ -167,8 +169,8 @@ class Relay:
             return RelayStep(result, msg, clear=clear, psi=(psi1, psi2))
         if mech == "hardened":
             return RelayStep(result, est.hardened_message(result))
-        if mech == "fused":
-            return RelayStep(result, est.fused_message(result, incoming))
+        if mech in ("fused", "fused_posterior"):
+            return RelayStep(result, est.fused_message(result, incoming, posterior=mech == "fused_posterior"))
         from .baselines import dp_message     # baselines imports the optional crypto packages
 
         return RelayStep(result, dp_message(est.hardened_message(result), self.exchange.dp_sigma, rng=self.rng))
@@ -193,7 +195,7 @@ class Relay:
         """
         est = self.estimators[j]
         # The fused chain's estimate is the average itself: Algorithm 1 is not run on it.
-        learn_from = None if self.exchange.mechanism == "fused" else incoming
+        learn_from = None if self.exchange.mechanism in ("fused", "fused_posterior") else incoming
         result = est.estimate(y, learn_from, Y=Y)
         return self.send(j, result, incoming)
 
