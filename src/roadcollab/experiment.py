@@ -217,7 +217,7 @@ class FleetPipeline:
 
 
 #: Estimators scored by the reproduction, in the order of ``mse.csv`` and Fig. 4.
-ESTIMATORS = ("observer_only", "own_inversion", "algorithm1", "algorithm1_private", "fused", "fused_posterior",
+ESTIMATORS = ("observer_only", "own_inversion", "own_posterior_inversion", "algorithm1", "algorithm1_private", "fused", "fused_posterior",
               "centralized", "oracle_bound")
 
 
@@ -305,6 +305,7 @@ def simulate_run(pipe: FleetPipeline, rng, *, keep_traces: int = 0, privacy: boo
         r = plain[j].result
         out["observer_only"][j] = mse(r.W_obs)
         out["own_inversion"][j] = mse(est.invert(Ys[j]))
+        out["own_posterior_inversion"][j] = mse(est.invert(Ys[j], posterior=True))
         out["algorithm1"][j] = mse(r.W_hat)
         out["algorithm1_private"][j] = mse(priv[j].result.W_hat)
         out["fused"][j] = mse(fused[j].estimate_spectrum)
@@ -360,7 +361,8 @@ class ReproductionResult:
             row = {"vehicle": j + 1, "mse_mean": priv[:, j].mean(), "mse_std": std(priv[:, j]),
                    "mse_no_privacy_mean": self.mse("algorithm1")[:, j].mean(),
                    "nmse_mean": (priv[:, j:j + 1] / pw).mean()}
-            for name in ("observer_only", "own_inversion", "fused", "fused_posterior", "centralized", "oracle_bound"):
+            for name in ("observer_only", "own_inversion", "own_posterior_inversion", "fused", "fused_posterior",
+                         "centralized", "oracle_bound"):
                 m = self.mse(name)
                 row[f"{name}_mse_mean"] = m[:, j].mean()
                 row[f"{name}_mse_std"] = std(m[:, j])

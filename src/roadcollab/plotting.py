@@ -56,6 +56,7 @@ def plot_mse(rows: list[dict], path) -> Path:
     ax.errorbar(v + 0.1, [r["observer_only_mse_mean"] for r in rows], yerr=[r["observer_only_mse_std"] for r in rows],
                 fmt="s--", capsize=4, alpha=0.8, label="observer only (own, online)")
     for key, label, style in (("own_inversion_mse_mean", "own inversion (own, offline)", "d:"),
+                              ("own_posterior_inversion_mse_mean", "own posterior inversion", "x:"),
                               ("fused_mse_mean", "fused (average of z, vehicles 1..j)", "^-"),
                               ("fused_posterior_mse_mean", "fused, posterior inversions (1..j)", "<-"),
                               ("centralized_mse_mean", "centralized linear MMSE (1..j)", "v-."),
