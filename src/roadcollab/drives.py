@@ -50,7 +50,7 @@ Processing
 * One :class:`~roadcollab.collaborative.CollaborativeEstimator` per drive with
   ``Vehicle(index=j, true_params=p, estimated_params=p)`` (the true parameters of a real car are
   unknown; only the estimated ones are used, ``oracle=False``), observer gamma and band edge from
-  the :class:`~roadcollab.experiment.ExperimentConfig` defaults (32, 0.5 Hz), on
+  the :class:`~roadcollab.experiment.ExperimentConfig` defaults (512, 0.5 Hz), on
   ``SegmentGrid(n_samples, sample_rate, band_low_hz=0.5)``.
 * Per drive ``k``: ``single`` = the vehicle's own observer ``D_k y_k``; ``collaborative`` =
   Algorithm 1 with the message of drive ``k - 1`` (drive 1: the observer only, so equal to
