@@ -187,6 +187,16 @@ class _Tally:
         self.pos_err += m["position_errors"]
         self.depth_err += m["depth_rel_errors"]
 
+    def merge(self, other: "_Tally") -> None:
+        """Add the counts and pairs of another tally (e.g. one pooled on a worker)."""
+        self.n_true += other.n_true
+        self.n_detected += other.n_detected
+        self.n_matched += other.n_matched
+        self.n_kind += other.n_kind
+        self.n_side += other.n_side
+        self.pos_err += other.pos_err
+        self.depth_err += other.depth_err
+
     def row(self) -> dict:
         p = self.n_matched / self.n_detected if self.n_detected else 1.0
         r = self.n_matched / self.n_true if self.n_true else 1.0
@@ -228,6 +238,20 @@ def _fresh(ss: np.random.SeedSequence) -> np.random.SeedSequence:
     return np.random.SeedSequence(ss.entropy, spawn_key=ss.spawn_key, pool_size=ss.pool_size)
 
 
+def _run_seeds(seed: int, n_runs: int) -> list[np.random.SeedSequence]:
+    """One SeedSequence per run: the children of ``SeedSequence(seed).spawn(2)[1]`` (the first
+    child draws the fleet, see :func:`roadcollab.experiment.pipeline_for`)."""
+    return np.random.SeedSequence(seed).spawn(2)[1].spawn(n_runs)
+
+
+def _condition_pipelines(config: AnomalyStudyConfig, seed: int) -> tuple[_RoadOverride, list[_RoadOverride]]:
+    """The default condition's pipeline and one per sweep depth (same fleet and estimators)."""
+    from .experiment import pipeline_for
+
+    pipe = _RoadOverride(pipeline_for(config.experiment, seed), config.road_spec())
+    return pipe, [_RoadOverride(pipe, config.road_spec(d)) for d in config.depths]
+
+
 @dataclass(frozen=True)
 class _AnomalyTask:
     """Picklable task: the matches of runs ``indices`` under every condition."""
@@ -236,12 +260,9 @@ class _AnomalyTask:
     seed: int
 
     def __call__(self, indices) -> list[dict]:
-        from .experiment import pipeline_for
-
         config, exp = self.config, self.config.experiment
-        pipe = _RoadOverride(pipeline_for(exp, self.seed), config.road_spec())
-        depth_pipes = [_RoadOverride(pipe, config.road_spec(d)) for d in config.depths]
-        runs_ss = np.random.SeedSequence(self.seed).spawn(2)[1].spawn(config.n_runs)
+        pipe, depth_pipes = _condition_pipelines(config, self.seed)
+        runs_ss = _run_seeds(self.seed, config.n_runs)
         V = exp.n_vehicles
         pooled = range(1, V)   # vehicles 2..V
         out = []

@@ -1,7 +1,8 @@
 """Command-line interface ``roadcollab``.
 
-Subcommands: ``reproduce`` (Figs. 4-7), ``attack`` (security study), ``anomalies``, ``estimate``
-(recorded drives), ``bench``, ``message example``. Long work shows a progress bar.
+Subcommands: ``reproduce`` (Figs. 4-7), ``attack`` (security study), ``anomalies``,
+``calibrate-anomalies``, ``estimate`` (recorded drives), ``bench``, ``message example``. Long work
+shows a progress bar.
 """
 
 from __future__ import annotations
@@ -61,7 +62,7 @@ def _add_road_options(p: argparse.ArgumentParser) -> None:
 def build_parser() -> argparse.ArgumentParser:
     """The ``argparse`` parser of the ``roadcollab`` command.
 
-    Subcommands ``reproduce``, ``attack``, ``anomalies``, ``bench``, ``estimate`` and
+    Subcommands ``reproduce``, ``attack``, ``anomalies``, ``calibrate-anomalies``, ``bench``, ``estimate`` and
     ``message example``; the parsed subcommand is ``args.command``.
 
     Returns
@@ -83,6 +84,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--uncertainty", type=float, default=None,
                    help="relative parameter uncertainty of each vehicle's model (default 0.10)")
     p.add_argument("--iso-class", default=None, help="ISO 8608 roughness class of the synthetic road (default C)")
+    p.add_argument("--gamma", type=_positive_float, default=None,
+                   help="observer parameter gamma of eq. 4 (default 512, the strongest single-vehicle observer)")
     p.add_argument("--oracle", action="store_true", help="use the true plants in T_j (analysis only)")
     p.add_argument("--redraw-fleet", action="store_true",
                    help="draw a new fleet for every run (statistics over fleets)")
@@ -109,6 +112,33 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--iso-class", default=None, help="ISO 8608 roughness class (default C)")
     p.add_argument("--no-sweeps", action="store_true", help="skip the depth and noise sweeps")
     _add_road_options(p)
+    _add_dask_options(p)
+
+    p = sub.add_parser("calibrate-anomalies",
+                       help="grid search of the anomaly detector's threshold and depth floor on training seeds")
+    p.add_argument("--out", type=Path, required=True, help="output folder")
+    p.add_argument("--seeds", nargs="+", default=["1000-1004"],
+                   help="training root seeds, integers or ranges a-b (default 1000-1004; evaluation seed 0 refused)")
+    p.add_argument("--runs-per-seed", type=_positive_int, default=8, help="roads per seed (default 8)")
+    p.add_argument("--vehicles", type=_positive_int, default=10, help="fleet size (default 10, at least 2)")
+    p.add_argument("--snr-thresholds", type=_positive_float, nargs="+", default=None,
+                   help="snr_threshold grid (default 3.5 4 4.25 4.5 5 5.5)")
+    p.add_argument("--min-depths-mm", type=_positive_float, nargs="+", default=None,
+                   help="min_depth grid, mm (default 5 7.5 10 12.5 15)")
+    _add_dask_options(p)
+
+    p = sub.add_parser("sweep", help="where Algorithm 1 beats a single vehicle: gamma x noise x uncertainty grid")
+    p.add_argument("--out", type=Path, required=True, help="output folder")
+    p.add_argument("--runs", type=_positive_int, default=8,
+                   help="Monte Carlo runs per grid point, each with a new fleet and road (default 8)")
+    p.add_argument("--seed", type=_nonneg_int, default=0, help="root seed (default 0)")
+    p.add_argument("--vehicles", type=_positive_int, default=10, help="fleet size (default 10, at least 2)")
+    p.add_argument("--gammas", default=None, metavar="LIST",
+                   help="observer parameters gamma, comma-separated (default 1,8,32,128,512)")
+    p.add_argument("--noise", default=None, metavar="LIST",
+                   help="accelerometer noise stds, m/s^2, comma-separated (default 0.05,0.2)")
+    p.add_argument("--uncertainty", default=None, metavar="LIST",
+                   help="relative parameter uncertainties, comma-separated (default 0.05,0.15)")
     _add_dask_options(p)
 
     p = sub.add_parser("bench", help="per-segment cost of one vehicle, and its scaling with segment length")
@@ -153,6 +183,8 @@ def _config_from_args(args):
         kw["sensor_noise_std"] = args.noise
     if args.iso_class is not None:
         kw["iso_class"] = args.iso_class
+    if getattr(args, "gamma", None) is not None:
+        kw["gamma"] = args.gamma
     if args.uncertainty is not None:
         kw["fleet"] = dataclasses.replace(FleetSpec(), estimate_uncertainty=args.uncertainty)
     if args.road_profile is not None and args.road_profile != "packaged" and not Path(args.road_profile).is_file():
@@ -193,16 +225,17 @@ def _cmd_reproduce(args, argv) -> int:
     command = "roadcollab " + " ".join(shlex.quote(a) for a in argv)
     summary = write_reproduction(result, args.out, command=command, elapsed=elapsed, measured=measured)
     table = Table(title=f"MSE per vehicle ((m/s)^2), {cfg.n_runs} runs, {elapsed:.1f} s")
-    for col in ("vehicle", "Alg. 1+2", "no privacy", "observer only", "fused", "centralised", "max rel diff"):
-        table.add_column(col, justify="right")
+    from .report import HEADLINE_COLUMNS
+
+    for _, header in HEADLINE_COLUMNS:
+        table.add_column(header, justify="right")
     for r in result.table():
-        table.add_row(str(r["vehicle"]), *(f"{r[k]:.3g}" for k in (
-            "mse_mean", "mse_no_privacy_mean", "observer_only_mse_mean", "fused_mse_mean", "centralized_mse_mean",
-            "max_rel_diff_privacy")))
+        table.add_row(str(r["vehicle"]), *(f"{r[k]:.3g}" for k, _ in HEADLINE_COLUMNS[1:]))
     console = Console()
     console.print(table)
-    console.print(f"vehicles 2..{cfg.n_vehicles} beat vehicle 1 by at least "
-                  f"{summary['min_improvement_over_vehicle1']:.1f}x; wrote {args.out}/report.md")
+    console.print(f"vehicle 1 online / Algorithm 1 (vehicles 2..{cfg.n_vehicles}): "
+                  f"{summary['vehicle1_observer_over_algorithm1']:.2f}x; fused / centralized at vehicle "
+                  f"{cfg.n_vehicles}: {summary['fused_over_centralized_last']:.2f}x; wrote {args.out}/report.md")
     return 0
 
 
@@ -261,6 +294,68 @@ def _cmd_anomalies(args, argv) -> int:
         t.add_row(r["estimator"], f"{r['precision']:.3f}", f"{r['recall']:.3f}", f"{r['f1']:.3f}",
                   f"{r['median_position_error_m']:.3f}")
     Console().print(t)
+    print(f"wrote {args.out}/report.md")
+    return 0
+
+
+def _cmd_calibrate_anomalies(args, argv) -> int:
+    from .anomaly_calibration import (AnomalyCalibrationConfig, calibrate_anomalies, parse_seeds,
+                                      write_calibration)
+    from .experiment import ExperimentConfig
+
+    kw = {}
+    if args.snr_thresholds is not None:
+        kw["snr_thresholds"] = tuple(args.snr_thresholds)
+    if args.min_depths_mm is not None:
+        kw["min_depths"] = tuple(d / 1000.0 for d in args.min_depths_mm)
+    cfg = AnomalyCalibrationConfig(seeds=parse_seeds(args.seeds), runs_per_seed=args.runs_per_seed,
+                                   experiment=ExperimentConfig(n_vehicles=args.vehicles, n_runs=1), **kw)
+    n = len(cfg.seeds) * cfg.runs_per_seed
+    prog, cb = _progress(n, "calibrate-anomalies")
+    with prog:
+        result = calibrate_anomalies(cfg, progress=cb, workers=args.workers, scheduler=args.scheduler)
+    command = "roadcollab " + " ".join(shlex.quote(a) for a in argv)
+    write_calibration(result, args.out, command=command)
+    best = result.best
+    print(f"best point: snr_threshold {best.snr_threshold:g}, min_depth {1000 * best.min_depth:g} mm, objective "
+          f"{best.objective:.4f} ({n} runs, {result.elapsed_s:.1f} s); wrote {args.out}/report.md")
+    return 0
+
+
+def _cmd_sweep(args, argv) -> int:
+    from rich.console import Console
+    from rich.table import Table
+
+    from .sweep import SweepConfig, run_sweep
+    from .sweep_report import write_sweep
+
+    def floats(option: str, text: str) -> tuple[float, ...]:
+        try:
+            return tuple(float(x) for x in text.split(","))
+        except ValueError as err:
+            raise ParameterError(f"{option} must be comma-separated numbers such as 1,8,32, got {text!r}") from err
+
+    kw = {key: floats(option, text) for key, option, text in (
+        ("gammas", "--gammas", args.gammas), ("sensor_noise_stds", "--noise", args.noise),
+        ("parameter_uncertainties", "--uncertainty", args.uncertainty)) if text is not None}
+    cfg = SweepConfig(n_vehicles=args.vehicles, n_runs=args.runs, **kw)
+    prog, cb = _progress(len(cfg.points()) * cfg.n_runs, "sweep")
+    t0 = time.perf_counter()
+    with prog:
+        result = run_sweep(cfg, args.seed, progress=cb, workers=args.workers, scheduler=args.scheduler)
+    elapsed = time.perf_counter() - t0
+    command = "roadcollab " + " ".join(shlex.quote(a) for a in argv)
+    findings = write_sweep(result, args.out, command=command, elapsed=elapsed)
+    table = Table(title=f"Vehicle 1's observer vs Algorithm 1, {cfg.n_runs} runs per point, {elapsed:.1f} s")
+    for col in ("noise (m/s^2)", "uncertainty", f"smallest gamma within {findings[0].threshold:g}x",
+                f"Alg. 1 / observer at gamma {findings[0].largest_gamma:g}", "Alg. 1 wins at gamma"):
+        table.add_column(col, justify="right")
+    for f in findings:
+        table.add_row(f"{f.sensor_noise_std:g}", f"{f.parameter_uncertainty:g}",
+                      "none" if f.smallest_gamma_within is None else f"{f.smallest_gamma_within:g}",
+                      f"{f.algorithm1_over_observer_at_largest:.3g}",
+                      ", ".join(f"{g:g}" for g in f.gammas_algorithm1_wins) or "none")
+    Console().print(table)
     print(f"wrote {args.out}/report.md")
     return 0
 
@@ -343,6 +438,10 @@ def main(argv: list[str] | None = None) -> int:
             return _cmd_attack(args, argv)
         if args.command == "anomalies":
             return _cmd_anomalies(args, argv)
+        if args.command == "calibrate-anomalies":
+            return _cmd_calibrate_anomalies(args, argv)
+        if args.command == "sweep":
+            return _cmd_sweep(args, argv)
         if args.command == "estimate":
             return _cmd_estimate(args, argv)
         if args.command == "bench":

@@ -105,7 +105,8 @@ def posterior_draws(estimate: HalfCarParameters, fleet: FleetSpec, n_models: int
     estimate : HalfCarParameters
         The vehicle's estimate ``theta_hat``.
     fleet : FleetSpec
-        The fleet's (public) distribution: nominal, spread and estimate uncertainty ``u > 0``.
+        The fleet's (public) distribution: nominal, spread and estimate uncertainty ``u``
+        (``u = 0``: every draw is the estimate).
         Symmetric fleets are treated as if their arms were independent.
     n_models : int
         Draws.
@@ -118,8 +119,8 @@ def posterior_draws(estimate: HalfCarParameters, fleet: FleetSpec, n_models: int
     """
     n_models = check_int("n_models", n_models, low=1)
     u = fleet.estimate_uncertainty
-    if u <= 0:
-        raise ParameterError(f"fleet.estimate_uncertainty must be > 0 for a posterior, got {u}")
+    if u == 0:     # exact estimates: the posterior is a point mass
+        return [estimate] * n_models
     rng = np.random.default_rng(rng)
     q = (np.arange(n_models) + 0.5) / n_models
     cols = {}

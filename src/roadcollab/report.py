@@ -199,20 +199,23 @@ def reproduction_summary(rows: list[dict], bound_rows: list[dict] | None = None)
     return out
 
 
+def _ratio_words(ratio: float) -> str:
+    """``other / this`` as "2.1x better" or "2.1x worse"."""
+    return f"{ratio:.2f}x better" if ratio >= 1 else f"{1 / ratio:.2f}x worse"
+
+
 def _summary_lines(summary: dict, n_vehicles: int) -> list[str]:
     """The report's summary bullets, worded from the numbers."""
     s = summary
-    a1 = s["vehicle1_observer_over_algorithm1"]
-    lines = [
+    return [
         f"- Vehicle 1's lag-free online estimate (observer only) has MSE {s['vehicle1_observer_mse']:.4g}, "
         f"{s['vehicle1_observer_over_own_inversion']:.2f}x its own offline inversion.",
         f"- Algorithm 1 (vehicles 2..{n_vehicles}, mean MSE {s['algorithm1_mean_mse']:.4g}) is "
-        + (f"{a1:.2f}x better than vehicle 1's online estimate" if a1 >= 1 else f"{1 / a1:.2f}x worse than vehicle "
-           "1's online estimate")
-        + f"; on the same vehicles it is {s['observer_over_algorithm1_same_vehicles']:.2f}x better than their own "
-        f"online estimates, {s['own_inversion_over_algorithm1_same_vehicles']:.2f}x better than their own "
-        f"offline inversions and {s['own_posterior_inversion_over_algorithm1_same_vehicles']:.2f}x better than their "
-        "own posterior inversions (a ratio below 1 means worse).",
+        f"{_ratio_words(s['vehicle1_observer_over_algorithm1'])} than vehicle 1's online estimate. On the same "
+        f"vehicles it is {_ratio_words(s['observer_over_algorithm1_same_vehicles'])} than their own online "
+        f"estimates, {_ratio_words(s['own_inversion_over_algorithm1_same_vehicles'])} than their own offline "
+        f"inversions and {_ratio_words(s['own_posterior_inversion_over_algorithm1_same_vehicles'])} than their own "
+        "posterior inversions.",
         f"- Privacy (Algorithm 2) changes no estimate by more than {s['max_rel_diff_privacy']:.2g} relative (the "
         "receiver's estimate from the obfuscated message vs. from the clear one). Measured on the message itself, "
         f"in band: the sent e~ matches Psi1 e within {s['theorem1_e_band_max']:.2g} over the band "
@@ -224,15 +227,14 @@ def _summary_lines(summary: dict, n_vehicles: int) -> list[str]:
         f"{1 / s['oracle_over_fused_last']:.0f}x below it. Fused from posterior inversions: "
         f"{s['fused_posterior_over_centralized_last']:.2f}x the centralized MMSE and "
         f"{s['algorithm1_over_fused_posterior_last']:.1f}x better than Algorithm 1.",
-        f"- The fused estimate of {s['fused5_vehicles']} vehicles is {s['vehicle1_observer_over_fused5']:.1f}x "
-        f"(posterior: {s['vehicle1_observer_over_fused_posterior5']:.1f}x) better than vehicle 1's online estimate.",
-    ]
-    if "bound_min_z" in s:
-        lines.append(
-            f"- Oracle bound: " + ("**beaten** " if s["bound_beaten"] else "not beaten ")
-            + f"(smallest paired z-score of any estimator's excess MSE over the bound: {s['bound_min_z']:.1f}, "
-            f"{s['bound_min_z_estimator']} at vehicle {s['bound_min_z_vehicle']}; beaten means z < -3).")
-    return lines
+        f"- The fused estimate of {s['fused5_vehicles']} vehicles is "
+        f"{_ratio_words(s['vehicle1_observer_over_fused5'])} (posterior: "
+        f"{_ratio_words(s['vehicle1_observer_over_fused_posterior5'])}) than vehicle 1's online estimate.",
+    ] + ([
+        "- Oracle bound: " + ("**beaten** " if s["bound_beaten"] else "not beaten ")
+        + f"(smallest paired z-score of any estimator's excess MSE over the bound: {s['bound_min_z']:.1f}, "
+        f"{s['bound_min_z_estimator']} at vehicle {s['bound_min_z_vehicle']}; beaten means z < -3)."]
+        if "bound_min_z" in s else [])
 
 
 def write_reproduction(result, out, *, command: str, elapsed: float, measured=None) -> dict:
