@@ -11,9 +11,11 @@ from .anomaly import Detection, DetectorSpec, detect_anomalies, match_detections
 from .collaborative import CollaborativeEstimator, VehicleEstimate, learning_filters
 from .errors import MessageError, ParameterError
 from .estimator import JDPNoise, RoadInputEstimator, build_road_input_estimator, jdp_estimator_gain
-from .experiment import ExperimentConfig, ReproductionResult, run_reproduction
+from .experiment import ExperimentConfig, FleetPipeline, ReproductionResult, run_reproduction
+from .fusion import LinearMMSE
 from .message import ExchangeMessage, InversionMessage, StateSpaceData
 from .privacy import ObfuscationSpec, obfuscate
+from .relay import Exchange, Relay, simulate_measurements
 from .road import RoadSpec, generate_road, measured_road
 from .simulation import discretize_plant, simulate_response
 from .spectral import SegmentGrid
@@ -29,7 +31,8 @@ __all__ = [
     "CollaborativeEstimator", "VehicleEstimate", "learning_filters",
     "MessageError", "ParameterError",
     "JDPNoise", "RoadInputEstimator", "build_road_input_estimator", "jdp_estimator_gain",
-    "ExperimentConfig", "ReproductionResult", "run_reproduction",
+    "ExperimentConfig", "FleetPipeline", "ReproductionResult", "run_reproduction", "LinearMMSE",
+    "Exchange", "Relay", "simulate_measurements",
     "ExchangeMessage", "InversionMessage", "StateSpaceData",
     "ObfuscationSpec", "obfuscate",
     "RoadSpec", "generate_road", "measured_road",
