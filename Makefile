@@ -17,6 +17,7 @@ demo: $(STAMP)
 	$(BIN)/roadcollab reproduce --out results/demo
 
 study: $(STAMP)
+	$(BIN)/roadcollab sweep --out results/sweep --workers 2
 	$(BIN)/roadcollab attack --out results/attack
 	$(BIN)/roadcollab anomalies --out results/anomalies
 

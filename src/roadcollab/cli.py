@@ -1,8 +1,8 @@
 """Command-line interface ``roadcollab``.
 
-Subcommands: ``reproduce`` (Figs. 4-7), ``attack`` (security study), ``anomalies``,
-``calibrate-anomalies``, ``estimate`` (recorded drives), ``bench``, ``message example``. Long work
-shows a progress bar.
+Subcommands: ``reproduce`` (Figs. 4-7), ``sweep`` (where Algorithm 1 beats a single vehicle),
+``attack`` (security study), ``anomalies``, ``calibrate-anomalies``, ``estimate`` (recorded drives),
+``bench``, ``message example``. Long work shows a progress bar.
 """
 
 from __future__ import annotations
@@ -62,8 +62,8 @@ def _add_road_options(p: argparse.ArgumentParser) -> None:
 def build_parser() -> argparse.ArgumentParser:
     """The ``argparse`` parser of the ``roadcollab`` command.
 
-    Subcommands ``reproduce``, ``attack``, ``anomalies``, ``calibrate-anomalies``, ``bench``, ``estimate`` and
-    ``message example``; the parsed subcommand is ``args.command``.
+    Subcommands ``reproduce``, ``sweep``, ``attack``, ``anomalies``, ``calibrate-anomalies``, ``bench``,
+    ``estimate`` and ``message example``; the parsed subcommand is ``args.command``.
 
     Returns
     -------
