@@ -113,6 +113,30 @@ def test_obfuscated_realisation_shows_no_block_of_T(pipe):
     assert _rel(msg.T.frequency_response(om), expect) < 1e-8
 
 
+def test_balanced_similarity_keeps_a_high_gain_series_transfer_matrix():
+    """Closed form: two diagonal systems with poles near z = 1 and gains 1e3, in series."""
+    from roadcollab.message import StateSpaceData, random_orthogonal, series, similarity
+
+    rng = np.random.default_rng(5)
+    z = np.exp(1j * np.geomspace(2e-3, 0.5, 60))
+
+    def diag_system(poles, gain):
+        B, C = rng.standard_normal((poles.size, 2)), gain * rng.standard_normal((2, poles.size))
+        D = rng.standard_normal((2, 2))
+        H = np.einsum("in,kn,nj->kij", C, 1 / (z[:, None] - poles[None, :]), B) + D
+        return StateSpaceData(np.diag(poles), B, C, D, 0.005), H
+
+    first, H1 = diag_system(1 - np.geomspace(3e-3, 0.3, 5), 1e3)
+    second, H2 = diag_system(1 - np.geomspace(5e-3, 0.5, 4), 1.0)
+    sys = series(first, second)
+    hidden = similarity(sys, random_orthogonal(sys.order, rng), balance=True)
+    assert np.max(np.abs(sys.A)) > 1e2           # the coupling block is large ...
+    assert np.max(np.abs(hidden.A)) < 10         # ... and balancing removed it before hiding
+    expect = H2 @ H1
+    got = hidden.frequency_response(np.angle(z))
+    assert _rel(got, expect) < 1e-10
+
+
 @settings(max_examples=25)
 @given(st.integers(0, 2**32 - 1))
 def test_obfuscators_are_stable_invertible_and_well_conditioned(seed):

