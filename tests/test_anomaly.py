@@ -1,4 +1,4 @@
-"""Tests of roadcollab.anomaly (detector, scoring) and roadcollab.anomaly_study."""
+"""Tests of roadcollab.detection.detector (detector, scoring) and roadcollab.experiments.anomaly_study."""
 
 from __future__ import annotations
 
@@ -12,12 +12,12 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.ndimage import uniform_filter1d
 
-from roadcollab.anomaly import Detection, DetectorSpec, detect_anomalies, match_detections
-from roadcollab.anomaly_study import ESTIMATORS, AnomalyStudyConfig, run_anomaly_study
+from roadcollab.detection.detector import Detection, DetectorSpec, detect_anomalies, match_detections
+from roadcollab.experiments.anomaly_study import ESTIMATORS, AnomalyStudyConfig, run_anomaly_study
 from roadcollab.errors import ParameterError
-from roadcollab.experiment import ExperimentConfig
-from roadcollab.road import Anomaly, RoadProfile, RoadSpec, generate_road
-from roadcollab.spectral import SegmentGrid
+from roadcollab.experiments.reproduction import ExperimentConfig
+from roadcollab.models.road import Anomaly, RoadProfile, RoadSpec, generate_road
+from roadcollab.estimation.grid import SegmentGrid
 
 SPEED, FS = 15.0, 200.0
 
@@ -265,7 +265,7 @@ def test_small_study_rows_in_range(small_study, tmp_path):
     ex = res.map_example
     assert ex["vehicle"] == cfg.map_vehicle and ex["truth"] and set(ex["detections"]) == set(ESTIMATORS)
 
-    from roadcollab import plotting
+    from roadcollab.reporting import plotting
     for fn, arg in ((plotting.plot_anomaly_map, ex), (plotting.plot_f1_vs_depth, res.depth_rows),
                     (plotting.plot_f1_vs_noise, res.noise_rows)):
         out = fn(arg, tmp_path / f"{fn.__name__}.png")
@@ -342,7 +342,7 @@ def test_study_validation():
 
 def test_measured_profile_with_injected_anomalies():
     """Measured roughness plus synthetic anomalies: ground truth survives and is found."""
-    from roadcollab.road import RoadSpec, measured_road, with_anomalies
+    from roadcollab.models.road import RoadSpec, measured_road, with_anomalies
 
     base = measured_road(spacing=0.05, rng=0)
     road = with_anomalies(base, RoadSpec(anomaly_density=0.02, depth_range=(0.05, 0.05)), rng=1)

@@ -1,4 +1,4 @@
-"""Tests of roadcollab.anomaly_calibration and ``roadcollab calibrate-anomalies``."""
+"""Tests of roadcollab.experiments.anomaly_calibration and ``roadcollab calibrate-anomalies``."""
 
 from __future__ import annotations
 
@@ -9,13 +9,13 @@ import re
 import numpy as np
 import pytest
 
-from roadcollab.anomaly import DetectorSpec
-from roadcollab.anomaly_calibration import (EVALUATION_SEEDS, AnomalyCalibrationConfig, calibrate_anomalies,
+from roadcollab.detection.detector import DetectorSpec
+from roadcollab.experiments.anomaly_calibration import (EVALUATION_SEEDS, AnomalyCalibrationConfig, calibrate_anomalies,
                                             parse_seeds)
-from roadcollab.anomaly_study import ESTIMATORS, AnomalyStudyConfig, run_anomaly_study
-from roadcollab.cli import build_parser, main
+from roadcollab.experiments.anomaly_study import ESTIMATORS, AnomalyStudyConfig, run_anomaly_study
+from roadcollab.cli.main import build_parser, main
 from roadcollab.errors import ParameterError
-from roadcollab.experiment import ExperimentConfig
+from roadcollab.experiments.reproduction import ExperimentConfig
 
 # 1 seed, 2 runs, 3 vehicles, a 2 x 2 grid whose thresholds are far apart (different objectives).
 TINY = ["--seeds", "1000", "--runs-per-seed", "2", "--vehicles", "3", "--snr-thresholds", "3.5", "4.5",

@@ -1,4 +1,4 @@
-"""Tests of roadcollab.baselines: Gaussian-mechanism DP, Paillier cost, ChaCha20-Poly1305 channel."""
+"""Tests of roadcollab.privacy.baselines: Gaussian-mechanism DP, Paillier cost, ChaCha20-Poly1305 channel."""
 
 from __future__ import annotations
 
@@ -13,7 +13,7 @@ from hypothesis import strategies as st
 from phe import paillier
 from scipy.stats import norm
 
-from roadcollab.baselines import (
+from roadcollab.privacy.baselines import (
     AEAD_OVERHEAD_BYTES,
     DPSpec,
     aead_cost,
@@ -29,9 +29,9 @@ from roadcollab.baselines import (
     seal,
 )
 from roadcollab.errors import MessageError, ParameterError
-from roadcollab.message import InversionMessage
-from roadcollab.protocol import encode, inversion_nbytes
-from roadcollab.spectral import SegmentGrid, inv2x2, matvec
+from roadcollab.wire.message import InversionMessage
+from roadcollab.wire.protocol import encode, inversion_nbytes
+from roadcollab.estimation.grid import SegmentGrid, inv2x2, matvec
 
 HYP = settings(database=None, deadline=None, max_examples=60)
 
@@ -166,7 +166,7 @@ def test_sensitivity_rejects_bad_arguments():
 @pytest.fixture(scope="module")
 def vehicle():
     from roadcollab import ExperimentConfig, sample_fleet
-    from roadcollab.experiment import FleetPipeline
+    from roadcollab.experiments.reproduction import FleetPipeline
 
     cfg = ExperimentConfig(n_vehicles=1, n_runs=1, segment_length=60.0, margin=15.0)
     return FleetPipeline(cfg, sample_fleet(1, cfg.fleet, rng=11)).estimators[0]

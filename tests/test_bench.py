@@ -3,7 +3,7 @@
 import pytest
 
 from roadcollab import ParameterError
-from roadcollab.bench import bench_segment
+from roadcollab.experiments.bench import bench_segment
 
 
 @pytest.mark.parametrize("mechanism", ["none", "paper", "paper_vehicle", "hardened"])

@@ -6,8 +6,8 @@ from pathlib import Path
 
 import pytest
 
-from roadcollab import protocol
-from roadcollab.cli import main
+from roadcollab.wire import protocol
+from roadcollab.cli.main import main
 
 README = Path(__file__).resolve().parents[1] / "README.md"
 

@@ -9,11 +9,11 @@ from hypothesis import strategies as st
 
 from roadcollab import CollaborativeEstimator, learning_filters, ExperimentConfig, MessageError, ObfuscationSpec, ParameterError, \
     obfuscate, run_reproduction, sample_fleet
-from roadcollab.experiment import FleetPipeline
-from roadcollab.privacy import draw_obfuscator
-from roadcollab.simulation import add_sensor_noise, simulate_response
-from roadcollab.spectral import inv2x2, matvec
-from roadcollab.vehicle import FleetSpec
+from roadcollab.experiments.reproduction import FleetPipeline
+from roadcollab.privacy.obfuscation import draw_obfuscator
+from roadcollab.models.simulation import add_sensor_noise, simulate_response
+from roadcollab.estimation.grid import inv2x2, matvec
+from roadcollab.models.vehicle import FleetSpec
 
 CFG = ExperimentConfig(n_vehicles=3, n_runs=1, segment_length=120.0, margin=15.0)
 
@@ -115,7 +115,7 @@ def test_obfuscated_realisation_shows_no_block_of_T(pipe):
 
 def test_balanced_similarity_keeps_a_high_gain_series_transfer_matrix():
     """Closed form: two diagonal systems with poles near z = 1 and gains 1e3, in series."""
-    from roadcollab.message import StateSpaceData, random_orthogonal, series, similarity
+    from roadcollab.wire.message import StateSpaceData, random_orthogonal, series, similarity
 
     rng = np.random.default_rng(5)
     z = np.exp(1j * np.geomspace(2e-3, 0.5, 60))
@@ -186,7 +186,7 @@ def test_message_for_another_grid_is_refused(pipe):
 
 
 def test_theorem1_holds_with_a_channel_reused_over_segments():
-    from roadcollab.privacy import ObfuscationChannel
+    from roadcollab.privacy.obfuscation import ObfuscationChannel
 
     pipe = _PIPE
     g = pipe.grid

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from roadcollab import ParameterError
-from roadcollab.drives import (
+from roadcollab.io.drives import (
     ESTIMATORS,
     add_estimate_arguments,
     estimate_command,
@@ -23,9 +23,9 @@ from roadcollab.drives import (
     write_drive_csv,
     write_drive_params,
 )
-from roadcollab.experiment import ExperimentConfig, FleetPipeline, run_estimates
-from roadcollab.simulation import add_sensor_noise, simulate_response
-from roadcollab.vehicle import HalfCarParameters, sample_fleet
+from roadcollab.experiments.reproduction import ExperimentConfig, FleetPipeline, run_estimates
+from roadcollab.models.simulation import add_sensor_noise, simulate_response
+from roadcollab.models.vehicle import HalfCarParameters, sample_fleet
 
 SEED = 7
 
@@ -105,7 +105,7 @@ def test_command_writes_all_outputs(simulated):
 
 
 def test_anomalies_match_the_detector(simulated):
-    anomaly = pytest.importorskip("roadcollab.anomaly")
+    anomaly = pytest.importorskip("roadcollab.detection.detector")
     ref, out, cfg = simulated["ref"], simulated["out"], simulated["cfg"]
     with (out / "anomalies.csv").open() as fh:
         rows = list(csv.DictReader(fh))
@@ -336,7 +336,7 @@ def test_small_drive_runs_end_to_end(tmp_path):
 
 
 def test_command_runs_without_the_anomaly_module(tmp_path, monkeypatch):
-    monkeypatch.setitem(sys.modules, "roadcollab.anomaly", None)   # import fails
+    monkeypatch.setitem(sys.modules, "roadcollab.detection.detector", None)   # import fails
     a = _write_drive(tmp_path, "drive1", lines=_good_rows(n=300))
     summary = estimate_command([str(a)], tmp_path / "out", command="x")
     assert summary["n_anomalies"] is None

@@ -7,7 +7,7 @@ from hypothesis import strategies as st
 
 from roadcollab import HalfCarParameters, JDPNoise, ParameterError, build_road_input_estimator, half_car_model, \
     jdp_estimator_gain
-from roadcollab.estimator import observer_corner
+from roadcollab.estimation.estimator import observer_corner
 
 MODEL = half_car_model(HalfCarParameters())
 NOISE = dict(wiener_cov=0.0057 * np.eye(2), jump_rate=0.3, jump_mean=[0.01, -0.005],
@@ -25,7 +25,7 @@ def _lemma1_pieces(model, noise):
 
 
 def test_gain_solves_the_riccati_equation_and_is_stabilising():
-    from roadcollab.estimator import _jdp_gain
+    from roadcollab.estimation.estimator import _jdp_gain
 
     F, Q = _jdp_gain(MODEL, JDPNoise(**NOISE))
     np.testing.assert_array_equal(F, jdp_estimator_gain(MODEL, **NOISE))
@@ -90,8 +90,8 @@ def test_discretisation_matches_continuous_design_without_lag(gamma):
 
 def test_online_estimate_peaks_at_lag_zero_against_the_truth():
     """The causal online estimate is aligned with the road velocity it estimates."""
-    from roadcollab.road import RoadSpec, generate_road
-    from roadcollab.simulation import discretize_plant, simulate_response
+    from roadcollab.models.road import RoadSpec, generate_road
+    from roadcollab.models.simulation import discretize_plant, simulate_response
 
     dt = 0.005
     est = build_road_input_estimator(MODEL, JDPNoise(**NOISE), gamma=512.0, dt=dt)

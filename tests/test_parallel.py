@@ -5,7 +5,7 @@ import dataclasses
 import pytest
 
 from roadcollab import ExperimentConfig, ParameterError, run_reproduction
-from roadcollab.parallel import map_runs
+from roadcollab.experiments.runner import map_runs
 
 CFG = ExperimentConfig(n_vehicles=3, n_runs=4, segment_length=90.0)
 
@@ -32,7 +32,7 @@ def test_bad_parallel_arguments():
 
 
 def test_attack_study_on_dask_matches_serial():
-    from roadcollab.security_study import AttackStudyConfig, run_attack_study
+    from roadcollab.experiments.security_study import AttackStudyConfig, run_attack_study
 
     cfg = AttackStudyConfig(experiment=ExperimentConfig(n_vehicles=3, n_runs=1, segment_length=90.0), n_runs=2,
                             paillier_bits=512, paillier_sample=2, physical_fit_runs=1, dp_epsilons=(1.0,))

@@ -1,4 +1,4 @@
-"""Tests of roadcollab.protocol: the binary wire format for untrusted vehicle-to-vehicle messages."""
+"""Tests of roadcollab.wire.protocol: the binary wire format for untrusted vehicle-to-vehicle messages."""
 
 from __future__ import annotations
 
@@ -9,10 +9,10 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from roadcollab import protocol
+from roadcollab.wire import protocol
 from roadcollab.errors import MessageError
-from roadcollab.message import ExchangeMessage, InversionMessage, StateSpaceData
-from roadcollab.protocol import (
+from roadcollab.wire.message import ExchangeMessage, InversionMessage, StateSpaceData
+from roadcollab.wire.protocol import (
     FORMAT_VERSION,
     MAGIC,
     MAX_COUNT,

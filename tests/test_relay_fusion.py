@@ -6,14 +6,14 @@ import numpy as np
 import pytest
 
 from roadcollab import ExperimentConfig, ParameterError, sample_fleet
-from roadcollab.anomaly import Detection, match_detections
-from roadcollab.experiment import FleetPipeline, run_reproduction
-from roadcollab.fusion import LinearMMSE, plant_moments, posterior_draws
-from roadcollab.privacy import obfuscate, theorem1_errors
-from roadcollab.relay import Exchange, Relay, simulate_measurements
-from roadcollab.road import Anomaly
-from roadcollab.spectral import SegmentGrid, inv2x2, matvec
-from roadcollab.vehicle import FleetSpec, HalfCarParameters
+from roadcollab.detection.detector import Detection, match_detections
+from roadcollab.experiments.reproduction import FleetPipeline, run_reproduction
+from roadcollab.collaboration.fusion import LinearMMSE, plant_moments, posterior_draws
+from roadcollab.privacy.obfuscation import obfuscate, theorem1_errors
+from roadcollab.collaboration.relay import Exchange, Relay, simulate_measurements
+from roadcollab.models.road import Anomaly
+from roadcollab.estimation.grid import SegmentGrid, inv2x2, matvec
+from roadcollab.models.vehicle import FleetSpec, HalfCarParameters
 
 CFG = ExperimentConfig(n_vehicles=3, n_runs=1, segment_length=120.0, margin=15.0)
 

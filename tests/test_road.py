@@ -1,4 +1,4 @@
-"""Tests of roadcollab.road: ISO 8608 roughness, anomalies, sampling and measured profiles."""
+"""Tests of roadcollab.models.road: ISO 8608 roughness, anomalies, sampling and measured profiles."""
 
 from __future__ import annotations
 
@@ -10,7 +10,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from roadcollab.errors import ParameterError
-from roadcollab.road import (
+from roadcollab.models.road import (
     ISO_8608_GD0,
     Anomaly,
     JumpStatistics,

@@ -4,12 +4,12 @@ import numpy as np
 import pytest
 
 from roadcollab import ExperimentConfig, sample_fleet
-from roadcollab.experiment import FleetPipeline
-from roadcollab.privacy import obfuscate
-from roadcollab.security import (PhysicalPrior, attack_model_reduction, attack_multiplicity, attack_pole_intersection,
+from roadcollab.experiments.reproduction import FleetPipeline
+from roadcollab.privacy.obfuscation import obfuscate
+from roadcollab.privacy.attacks import (PhysicalPrior, attack_model_reduction, attack_multiplicity, attack_pole_intersection,
                                  attack_signals_prior, pole_errors, select_by_prior)
-from roadcollab.security_study import AttackStudyConfig, _linkability, run_attack_study
-from roadcollab.simulation import add_sensor_noise, simulate_response
+from roadcollab.experiments.security_study import AttackStudyConfig, _linkability, run_attack_study
+from roadcollab.models.simulation import add_sensor_noise, simulate_response
 
 CFG = ExperimentConfig(n_vehicles=3, n_runs=1, segment_length=120.0)
 PIPE = FleetPipeline(CFG, sample_fleet(3, CFG.fleet, rng=21))

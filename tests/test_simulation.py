@@ -5,7 +5,7 @@ import scipy.integrate
 import scipy.signal
 
 from roadcollab import HalfCarParameters, half_car_model
-from roadcollab.simulation import add_sensor_noise, discretize_plant, simulate_response
+from roadcollab.models.simulation import add_sensor_noise, discretize_plant, simulate_response
 
 MODEL = half_car_model(HalfCarParameters())
 

@@ -9,9 +9,9 @@ import numpy as np
 import pytest
 
 from roadcollab import ExperimentConfig, ParameterError
-from roadcollab.cli import main
-from roadcollab.sweep import SWEPT_ESTIMATORS, SweepConfig, SweepResult, ratio_of_means, run_sweep
-from roadcollab.sweep_report import write_sweep
+from roadcollab.cli.main import main
+from roadcollab.experiments.sweep import SWEPT_ESTIMATORS, SweepConfig, SweepResult, ratio_of_means, run_sweep
+from roadcollab.reporting.sweep_report import write_sweep
 
 FIRST_COLUMNS = ["gamma", "sensor_noise_std", "parameter_uncertainty", "vehicle1_observer_mse", "algorithm1_mse",
                  "own_inversion_mse", "fused_mse", "oracle_bound_mse"]

@@ -9,7 +9,7 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from roadcollab import HalfCarParameters, ParameterError, half_car_model, sample_fleet
-from roadcollab.vehicle import FleetSpec
+from roadcollab.models.vehicle import FleetSpec
 
 EXAMPLE = HalfCarParameters(sprung_mass=500.0, roll_inertia=400.0, left_arm=0.75, right_arm=0.75,
                             stiffness=20e3, damping=1.5e3)

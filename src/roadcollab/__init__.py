@@ -6,20 +6,20 @@ with Application to Road Anomaly Detection". See the README for the architecture
 
 from importlib import metadata as _metadata
 
-from . import protocol
-from .anomaly import Detection, DetectorSpec, detect_anomalies, match_detections
-from .collaborative import CollaborativeEstimator, VehicleEstimate, learning_filters
+from .wire import protocol
+from .detection.detector import Detection, DetectorSpec, detect_anomalies, match_detections
+from .collaboration.algorithm1 import CollaborativeEstimator, VehicleEstimate, learning_filters
 from .errors import MessageError, ParameterError
-from .estimator import JDPNoise, RoadInputEstimator, build_road_input_estimator, jdp_estimator_gain
-from .experiment import ExperimentConfig, FleetPipeline, ReproductionResult, run_reproduction
-from .fusion import LinearMMSE
-from .message import ExchangeMessage, InversionMessage, StateSpaceData
-from .privacy import ObfuscationSpec, obfuscate
-from .relay import Exchange, Relay, simulate_measurements
-from .road import RoadSpec, generate_road, measured_road
-from .simulation import discretize_plant, simulate_response
-from .spectral import SegmentGrid
-from .vehicle import FleetSpec, HalfCarParameters, Vehicle, half_car_model, sample_fleet
+from .estimation.estimator import JDPNoise, RoadInputEstimator, build_road_input_estimator, jdp_estimator_gain
+from .experiments.reproduction import ExperimentConfig, FleetPipeline, ReproductionResult, run_reproduction
+from .collaboration.fusion import LinearMMSE
+from .wire.message import ExchangeMessage, InversionMessage, StateSpaceData
+from .privacy.obfuscation import ObfuscationSpec, obfuscate
+from .collaboration.relay import Exchange, Relay, simulate_measurements
+from .models.road import RoadSpec, generate_road, measured_road
+from .models.simulation import discretize_plant, simulate_response
+from .estimation.grid import SegmentGrid
+from .models.vehicle import FleetSpec, HalfCarParameters, Vehicle, half_car_model, sample_fleet
 
 try:
     __version__ = _metadata.version("roadcollab")

@@ -1,0 +1,1 @@
+"""The ``roadcollab`` command line."""

@@ -1,0 +1,1 @@
+"""Algorithm 1, the relay engine and fleet fusion."""

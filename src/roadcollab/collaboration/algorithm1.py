@@ -1,0 +1,350 @@
+"""Algorithm 1: offline collaborative estimation relayed from vehicle to vehicle.
+
+Vehicle ``j`` traverses the segment, records ``y_j``, and runs its own estimator
+``D_j`` (:mod:`roadcollab.estimation.estimator`). It then receives ``(T_{j-1}, S_{j-1}, e_{j-1},
+w^f_{j-1})`` from vehicle ``j-1`` and forms
+
+.. math::
+
+    w^f_j = L_1 w^f_{j-1} + L_2 e_{j-1},\\qquad
+    \\hat w_j = D_j y_j + w^f_j,\\qquad
+    e_j = y_j - \\hat P_j \\hat w_j = T_j w + S_j w^f_j (+\\text{noise}),
+
+with ``T_j = (I - P_hat_j D_j) P_hat_j``, ``S_j = -P_hat_j`` from the vehicle's *nominal*
+model (it cannot know its true plant; ``oracle=True`` uses the true plant for analysis) and
+the optimal learning filters (eqs. 11-12), regularised at DC by the weight ``W`` (``W_reg``) of
+:class:`~roadcollab.estimation.grid.SegmentGrid`:
+
+.. math::
+
+    L_1 = W S_j^{-1} T_j T_{j-1}^{-1} S_{j-1},\\qquad
+    L_2 = -W S_j^{-1} T_j T_{j-1}^{-1}.
+
+Equivalently ``w^f_j = -S_j^{-1} T_j z_{j-1}`` with
+``z_{j-1} = W T_{j-1}^{-1}(e_{j-1} - S_{j-1} w^f_{j-1})``, which with nominal ``T`` equals
+``W P_hat_{j-1}^{-1} y_{j-1}``: Algorithm 1 blends the vehicle's own observer (its low band)
+with the previous vehicle's offline model inversion (tested in ``tests/test_collaborative.py``).
+Vehicle 1 has ``w^f = 0``.
+"""
+
+from __future__ import annotations
+
+import functools
+from dataclasses import dataclass
+
+import numpy as np
+
+from .._validation import check_signal
+from ..errors import MessageError, ParameterError
+from ..estimation.estimator import JDPNoise, RoadInputEstimator, build_road_input_estimator
+from ..collaboration.fusion import DESIGN_SEED, posterior_responses
+from ..wire.message import ExchangeMessage, InversionMessage, StateSpaceData, series
+from ..models.simulation import DiscretePlant, discretize_plant
+from ..estimation.grid import SegmentGrid, inv2x2, matvec
+from ..models.vehicle import FleetSpec, Vehicle
+
+__all__ = ["VehicleEstimate", "CollaborativeEstimator", "learning_filters"]
+
+
+def learning_filters(T_j, S_j, T_prev, S_prev, weight):
+    """Optimal learning filters of eqs. 11-12 on a grid, band-limited by ``weight``.
+
+    Parameters
+    ----------
+    T_j, S_j, T_prev, S_prev : (K, 2, 2) complex ndarray
+        Frequency responses on the active bins.
+    weight : (K,) ndarray
+        Band weight ``W`` on those bins.
+
+    Returns
+    -------
+    L1, L2 : (K, 2, 2) complex ndarray
+    """
+    G = -(inv2x2(S_j) @ T_j @ inv2x2(T_prev)) * weight[:, None, None]   # = L2
+    return -(G @ S_prev), G
+
+
+@dataclass(frozen=True, eq=False)
+class VehicleEstimate:
+    """Vehicle ``j``'s results on one segment.
+
+    Attributes
+    ----------
+    observer_only : (N, 2) ndarray
+        ``D_j y_j``, m/s: the vehicle alone.
+    W_obs : (K, 2) complex ndarray
+        Spectrum of ``D_j y_j``.
+    estimate : (N, 2) ndarray
+        ``w_hat_j = D_j y_j + w^f_j``, m/s: Algorithm 1.
+    W_hat, E, Wf : (K, 2) complex ndarray
+        Spectra of ``w_hat_j``, ``e_j`` and ``w^f_j`` on the grid (all bins).
+    Y : (K, 2) complex ndarray
+        Spectrum of the measurement ``y_j``.
+    """
+
+    W_obs: np.ndarray
+    W_hat: np.ndarray
+    Wf: np.ndarray
+    Y: np.ndarray
+    P_f: np.ndarray
+    grid: SegmentGrid
+    offset: np.ndarray
+
+    # Time signals and the residual are computed on first use: a car that only forwards a
+    # message needs neither (saves two inverse FFTs per segment).
+    @functools.cached_property
+    def observer_only(self) -> np.ndarray:
+        return self.grid.irfft(self.W_obs, self.grid.n_samples) + self.offset
+
+    @functools.cached_property
+    def estimate(self) -> np.ndarray:
+        return self.grid.irfft(self.W_hat, self.grid.n_samples) + self.offset
+
+    @functools.cached_property
+    def E(self) -> np.ndarray:
+        return self.Y - matvec(self.P_f, self.W_hat)
+
+
+class CollaborativeEstimator:
+    """Vehicle ``j``'s side of Algorithm 1 on a fixed segment grid.
+
+    Everything that does not depend on the measured data (the Lemma 1 gain, the
+    discretisations, the frequency responses of ``D_j``, ``P_hat_j``, ``T_j``, ``S_j`` and
+    their realisations) is built once here, as on a car that drives segment after segment.
+
+    Parameters
+    ----------
+    vehicle : Vehicle
+    noise : JDPNoise
+        Road and sensor statistics for the Lemma 1 design.
+    grid : SegmentGrid
+    gamma : float
+        Observer parameter of eq. 4.
+    oracle : bool
+        Use the true plant in ``T_j``, ``S_j`` and ``e_j`` (analysis only).
+    fleet : FleetSpec, optional
+        The fleet distribution the vehicle's parameter estimate came from. Needed only for the
+        posterior inversion (``invert(..., posterior=True)``), which inverts ``E[P | theta_hat]``
+        instead of the nominal ``P_hat``.
+    """
+
+    def __init__(self, vehicle: Vehicle, noise: JDPNoise, grid: SegmentGrid, *, gamma: float,
+                 oracle: bool = False, fleet: FleetSpec | None = None) -> None:
+        if not isinstance(vehicle, Vehicle):
+            raise ParameterError(f"vehicle must be a Vehicle, got {type(vehicle).__name__}")
+        if not isinstance(grid, SegmentGrid):
+            raise ParameterError(f"grid must be a SegmentGrid, got {type(grid).__name__}")
+        self.vehicle = vehicle
+        self.grid = grid
+        self.oracle = bool(oracle)
+        self.fleet = fleet
+        dt = grid.dt
+        self.estimator: RoadInputEstimator = build_road_input_estimator(
+            vehicle.nominal_model, noise, gamma=gamma, dt=dt)
+        self.true_plant: DiscretePlant = discretize_plant(vehicle.true_model, dt)
+        self.model_plant: DiscretePlant = (self.true_plant if self.oracle
+                                           else discretize_plant(vehicle.nominal_model, dt))
+        om = grid.omega_dt
+        self.D_f = self.estimator.frequency_response(om)            # (K, 2, 2)
+        self.P_f = self.model_plant.frequency_response(om)         # P_hat_j (or P_j if oracle)
+        eye = np.eye(2)
+        self.T_f = (eye - self.P_f @ self.D_f) @ self.P_f
+        self.S_f = -self.P_f
+        act = grid.active
+        self._act = act
+        self._w_act = grid.reg_weight[act]
+        # -S_j^-1 T_j = P_hat^-1 (I - P_hat D) P_hat = (I - D P_hat): the map z_{j-1} -> w^f_j.
+        self._minus_Sinv_T = -(inv2x2(self.S_f[act]) @ self.T_f[act])
+        self._W_Pinv = self._w_act[:, None, None] * inv2x2(self.P_f[act])     # z = W P_hat^-1 y
+        self.T_ss, self.S_ss = self._realisations()
+        # Responses of the realisations that are sent; the obfuscator and the receiver both
+        # use exactly these, so privacy changes no estimate beyond round-off.
+        self.T_ss_f = self.T_ss.frequency_response(om[act])
+        self.S_ss_f = self.S_ss.frequency_response(om[act])
+        self._offset = self.estimator.steady_offset()
+
+    # -- realisations sent to the next vehicle ------------------------------------------------
+    def _realisations(self) -> tuple[StateSpaceData, StateSpaceData]:
+        """Minimal discrete realisations of ``T_j`` and ``S_j``.
+
+        .. code-block:: text
+
+            T = (I - P D) P :  u -> P -> [I - P D] -> y,  with  I - P D = I + (-P) o D
+        """
+        import control
+
+        p = self.model_plant
+        dt = self.grid.dt
+        P = StateSpaceData(p.Ad, p.Bd, p.C, p.D, dt)
+        e = self.estimator
+        Dj = StateSpaceData(e.Ad, e.Bd, e.Cd, e.Dd, dt)
+        PD = series(Dj, P)
+        I_minus_PD = StateSpaceData(PD.A, PD.B, -PD.C, np.eye(2) - PD.D, dt)
+        T_full = series(P, I_minus_PD)
+        T_min = control.minreal(T_full.to_control(), tol=1e-9, verbose=False)
+        T = StateSpaceData(np.asarray(T_min.A), np.asarray(T_min.B), np.asarray(T_min.C),
+                           np.asarray(T_min.D), dt)
+        S = StateSpaceData(p.Ad.copy(), p.Bd.copy(), -p.C, -p.D, dt)
+        return T, S
+
+    # -- per-segment work ---------------------------------------------------------------------
+    def spectrum(self, y) -> np.ndarray:
+        """Zero-padded spectrum of a measured window ``y`` (N, 2)."""
+        y = check_signal("y", y, 2)
+        if y.shape[0] != self.grid.n_samples:
+            raise ParameterError(f"y must have {self.grid.n_samples} samples (the segment grid), got {y.shape[0]}")
+        return self.grid.rfft(y)
+
+    def wf_from_z(self, Z: np.ndarray) -> np.ndarray:
+        """``w^f_j = -S_j^-1 T_j z`` for a band-limited road-input spectrum ``Z`` (K, 2)."""
+        Wf = np.zeros_like(Z)
+        Wf[self._act] = matvec(self._minus_Sinv_T, Z[self._act])
+        return Wf
+
+    @functools.cached_property
+    def posterior_responses(self) -> np.ndarray:
+        """Plausible true plants given this vehicle's estimate, (n, K_active, 2, 2) (see
+        :func:`roadcollab.collaboration.fusion.posterior_responses`); needs ``fleet``."""
+        if self.fleet is None:
+            raise ParameterError("the posterior inversion needs the fleet distribution: pass fleet= to "
+                                 "CollaborativeEstimator")
+        return posterior_responses(self.vehicle.estimated_params, self.grid, self.fleet,
+                                   rng=[DESIGN_SEED, self.vehicle.index])
+
+    @functools.cached_property
+    def _W_Pbar_inv(self) -> np.ndarray:
+        return self._w_act[:, None, None] * inv2x2(self.posterior_responses.mean(axis=0))
+
+    def invert(self, Y: np.ndarray, *, posterior: bool = False) -> np.ndarray:
+        """Band-limited offline model inversion ``z_j = W P_hat_j^-1 y_j`` (spectrum).
+
+        Parameters
+        ----------
+        Y : (K, 2) complex ndarray
+            Record spectrum on the grid.
+        posterior : bool
+            Invert the posterior-mean plant ``E[P | theta_hat]`` (needs ``fleet``) instead of the
+            nominal ``P_hat``.
+
+        Returns
+        -------
+        (K, 2) complex ndarray
+            Road-velocity spectrum, zero outside the active bins.
+        """
+        Z = np.zeros_like(Y)
+        Z[self._act] = matvec(self._W_Pbar_inv if posterior else self._W_Pinv, Y[self._act])
+        return Z
+
+    def _check_grid(self, message) -> None:
+        g = self.grid
+        if message.n_samples != g.n_samples or message.sample_rate != g.sample_rate:
+            raise MessageError(f"message is for a grid of {message.n_samples} samples at {message.sample_rate} Hz, "
+                               f"this vehicle uses {g.n_samples} at {g.sample_rate} Hz")
+
+    def learn(self, message: ExchangeMessage | InversionMessage) -> np.ndarray:
+        """Learning update (eqs. 11-12): ``w^f_j = L1 w^f_{j-1} + L2 e_{j-1}`` (spectrum).
+
+        For an :class:`InversionMessage` (hardened or fused exchange) the update is
+        ``w^f_j = -S_j^-1 T_j z``, identical to the optimal filters applied to ``(T, S, e, w^f)``.
+
+        Raises
+        ------
+        MessageError
+            If the message does not fit this vehicle's grid.
+        """
+        g = self.grid
+        if isinstance(message, InversionMessage):
+            if message.z.shape != (g.nfft, 2):
+                raise MessageError(f"message z must have shape ({g.nfft}, 2) on this segment grid, "
+                                   f"got {message.z.shape}")
+            self._check_grid(message)
+            return self.wf_from_z(g.rfft(message.z))
+        if message.e.shape != (g.nfft, 2) or message.wf.shape != (g.nfft, 2):
+            raise MessageError(f"message signals must have shape ({g.nfft}, 2) on this segment grid, "
+                               f"got {message.e.shape} and {message.wf.shape}")
+        self._check_grid(message)
+        act = self._act
+        om = g.omega_dt[act]
+        T_prev = message.T.frequency_response(om)
+        S_prev = message.S.frequency_response(om)
+        E_prev = g.rfft(message.e)[act]
+        Wf_prev = g.rfft(message.wf)[act]
+        # L1 w^f + L2 e = (-S_j^-1 T_j) W T_prev^-1 (e - S_prev w^f): eqs. 11-12 applied in
+        # factored form, matrix-vector products only (3x faster than forming L1 and L2;
+        # ``learning_filters`` forms them explicitly and the tests check both agree).
+        z = self._w_act[:, None] * matvec(inv2x2(T_prev), E_prev - matvec(S_prev, Wf_prev))
+        Wf = np.zeros((g.n_bins, 2), complex)
+        Wf[act] = matvec(self._minus_Sinv_T, z)
+        return Wf
+
+    def estimate(self, y, message: ExchangeMessage | None = None, *, Wf: np.ndarray | None = None,
+                 Y: np.ndarray | None = None) -> VehicleEstimate:
+        """Run Algorithm 1 for this vehicle on one segment.
+
+        Parameters
+        ----------
+        y : (N, 2) array_like
+            Measured body-tip accelerations, m/s^2.
+        message : ExchangeMessage | None
+            From vehicle ``j-1``; None for vehicle 1 (``w^f = 0``).
+        Wf : (K, 2) ndarray, optional
+            A feed-forward spectrum computed elsewhere (e.g. the fused estimate); overrides
+            ``message``.
+        Y : (K, 2) complex ndarray, optional
+            The spectrum of ``y`` on the grid, if already computed (``y`` is then not used).
+
+        Returns
+        -------
+        VehicleEstimate
+        """
+        if Y is None:
+            Y = self.spectrum(y)
+        elif Y.shape != (self.grid.n_bins, 2):
+            raise ParameterError(f"Y must have shape ({self.grid.n_bins}, 2), got {Y.shape}")
+        DY = matvec(self.D_f, Y)
+        if Wf is None:
+            Wf = self.learn(message) if message is not None else np.zeros_like(Y)
+        return VehicleEstimate(W_obs=DY, W_hat=DY + Wf, Wf=Wf, Y=Y, P_f=self.P_f, grid=self.grid,
+                               offset=self._offset)
+
+    def hardened_message(self, result: VehicleEstimate) -> InversionMessage:
+        """The hardened message: ``z_j = W P_hat_j^-1 y_j`` only (no dynamics)."""
+        g = self.grid
+        return InversionMessage(mechanism="hardened", sample_rate=g.sample_rate, n_samples=g.n_samples,
+                                z=g.irfft(self.invert(result.Y)), count=1)
+
+    def fused_message(self, result: VehicleEstimate, incoming: InversionMessage | None, *,
+                      posterior: bool = False) -> InversionMessage:
+        """Running fleet average of ``z`` including this vehicle (the fused estimate).
+
+        Parameters
+        ----------
+        result : VehicleEstimate
+            This vehicle's estimate on the segment (for its record spectrum).
+        incoming : InversionMessage | None
+            The running average of the vehicles before (None for the first).
+        posterior : bool
+            Average posterior inversions (see :meth:`invert`).
+
+        Returns
+        -------
+        InversionMessage
+            ``mechanism == "fused"``, ``count`` = vehicles averaged.
+        """
+        g = self.grid
+        z = g.irfft(self.invert(result.Y, posterior=posterior))
+        if incoming is not None:
+            if incoming.mechanism != "fused" or incoming.z.shape != z.shape:
+                raise MessageError(f"expected a fused message with z of shape {z.shape}, got "
+                                   f"{incoming.mechanism!r} with {incoming.z.shape}")
+            self._check_grid(incoming)
+            z = (incoming.count * incoming.z + z) / (incoming.count + 1)
+        count = 1 if incoming is None else incoming.count + 1
+        return InversionMessage(mechanism="fused", sample_rate=g.sample_rate, n_samples=g.n_samples, z=z,
+                                count=count)
+
+    def message(self, result: VehicleEstimate) -> ExchangeMessage:
+        """The plain message ``(T_j, S_j, e_j, w^f_j)`` of Algorithm 1."""
+        g = self.grid
+        return ExchangeMessage(mechanism="none", sample_rate=g.sample_rate, n_samples=g.n_samples,
+                               T=self.T_ss, S=self.S_ss, e=g.irfft(result.E), wf=g.irfft(result.Wf))

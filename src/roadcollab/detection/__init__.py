@@ -1,0 +1,1 @@
+"""Road anomaly detection and its scoring."""

@@ -1,0 +1,1 @@
+"""Studies: reproduction, sweep, security, anomalies, calibration, benchmark, the runner."""

@@ -1,0 +1,1 @@
+"""Recorded drives and profile files."""

@@ -1,0 +1,1 @@
+"""Vehicle and road models, simulation (eqs. 1-3, the JDP road)."""

@@ -1,0 +1,130 @@
+"""Sampled-data simulation of a vehicle driven by the road.
+
+Exactness: the road elevation is linear between samples (see
+:meth:`roadcollab.models.road.RoadProfile.sample`), so the road velocity ``w`` is constant over
+each sample period and the zero-order-hold discretisation of the plant is exact:
+
+.. math:: x_{k+1} = e^{A\\,dt} x_k + \\int_0^{dt} e^{A s} ds\\, B\\, w_k,\\qquad y_k = C x_k + D w_k.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.signal
+
+from .._validation import check_nonnegative, check_positive, check_signal
+from ..estimation.estimator import dlti_frequency_response, zoh_discretize
+from ..models.vehicle import HalfCarModel
+
+__all__ = ["DiscretePlant", "discretize_plant", "simulate_response", "add_sensor_noise"]
+
+
+@dataclass(frozen=True, eq=False)
+class DiscretePlant:
+    """ZOH-exact discrete plant with its modal decomposition (for fast simulation).
+
+    Attributes
+    ----------
+    Ad, Bd : (4, 4), (4, 2) ndarray
+    C, D : (2, 4), (2, 2) ndarray
+    dt : float
+        s.
+    """
+
+    Ad: np.ndarray
+    Bd: np.ndarray
+    C: np.ndarray
+    D: np.ndarray
+    dt: float
+
+    def __post_init__(self) -> None:
+        lam, V = np.linalg.eig(self.Ad)
+        # Keep one mode of each complex-conjugate pair (the other is its conjugate for a real
+        # input): half the recursions. Real modes are kept as they are.
+        keep = lam.imag >= 0
+        pairs = np.isclose(lam[keep].imag, 0.0)
+        modal = np.linalg.cond(V) < 1e8 and np.sum(lam.imag > 0) == np.sum(lam.imag < 0)
+        object.__setattr__(self, "_modal", modal)
+        object.__setattr__(self, "_keep", keep)
+        object.__setattr__(self, "_weight", np.where(pairs, 1.0, 2.0))
+        if modal:
+            object.__setattr__(self, "_lam", lam)
+            object.__setattr__(self, "_CV", self.C @ V)
+            object.__setattr__(self, "_VinvB", np.linalg.solve(V, self.Bd))
+            object.__setattr__(self, "_Vinv", np.linalg.inv(V))
+
+    def frequency_response(self, omega_dt: np.ndarray) -> np.ndarray:
+        """``P_d(e^{j omega dt})``, shape (M, 2, 2)."""
+        return dlti_frequency_response(self.Ad, self.Bd, self.C, self.D, omega_dt)
+
+    def to_control(self):
+        """The plant as a discrete :class:`control.StateSpace`."""
+        import control
+
+        return control.ss(self.Ad, self.Bd, self.C, self.D, self.dt)
+
+
+def discretize_plant(model: HalfCarModel, dt: float) -> DiscretePlant:
+    """ZOH discretisation of a half-car model (exact for piecewise-constant ``w``)."""
+    dt = check_positive("dt", dt)
+    Ad, Bd, C, D = zoh_discretize(model.A, model.B, model.C, model.D, dt)
+    return DiscretePlant(Ad, Bd, C, D, dt)
+
+
+def simulate_response(plant: DiscretePlant, w, *, x0=None) -> np.ndarray:
+    """Body-tip accelerations of a plant driven by road velocity ``w``.
+
+    Parameters
+    ----------
+    plant : DiscretePlant
+    w : (N, 2) array_like
+        Road velocity per sample, m/s (held constant over each sample period).
+    x0 : (4,) array_like, optional
+        Initial state; zero by default (vehicle at rest on a level road).
+
+    Returns
+    -------
+    y : (N, 2) ndarray
+        Noise-free accelerations, m/s^2.
+    """
+    w = check_signal("w", w, 2)
+    x0 = np.zeros(4) if x0 is None else np.asarray(x0, dtype=float).reshape(4)
+    if not plant._modal:  # defective Ad: plain recursion
+        _, y, _ = scipy.signal.dlsim((plant.Ad, plant.Bd, plant.C, plant.D, plant.dt), w, x0=x0)
+        return y
+    # Modal form: one first-order complex recursion per mode, run by lfilter (C speed):
+    # xi[k+1] = lam xi[k] + u[k], x = V xi. About 20x faster than scipy.signal.dlsim.
+    keep = plant._keep
+    u = w @ plant._VinvB[keep].T                            # (N, k) complex
+    xi0 = (plant._Vinv @ x0)[keep]
+    xi = np.empty_like(u)
+    for i, lam in enumerate(plant._lam[keep]):
+        # Transposed direct form: out[0] = zi = xi0, out[k] = lam out[k-1] + u[k-1].
+        out, _ = scipy.signal.lfilter([0.0, 1.0], [1.0, -lam], u[:, i], zi=[xi0[i]])
+        xi[:, i] = out
+    # y = C V xi: a conjugate pair contributes 2 Re(c v xi) of the kept mode.
+    return (xi @ (plant._CV[:, keep] * plant._weight).T).real + w @ plant.D.T
+
+
+def add_sensor_noise(y, noise_std: float, *, rng=None) -> np.ndarray:
+    """Add white Gaussian accelerometer noise of standard deviation ``noise_std`` (m/s^2).
+
+    Parameters
+    ----------
+    y : (N, p) array_like
+        Noise-free accelerations, m/s^2 (finite).
+    noise_std : float
+        Standard deviation of the noise, m/s^2, >= 0 (independent per sample and channel).
+    rng : numpy.random.Generator | int | None
+
+    Returns
+    -------
+    (N, p) ndarray
+        ``y`` plus the noise, m/s^2.
+    """
+    y = check_signal("y", y)
+    noise_std = check_nonnegative("noise_std", noise_std)
+    rng = np.random.default_rng(rng)
+    return y + noise_std * rng.standard_normal(y.shape)

@@ -1,0 +1,1 @@
+"""Algorithm 2 (obfuscation), attacks on the exchanges, conventional baselines."""

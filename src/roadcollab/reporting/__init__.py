@@ -1,0 +1,1 @@
+"""Reports, CSV and figures (the only place matplotlib is imported)."""

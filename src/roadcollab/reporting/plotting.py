@@ -1,0 +1,275 @@
+"""All figures. The only module that imports matplotlib (Agg backend, files only)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+
+__all__ = ["plot_mse", "plot_fusion", "plot_estimates", "plot_poles", "plot_attack_success",
+           "plot_anomaly_map", "plot_f1_vs_depth", "plot_f1_vs_noise"]
+
+_TRACKS = ("left track", "right track")
+
+
+def _save(fig, path) -> Path:
+    path = Path(path)
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+    return path
+
+
+def _mse_axes(ax, vehicles) -> None:
+    """Log MSE axis over vehicle numbers, shared by the MSE figures."""
+    ax.set_yscale("log")
+    ax.set_xlabel("vehicle")
+    ax.set_ylabel("road-velocity MSE ((m/s)$^2$)")
+    ax.set_xticks(vehicles)
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend()
+
+
+def plot_mse(rows: list[dict], path) -> Path:
+    """Fig. 4: MSE per vehicle of every estimator (mean over runs; std bars for Algorithm 1 + 2
+    and the online observer).
+
+    Parameters
+    ----------
+    rows : list of dict
+        ``mse.csv`` rows.
+    path : str or Path
+        Output image.
+
+    Returns
+    -------
+    Path
+    """
+    v = np.array([r["vehicle"] for r in rows])
+    fig, ax = plt.subplots(figsize=(8, 4.8))
+    ax.errorbar(v, [r["mse_mean"] for r in rows], yerr=[r["mse_std"] for r in rows], fmt="o-", capsize=4,
+                label="Algorithm 1 + 2 (collaborative, private)")
+    ax.errorbar(v + 0.1, [r["observer_only_mse_mean"] for r in rows], yerr=[r["observer_only_mse_std"] for r in rows],
+                fmt="s--", capsize=4, alpha=0.8, label="observer only (own, online)")
+    for key, label, style in (("own_inversion_mse_mean", "own inversion (own, offline)", "d:"),
+                              ("own_posterior_inversion_mse_mean", "own posterior inversion", "x:"),
+                              ("fused_mse_mean", "fused (average of z, vehicles 1..j)", "^-"),
+                              ("fused_posterior_mse_mean", "fused, posterior inversions (1..j)", "<-"),
+                              ("centralized_mse_mean", "centralized linear MMSE (1..j)", "v-."),
+                              ("oracle_bound_mse_mean", "oracle bound (true models, 1..j)", "k:")):
+        ax.plot(v, [r[key] for r in rows], style, label=label)
+    _mse_axes(ax, v)
+    ax.legend(fontsize=7, loc="best")
+    ax.set_title("MSE per vehicle (mean over runs; bars: std)")
+    return _save(fig, path)
+
+
+def plot_fusion(rows: list[dict], path) -> Path:
+    """MSE vs vehicle for the fleet estimates: observer only, Algorithm 1, fused, centralized
+    and the oracle bound.
+
+    Parameters
+    ----------
+    rows : list of dict
+        ``mse.csv`` rows.
+    path : str or Path
+        Output image.
+
+    Returns
+    -------
+    Path
+    """
+    v = np.array([r["vehicle"] for r in rows])
+    fig, ax = plt.subplots(figsize=(7, 4))
+    for key, label, style in (("observer_only_mse_mean", "observer only", "s--"),
+                              ("mse_mean", "Algorithm 1", "o-"),
+                              ("fused_mse_mean", "fused (average of z)", "^-"),
+                              ("fused_posterior_mse_mean", "fused (posterior inversions)", "<-"),
+                              ("centralized_mse_mean", "centralized linear MMSE", "v-."),
+                              ("oracle_bound_mse_mean", "oracle bound", "k:")):
+        ax.plot(v, [r[key] for r in rows], style, label=label)
+    _mse_axes(ax, v)
+    return _save(fig, path)
+
+
+def plot_estimates(time, truth, plain, private, vehicle: int, path, *, window: tuple[float, float] | None = None
+                   ) -> Path:
+    """Figs. 5-7: actual (band-limited) road input vs the estimates with and without privacy.
+
+    Parameters
+    ----------
+    time : (N,) array_like
+        s.
+    truth : (N, 2) ndarray
+        Band-limited road velocity, m/s, columns ``[left, right]``.
+    plain, private : (N, 2) ndarray
+        The vehicle's estimates without and with privacy (Algorithm 2), m/s.
+    vehicle : int
+        Vehicle number (1-based), for the title.
+    path : str or Path
+        Output image (format from the suffix, 120 dpi).
+    window : (float, float), optional
+        Time span ``(start, end)`` to plot, s, both ends included (default: everything).
+
+    Returns
+    -------
+    Path
+        ``path``.
+    """
+    time = np.asarray(time)
+    sel = slice(None) if window is None else (time >= window[0]) & (time <= window[1])
+    fig, axes = plt.subplots(2, 1, figsize=(8, 5), sharex=True)
+    for c, ax in enumerate(axes):
+        ax.plot(time[sel], truth[sel, c], "k-", lw=1.2, label="actual (band-limited)")
+        ax.plot(time[sel], plain[sel, c], "-", lw=1.0, label="estimate without privacy")
+        ax.plot(time[sel], private[sel, c], "--", lw=1.0, label="estimate with privacy")
+        ax.set_ylabel(f"{_TRACKS[c]}\nw (m/s)")
+        ax.grid(True, alpha=0.3)
+    axes[0].legend(loc="upper right", fontsize=8)
+    axes[0].set_title(f"Vehicle {vehicle}: road-velocity input and its estimates")
+    axes[-1].set_xlabel("time (s)")
+    return _save(fig, path)
+
+
+def plot_poles(example: dict, path) -> Path:
+    """Figs. 8-10: actual vs estimated poles of S_j in the complex plane (rad/s)."""
+    fig, ax = plt.subplots(figsize=(6, 5))
+    t = np.asarray(example["true"])
+    ax.plot(t.real, t.imag, "ko", ms=10, mfc="none", mew=2, label="actual poles of $S_j$")
+    for key, marker in (("model_reduction", "x"), ("pole_intersection", "+"), ("multiplicity", "1")):
+        p = np.asarray(example.get(key, []))
+        if p.size:
+            ax.plot(p.real, p.imag, marker, ms=10, mew=2, label=f"{key.replace('_', ' ')} attack")
+    ax.axvline(0, color="grey", lw=0.5)
+    ax.set_xlabel("Re s (rad/s)")
+    ax.set_ylabel("Im s (rad/s)")
+    ax.grid(True, alpha=0.3)
+    ax.legend(fontsize=8)
+    ax.set_title(f"Vehicle {example['vehicle']}: poles of $S_j$ and the attackers' estimates")
+    lim = 2.5 * float(np.max(np.abs(t)))
+    ax.set_xlim(-lim, 0.2 * lim)
+    ax.set_ylim(-lim, lim)
+    return _save(fig, path)
+
+
+def plot_attack_success(rows: list[dict], path) -> Path:
+    """Success rate and median relative pole error per mechanism and attack."""
+    labels = [f"{r['mechanism']}\n{r['attack']}" for r in rows]
+    x = np.arange(len(rows))
+    fig, (a1, a2) = plt.subplots(2, 1, figsize=(max(7, 0.8 * len(rows)), 6), sharex=True)
+    a1.bar(x, [r["success_rate"] for r in rows], color="tab:red")
+    a1.set_ylabel("success rate\n(all poles within 1 %)")
+    a1.set_ylim(0, 1.05)
+    a1.grid(True, axis="y", alpha=0.3)
+    err = [min(r["median_rel_pole_error"], 1e3) for r in rows]
+    a2.bar(x, err, color="tab:blue")
+    a2.set_yscale("log")
+    a2.axhline(0.1, color="k", ls="--", lw=1, label="0.1")
+    a2.set_ylabel("median relative\npole error")
+    a2.set_xticks(x)
+    a2.set_xticklabels(labels, rotation=60, ha="right", fontsize=8)
+    a2.legend()
+    a2.grid(True, axis="y", alpha=0.3)
+    return _save(fig, path)
+
+
+# --- road anomaly detection (roadcollab.experiments.anomaly_study) ----------------------------------------
+
+_ESTIMATOR_STYLE = {"observer_only": ("tab:gray", "s", "observer only"),
+                    "collaborative": ("tab:blue", "o", "collaborative (Algorithm 1)"),
+                    "fused": ("tab:green", "D", "fused (average of z)")}
+_KIND_COLOR = {"pothole": "tab:red", "bump": "tab:orange"}
+
+
+def plot_anomaly_map(map_example: dict, path) -> Path:
+    """Road map of true vs detected anomalies for one run and vehicle.
+
+    Top: position along the road (x) against the two wheel tracks (rows); true anomalies are
+    shaded spans coloured by kind (a ``"both"`` anomaly spans both rows), detections of each
+    estimator are markers (triangle down = pothole, up = bump) whose size grows with the
+    estimated depth. Bottom: signed depth in cm (potholes negative, bumps positive), true vs
+    estimated, so depth errors can be read off.
+    """
+    truth = map_example["truth"]
+    dets = map_example["detections"]
+    rows = {"left": (1.0,), "right": (0.0,), "both": (1.0, 0.0)}
+    fig, (ax, ax2) = plt.subplots(2, 1, figsize=(11, 5.5), sharex=True, gridspec_kw={"height_ratios": [1.2, 1]})
+    for a in truth:
+        for y in rows[a["side"]]:
+            ax.add_patch(plt.Rectangle((a["start"], y - 0.42), max(a["end"] - a["start"], 0.3), 0.84,
+                                       color=_KIND_COLOR[a["kind"]], alpha=0.35, lw=0))
+        ax.annotate(f"{100 * a['depth']:.1f}", (a["center"], 1.5), ha="center", fontsize=7,
+                    color=_KIND_COLOR[a["kind"]])
+        sign = -1.0 if a["kind"] == "pothole" else 1.0
+        ax2.bar(a["center"], sign * 100 * a["depth"], width=max(a["end"] - a["start"], 0.6),
+                color=_KIND_COLOR[a["kind"]], alpha=0.35)
+    names = [n for n in _ESTIMATOR_STYLE if n in dets] + [n for n in dets if n not in _ESTIMATOR_STYLE]
+    for i, name in enumerate(names):
+        color, _, label = _ESTIMATOR_STYLE.get(name, ("k", "x", name))
+        off = 0.25 * (i - (len(names) - 1) / 2)
+        for d in dets[name]:
+            marker = "v" if d["kind"] == "pothole" else "^"
+            size = 20 + 1500 * d["depth"]
+            for y in rows[d["side"]]:
+                ax.scatter(d["position"], y + off, s=size, marker=marker, color=color, edgecolor="k", lw=0.4,
+                           zorder=3)
+            sign = -1.0 if d["kind"] == "pothole" else 1.0
+            ax2.plot(d["position"], sign * 100 * d["depth"], marker, color=color, mec="k", mew=0.4, ms=6)
+        ax.scatter([], [], marker="o", color=color, label=label)
+    for kind, color in _KIND_COLOR.items():
+        ax.add_patch(plt.Rectangle((0, 0), 0, 0, color=color, alpha=0.35, label=f"true {kind} (depth in cm)"))
+    lo, hi = map_example.get("region", (None, None))
+    if lo is not None:
+        ax.set_xlim(lo, hi)
+    ax.set_ylim(-0.6, 1.8)
+    ax.set_yticks([0.0, 1.0])
+    ax.set_yticklabels(["right track", "left track"])
+    ax.legend(fontsize=7, ncol=3, loc="lower center", bbox_to_anchor=(0.5, 1.0))
+    ax.set_title(f"Run {map_example.get('run', 1)}, vehicle {map_example.get('vehicle', '?')}: "
+                 "true anomalies (spans) and detections (v pothole, ^ bump; size ~ depth)", fontsize=9, pad=36)
+    ax2.axhline(0, color="k", lw=0.5)
+    ax2.set_ylabel("depth (cm)\npothole < 0 < bump")
+    ax2.set_xlabel("position along the road (m)")
+    ax2.grid(True, alpha=0.3)
+    return _save(fig, path)
+
+
+def _plot_f1_vs(rows: list[dict], key: str, path, xlabel: str, *, scale: float = 1.0, logx: bool = False,
+                title: str = "") -> Path:
+    fig, ax = plt.subplots(figsize=(7, 4))
+    names = list(dict.fromkeys(r["estimator"] for r in rows))
+    for name in names:
+        sel = sorted((r for r in rows if r["estimator"] == name), key=lambda r: r[key])
+        x = np.array([r[key] for r in sel]) * scale
+        color, marker, label = _ESTIMATOR_STYLE.get(name, (None, "x", name))
+        ax.plot(x, [r["f1"] for r in sel], "-", marker=marker, color=color, label=f"{label}: F1")
+        ax.plot(x, [r["recall"] for r in sel], ":", marker=marker, color=color, alpha=0.6, mfc="none",
+                label=f"{label}: recall")
+    ax.axhline(0.9, color="k", ls="--", lw=0.8)
+    if logx:
+        ax.set_xscale("log")
+    ax.set_ylim(0, 1.02)
+    ax.set_xlabel(xlabel)
+    ax.set_ylabel("F1 / recall")
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend(fontsize=7)
+    ax.set_title(title, fontsize=9)
+    return _save(fig, path)
+
+
+def plot_f1_vs_depth(rows: list[dict], path) -> Path:
+    """F1 (solid) and recall (dotted) of anomaly detection per estimator vs anomaly depth;
+    ``rows`` as ``AnomalyStudyResult.depth_rows`` (``depth_m``, ``estimator``, ``f1``, ``recall``)."""
+    return _plot_f1_vs(rows, "depth_m", path, "anomaly depth / height (cm)", scale=100.0,
+                       title="Anomaly detection vs depth (dashed: F1 = 0.9)")
+
+
+def plot_f1_vs_noise(rows: list[dict], path) -> Path:
+    """F1 (solid) and recall (dotted) per estimator vs accelerometer noise std; ``rows`` as
+    ``AnomalyStudyResult.noise_rows`` (``sensor_noise_std``, ``estimator``, ``f1``, ``recall``)."""
+    return _plot_f1_vs(rows, "sensor_noise_std", path, "accelerometer noise std (m/s$^2$)", logx=True,
+                       title="Anomaly detection vs sensor noise (estimators designed for the default)")

@@ -1,0 +1,74 @@
+"""Figure of ``roadcollab sweep``: MSE against the observer parameter. Matplotlib, Agg backend, files only."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Sequence
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+
+__all__ = ["plot_sweep"]
+
+
+def plot_sweep(rows: Sequence, path) -> Path:
+    """MSE vs gamma (log-log), one panel per (sensor noise, parameter uncertainty) pair.
+
+    Lines: vehicle 1's own observer and Algorithm 1 (vehicles 2..V; both with +-1 standard
+    error bars over runs), each vehicle's own offline inversion, the fused estimate and the
+    oracle bound at vehicle V.
+
+    Parameters
+    ----------
+    rows : sequence of roadcollab.experiments.sweep.SweepRow
+        The sweep's table (:meth:`roadcollab.experiments.sweep.SweepResult.table`); MSE in (m/s)^2.
+    path : str or Path
+        Output image (format from the suffix, 120 dpi).
+
+    Returns
+    -------
+    Path
+        ``path``.
+    """
+    rows = list(rows)
+    noises = sorted({r.sensor_noise_std for r in rows})
+    uncerts = sorted({r.parameter_uncertainty for r in rows})
+    V = rows[0].n_vehicles
+    fig, axes = plt.subplots(len(noises), len(uncerts), figsize=(4.6 * len(uncerts), 3.6 * len(noises)),
+                             sharex=True, sharey=True, squeeze=False)
+    for i, s in enumerate(noises):
+        for k, u in enumerate(uncerts):
+            ax = axes[i, k]
+            panel = sorted((r for r in rows if r.sensor_noise_std == s and r.parameter_uncertainty == u),
+                           key=lambda r: r.gamma)
+            g = np.array([r.gamma for r in panel])
+            handles = [
+                ax.errorbar(g, [r.vehicle1_observer_mse for r in panel],
+                            yerr=np.nan_to_num([r.vehicle1_observer_mse_se for r in panel]), fmt="s--", capsize=3,
+                            color="tab:gray", label="vehicle 1: own observer"),
+                ax.errorbar(g, [r.algorithm1_mse for r in panel],
+                            yerr=np.nan_to_num([r.algorithm1_mse_se for r in panel]), fmt="o-", capsize=3,
+                            color="tab:blue", label=f"Algorithm 1 (vehicles 2..{V})"),
+            ]
+            handles += ax.plot(g, [r.own_inversion_mse for r in panel], "v:", color="tab:green",
+                               label="own offline inversion")
+            handles += ax.plot(g, [r.fused_mse for r in panel], "^-", color="tab:orange", label=f"fused, vehicle {V}")
+            handles += ax.plot(g, [r.oracle_bound_mse for r in panel], "k-.", label=f"oracle bound, vehicle {V}")
+            if i == 0 and k == 0:
+                ax.legend(handles=handles, fontsize=7, loc="best")
+            ax.set_xscale("log")
+            ax.set_yscale("log")
+            ax.grid(True, which="both", alpha=0.3)
+            ax.set_title(f"noise {s:g} m/s$^2$, uncertainty {100 * u:g} %", fontsize=10)
+            if i == len(noises) - 1:
+                ax.set_xlabel(r"observer parameter $\gamma$")
+            if k == 0:
+                ax.set_ylabel("road-velocity MSE ((m/s)$^2$)")
+    path = Path(path)
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+    return path
