@@ -31,7 +31,8 @@ from roadcollab.privacy.baselines import (
 from roadcollab.errors import MessageError, ParameterError
 from roadcollab.wire.message import InversionMessage
 from roadcollab.wire.protocol import encode, inversion_nbytes
-from roadcollab.estimation.grid import SegmentGrid, inv2x2, matvec
+from roadcollab.estimation.grid import SegmentGrid
+from roadcollab.lti.batch2x2 import inv2x2, matvec
 
 HYP = settings(database=None, deadline=None, max_examples=60)
 

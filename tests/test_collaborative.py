@@ -12,7 +12,7 @@ from roadcollab import CollaborativeEstimator, learning_filters, ExperimentConfi
 from roadcollab.experiments.reproduction import FleetPipeline
 from roadcollab.privacy.obfuscation import draw_obfuscator
 from roadcollab.models.simulation import add_sensor_noise, simulate_response
-from roadcollab.estimation.grid import inv2x2, matvec
+from roadcollab.lti.batch2x2 import inv2x2, matvec
 from roadcollab.models.vehicle import FleetSpec
 
 CFG = ExperimentConfig(n_vehicles=3, n_runs=1, segment_length=120.0, margin=15.0)
@@ -115,7 +115,7 @@ def test_obfuscated_realisation_shows_no_block_of_T(pipe):
 
 def test_balanced_similarity_keeps_a_high_gain_series_transfer_matrix():
     """Closed form: two diagonal systems with poles near z = 1 and gains 1e3, in series."""
-    from roadcollab.wire.message import StateSpaceData, random_orthogonal, series, similarity
+    from roadcollab.lti.realisation import StateSpaceData, random_orthogonal, series, similarity
 
     rng = np.random.default_rng(5)
     z = np.exp(1j * np.geomspace(2e-3, 0.5, 60))

@@ -11,7 +11,8 @@ from hypothesis import strategies as st
 
 from roadcollab.wire import protocol
 from roadcollab.errors import MessageError
-from roadcollab.wire.message import ExchangeMessage, InversionMessage, StateSpaceData
+from roadcollab.wire.message import ExchangeMessage, InversionMessage
+from roadcollab.lti.realisation import StateSpaceData
 from roadcollab.wire.protocol import (
     FORMAT_VERSION,
     MAGIC,

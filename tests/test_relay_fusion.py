@@ -12,8 +12,9 @@ from roadcollab.collaboration.fusion import LinearMMSE, plant_moments, posterior
 from roadcollab.privacy.obfuscation import obfuscate, theorem1_errors
 from roadcollab.collaboration.relay import Exchange, Relay, simulate_measurements
 from roadcollab.models.road import Anomaly
-from roadcollab.estimation.grid import SegmentGrid, inv2x2, matvec
-from roadcollab.models.vehicle import FleetSpec, HalfCarParameters
+from roadcollab.estimation.grid import SegmentGrid
+from roadcollab.lti.batch2x2 import matvec
+from roadcollab.models.vehicle import FleetSpec
 
 CFG = ExperimentConfig(n_vehicles=3, n_runs=1, segment_length=120.0, margin=15.0)
 

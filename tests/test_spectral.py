@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from roadcollab import ParameterError, SegmentGrid
-from roadcollab.estimation.grid import inv2x2
+from roadcollab.lti.batch2x2 import inv2x2
 
 
 def test_band_weight_is_zero_at_dc_half_at_the_edge_and_one_in_band():

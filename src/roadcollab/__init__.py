@@ -13,7 +13,8 @@ from .errors import MessageError, ParameterError
 from .estimation.estimator import JDPNoise, RoadInputEstimator, build_road_input_estimator, jdp_estimator_gain
 from .experiments.reproduction import ExperimentConfig, FleetPipeline, ReproductionResult, run_reproduction
 from .collaboration.fusion import LinearMMSE
-from .wire.message import ExchangeMessage, InversionMessage, StateSpaceData
+from .wire.message import ExchangeMessage, InversionMessage
+from .lti.realisation import StateSpaceData
 from .privacy.obfuscation import ObfuscationSpec, obfuscate
 from .collaboration.relay import Exchange, Relay, simulate_measurements
 from .models.road import RoadSpec, generate_road, measured_road

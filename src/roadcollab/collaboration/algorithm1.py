@@ -38,9 +38,12 @@ from .._validation import check_signal
 from ..errors import MessageError, ParameterError
 from ..estimation.estimator import JDPNoise, RoadInputEstimator, build_road_input_estimator
 from ..collaboration.fusion import DESIGN_SEED, posterior_responses
-from ..wire.message import ExchangeMessage, InversionMessage, StateSpaceData, series
+from ..wire.message import ExchangeMessage, InversionMessage
+from ..lti.realisation import StateSpaceData, series
 from ..models.simulation import DiscretePlant, discretize_plant
-from ..estimation.grid import SegmentGrid, inv2x2, matvec
+from ..estimation.grid import SegmentGrid
+from ..lti.batch2x2 import inv2x2, matvec
+from ..lti.response import FrequencyResponseCache
 from ..models.vehicle import FleetSpec, Vehicle
 
 __all__ = ["VehicleEstimate", "CollaborativeEstimator", "learning_filters"]
@@ -162,6 +165,8 @@ class CollaborativeEstimator:
         self.T_ss_f = self.T_ss.frequency_response(om[act])
         self.S_ss_f = self.S_ss.frequency_response(om[act])
         self._offset = self.estimator.steady_offset()
+        # A sender's unchanged clear T and S are evaluated once per receiver, not per segment.
+        self.response_cache = FrequencyResponseCache()
 
     # -- realisations sent to the next vehicle ------------------------------------------------
     def _realisations(self) -> tuple[StateSpaceData, StateSpaceData]:
@@ -265,8 +270,8 @@ class CollaborativeEstimator:
         self._check_grid(message)
         act = self._act
         om = g.omega_dt[act]
-        T_prev = message.T.frequency_response(om)
-        S_prev = message.S.frequency_response(om)
+        T_prev = self.response_cache.response(message.T, om)
+        S_prev = self.response_cache.response(message.S, om)
         E_prev = g.rfft(message.e)[act]
         Wf_prev = g.rfft(message.wf)[act]
         # L1 w^f + L2 e = (-S_j^-1 T_j) W T_prev^-1 (e - S_prev w^f): eqs. 11-12 applied in

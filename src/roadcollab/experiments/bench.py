@@ -22,7 +22,6 @@ from ..wire import protocol
 from .._validation import check_int
 from ..errors import ParameterError
 from ..experiments.reproduction import ExperimentConfig, FleetPipeline
-from ..wire.message import clear_response_cache
 from ..collaboration.relay import Exchange, Relay
 from ..models.simulation import add_sensor_noise, simulate_response
 from ..models.vehicle import sample_fleet
@@ -82,12 +81,12 @@ def bench_segment(n_samples: int = 4000, *, mechanism: str = "paper", repeats: i
         # The previous vehicle's message (not timed: that is its own work).
         y_prev = add_sensor_noise(simulate_response(prev.true_plant, w), cfg.sensor_noise_std, rng=rng)
         incoming = protocol.encode(relay.send(0, prev.estimate(y_prev)).message)
-        clear_response_cache()
+        car.response_cache.clear()
         if persistent:   # a receiver that cached the unchanged sender systems (untimed)
             warm = protocol.decode(incoming)
             om = grid.omega_dt[grid.active]
-            warm.T.frequency_response(om)
-            warm.S.frequency_response(om)
+            car.response_cache.response(warm.T, om)
+            car.response_cache.response(warm.S, om)
         t0 = time.perf_counter()
         msg_in = protocol.decode(incoming)
         y = add_sensor_noise(simulate_response(car.true_plant, w), cfg.sensor_noise_std, rng=rng)

@@ -375,7 +375,7 @@ def run_attack_study(config: AttackStudyConfig, seed: int, *, progress: Callable
 
 def _recover_z(message, grid) -> np.ndarray:
     """What a receiver computes from an (obfuscated) exchange message: W T^-1 (e - S w^f)."""
-    from ..estimation.grid import inv2x2, matvec
+    from ..lti.batch2x2 import inv2x2, matvec
 
     act = grid.active
     om = grid.omega_dt[act]

@@ -15,7 +15,8 @@ import numpy as np
 import scipy.signal
 
 from .._validation import check_nonnegative, check_positive, check_signal
-from ..estimation.estimator import dlti_frequency_response, zoh_discretize
+from ..lti.response import dlti_frequency_response
+from ..lti.discretisation import zoh_discretize
 from ..models.vehicle import HalfCarModel
 
 __all__ = ["DiscretePlant", "discretize_plant", "simulate_response", "add_sensor_noise"]

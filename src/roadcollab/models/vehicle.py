@@ -30,6 +30,7 @@ import numpy as np
 
 from .._validation import check_positive, check_real
 from ..errors import ParameterError
+from ..lti.response import ss_response
 
 __all__ = [
     "HalfCarParameters",
@@ -121,8 +122,6 @@ class HalfCarModel:
 
     def frequency_response(self, s: np.ndarray) -> np.ndarray:
         """``P(s)`` at complex frequencies ``s`` (shape (M,)); returns (M, 2, 2)."""
-        from ..estimation.estimator import ss_response
-
         return ss_response(self.A, self.B, self.C, self.D, s)
 
 

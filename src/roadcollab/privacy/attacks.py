@@ -39,7 +39,8 @@ import scipy.linalg
 import scipy.optimize
 
 from ..errors import ParameterError
-from ..wire.message import ExchangeMessage, StateSpaceData
+from ..wire.message import ExchangeMessage
+from ..lti.realisation import StateSpaceData
 
 __all__ = ["PhysicalPrior", "pole_errors", "select_by_prior", "attack_model_reduction",
            "attack_pole_intersection", "attack_multiplicity", "arx_poles", "attack_signals_reduction",
@@ -500,7 +501,7 @@ def attack_physical_fit(z: np.ndarray, w_band: np.ndarray, grid, nominal, *, ban
         Poles of the fitted ``P(theta_hat)``, rad/s, sorted by imaginary part; empty if the
         fit fails.
     """
-    from ..estimation.grid import matvec
+    from ..lti.batch2x2 import matvec
 
     Z = grid.rfft(z)
     Wb = grid.rfft(w_band)
@@ -516,7 +517,7 @@ def attack_physical_fit(z: np.ndarray, w_band: np.ndarray, grid, nominal, *, ban
     def resid(x):
         Ph = _ratio_model(x[:5]).frequency_response(s)
         P = _ratio_model(x[5:]).frequency_response(s)
-        from ..estimation.grid import inv2x2
+        from ..lti.batch2x2 import inv2x2
 
         r = (Zs - matvec(inv2x2(Ph) @ P, Ws)) / norm
         return np.concatenate([r.real.ravel(), r.imag.ravel()])

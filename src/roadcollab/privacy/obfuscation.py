@@ -32,9 +32,11 @@ import scipy.linalg
 
 from .._validation import check_int, check_positive, check_real
 from ..errors import ParameterError
-from ..estimation.estimator import bilinear_discretize
-from ..wire.message import ExchangeMessage, StateSpaceData, random_orthogonal, series, similarity
-from ..estimation.grid import SegmentGrid, inv2x2, matvec
+from ..lti.discretisation import bilinear_discretize
+from ..wire.message import ExchangeMessage
+from ..lti.realisation import StateSpaceData, random_orthogonal, series, similarity
+from ..estimation.grid import SegmentGrid
+from ..lti.batch2x2 import inv2x2, matvec
 
 __all__ = ["ObfuscationSpec", "Obfuscator", "ObfuscationChannel", "draw_obfuscator", "obfuscate", "theorem1_errors"]
 

@@ -86,7 +86,8 @@ from typing import NamedTuple, Union
 import numpy as np
 
 from ..errors import MessageError
-from ..wire.message import ExchangeMessage, InversionMessage, StateSpaceData
+from .message import ExchangeMessage, InversionMessage
+from ..lti.realisation import StateSpaceData
 
 __all__ = [
     "MAGIC",

@@ -1,0 +1,130 @@
+"""Discrete state-space realisations and their interconnection (series, similarity)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.linalg
+
+from .response import dlti_frequency_response
+
+__all__ = ["StateSpaceData", "series", "random_orthogonal", "similarity"]
+
+
+@dataclass(frozen=True, eq=False)
+class StateSpaceData:
+    """A discrete-time state-space realisation ``(A, B, C, D)`` with sample period ``dt``.
+
+    Attributes
+    ----------
+    A : (n, n) ndarray
+    B : (n, m) ndarray
+    C : (p, n) ndarray
+    D : (p, m) ndarray
+    dt : float
+        Sample period, s.
+    """
+
+    A: np.ndarray
+    B: np.ndarray
+    C: np.ndarray
+    D: np.ndarray
+    dt: float
+
+    @property
+    def order(self) -> int:
+        return int(self.A.shape[0])
+
+    def poles(self) -> np.ndarray:
+        """Discrete poles (eigenvalues of A)."""
+        return np.linalg.eigvals(self.A) if self.order else np.zeros(0, complex)
+
+    def continuous_poles(self) -> np.ndarray:
+        """Poles mapped back to the s-plane, ``log(z) / dt`` (rad/s)."""
+        return np.log(self.poles().astype(complex)) / self.dt
+
+    def frequency_response(self, omega_dt: np.ndarray) -> np.ndarray:
+        """Response at ``z = exp(j omega_dt)``, shape (M, p, m).
+
+        A pure function of the realisation; a receiver that sees the same realisation again
+        keeps its responses in a :class:`~roadcollab.lti.response.FrequencyResponseCache`.
+
+        Parameters
+        ----------
+        omega_dt : (M,) array_like
+            Normalised frequencies, rad/sample.
+
+        Returns
+        -------
+        (M, p, m) complex ndarray
+        """
+        return dlti_frequency_response(self.A, self.B, self.C, self.D, omega_dt)
+
+    def to_control(self):
+        """The realisation as a discrete :class:`control.StateSpace`."""
+        import control
+
+        return control.ss(self.A, self.B, self.C, self.D, self.dt)
+
+
+def series(first: StateSpaceData, second: StateSpaceData) -> StateSpaceData:
+    """Realisation of ``second * first`` (``first`` acts on the input first).
+
+    .. code-block:: text
+
+        u -> [A1 B1; C1 D1] -> v -> [A2 B2; C2 D2] -> y
+
+        A = [[A1,     0 ],      B = [[B1   ],
+             [B2 C1,  A2]]           [B2 D1]]
+        C = [D2 C1,  C2],       D = D2 D1
+    """
+    n1, n2 = first.order, second.order
+    A = np.zeros((n1 + n2, n1 + n2))
+    A[:n1, :n1] = first.A
+    A[n1:, :n1] = second.B @ first.C
+    A[n1:, n1:] = second.A
+    B = np.vstack([first.B, second.B @ first.D])
+    C = np.hstack([second.D @ first.C, second.C])
+    D = second.D @ first.D
+    return StateSpaceData(A, B, C, D, first.dt)
+
+
+def random_orthogonal(n: int, rng: np.random.Generator) -> np.ndarray:
+    """Haar-random orthogonal matrix (QR of a Gaussian matrix with sign fix)."""
+    if n == 0:
+        return np.zeros((0, 0))
+    Q, R = np.linalg.qr(rng.standard_normal((n, n)))
+    return Q * np.sign(np.diag(R))
+
+
+def similarity(sys: StateSpaceData, Q: np.ndarray, *, balance: bool = False) -> StateSpaceData:
+    """Realisation ``(Q^T A Q, Q^T B, C Q, D)`` for orthogonal ``Q``: same transfer matrix,
+    same conditioning, no visible block structure.
+
+    Parameters
+    ----------
+    sys : StateSpaceData
+    Q : (n, n) ndarray
+        Orthogonal.
+    balance : bool
+        First scale the states by powers of two (``scipy.linalg.matrix_balance``, exact in
+        floating point) so that the rows and columns of ``A`` have comparable norms. A series
+        connection of high-gain systems carries coupling entries up to 1e3 x its dynamics, and
+        the dense product ``Q^T A Q`` spreads their rounding into every entry. Measured on the
+        obfuscated ``T~``, ``S~`` of the default reproduction (540 messages, the receiver's
+        estimate from the obfuscated vs. the clear message): worst relative change 1.4e-8
+        without balancing, 2.0e-10 with it (99th percentile 1.0e-10 vs 1.6e-11); against a
+        40-digit reference one ``Psi1 S Psi2`` response went from 6e-9 to 4e-12 relative.
+        Forming the product in extended precision, or as ``I + Q^T (A - I) Q``, changed
+        neither figure.
+
+    Returns
+    -------
+    StateSpaceData
+    """
+    A, B, C = sys.A, sys.B, sys.C
+    if balance and sys.order:
+        A, (scale, _) = scipy.linalg.matrix_balance(A, permute=False, separate=True)
+        B, C = B / scale[:, None], C * scale[None, :]
+    return StateSpaceData(Q.T @ A @ Q, Q.T @ B, C @ Q, sys.D.copy(), sys.dt)

@@ -1,0 +1,143 @@
+"""Frequency responses of state-space realisations, and a cache that their owner holds."""
+
+from __future__ import annotations
+
+import hashlib
+from collections import OrderedDict
+
+import numpy as np
+import scipy.linalg
+
+__all__ = ["dlti_frequency_response", "ss_response", "FrequencyResponseCache"]
+
+
+def dlti_frequency_response(Ad, Bd, Cd, Dd, omega_dt: np.ndarray) -> np.ndarray:
+    """Frequency response ``C (zI - A)^-1 B + D`` at ``z = exp(j omega dt)``.
+
+    Parameters
+    ----------
+    Ad, Bd, Cd, Dd : ndarray
+        Discrete realisation, shapes (n, n), (n, m), (p, n), (p, m).
+    omega_dt : (M,) ndarray
+        Normalised frequencies, rad/sample.
+
+    Returns
+    -------
+    (M, p, m) complex ndarray
+    """
+    return ss_response(Ad, Bd, Cd, Dd, np.exp(1j * np.asarray(omega_dt, dtype=float)))
+
+
+def ss_response(A, B, C, D, points: np.ndarray) -> np.ndarray:
+    """``C (x I - A)^-1 B + D`` at complex points ``x`` (``s`` or ``z``), shape (M, p, m).
+
+    Parameters
+    ----------
+    A, B, C, D : array_like
+        Realisation, shapes (n, n), (n, m), (p, n), (p, m); with ``n = 0`` the result is ``D``
+        at every point. Continuous (``A`` in 1/s) for ``s`` points, discrete for ``z`` points.
+    points : complex array_like
+        Evaluation points, flattened to (M,): ``s = j omega`` (rad/s) for a continuous
+        realisation, ``z = exp(j omega dt)`` for a discrete one.
+
+    Returns
+    -------
+    (M, p, m) complex ndarray
+    """
+    # Diagonalise once: (xI - A)^-1 = V diag(1/(x - lambda)) V^-1, so every output/input pair
+    # is one matrix product [1/(x - lambda)] @ [Cv_pn Bv_nm] (about 10x faster than M solves).
+    # Its error grows like cond(V) * eps, and near transmission zeros the partial fractions
+    # cancel, so realisations with close or repeated poles (series connections) go through the
+    # backward-stable complex Schur form instead. The limit cond(V) < 1e2 (not 1e3) is measured:
+    # obfuscated S~ with cond(V) ~ 300 were evaluated 4x less accurately than by Schur at 0.5 Hz,
+    # and the receiver's worst estimate change under Algorithm 2 fell from 1.2e-9 to 1.4e-10
+    # (900 messages); the benchmark did not resolve a cost (paper 27 vs 29 ms, noise 2x).
+    x = np.asarray(points, dtype=complex).reshape(-1)
+    A, B, C, D = (np.asarray(a, dtype=float) for a in (A, B, C, D))
+    p, m = D.shape
+    if A.shape[0] == 0:
+        return np.broadcast_to(D.astype(complex), (x.size, p, m)).copy()
+    lam, V = np.linalg.eig(A)
+    if np.linalg.cond(V) < 1e2:
+        Cv = C @ V
+        Bv = np.linalg.solve(V, B)
+        R = (Cv[:, :, None] * Bv[None, :, :]).transpose(1, 0, 2).reshape(lam.size, p * m)
+        H = (1.0 / (x[:, None] - lam[None, :])) @ R
+        return H.reshape(x.size, p, m) + D
+    return _schur_frequency_response(A, B, C, D, x)
+
+
+def _schur_frequency_response(A, B, C, D, z):
+    """``C (zI - A)^-1 B + D`` via ``A = U T U^H``: one back substitution for all ``z``.
+
+    ``X`` is kept as (n, m, M) so each step is one BLAS product over every frequency
+    (about 10x faster than a per-row einsum; measured 1 ms vs 10 ms for n = 20, M = 3400).
+    """
+    T, U = scipy.linalg.schur(A, output="complex")
+    Bt = U.conj().T @ B
+    Ct = C @ U
+    n, m = B.shape
+    X = np.empty((n, m, z.size), complex)
+    inv_diag = 1.0 / (z[None, :] - np.diag(T)[:, None])          # (n, M), one pass
+    for i in range(n - 1, -1, -1):
+        if i + 1 < n:
+            acc = (T[i, i + 1:] @ X[i + 1:].reshape(n - i - 1, m * z.size)).reshape(m, z.size)
+            acc += Bt[i][:, None]
+        else:
+            acc = np.repeat(Bt[i][:, None].astype(complex), z.size, axis=1)
+        acc *= inv_diag[i]
+        X[i] = acc
+    H = (Ct @ X.reshape(n, m * z.size)).reshape(C.shape[0], m, z.size)
+    return H.transpose(2, 0, 1) + D
+
+
+class FrequencyResponseCache:
+    """Responses of realisations on a grid, memoised by content (least recently used).
+
+    A receiving vehicle holds one: a sender's unchanged clear ``T`` and ``S`` are evaluated
+    once, an obfuscated message is new every time. Results are identical with or without the
+    cache (a pure function); the benchmark clears it to count every evaluation.
+
+    Parameters
+    ----------
+    size : int
+        Entries kept.
+    """
+
+    def __init__(self, size: int = 64) -> None:
+        self.size = int(size)
+        self._store: OrderedDict[bytes, np.ndarray] = OrderedDict()
+
+    def response(self, system, omega_dt: np.ndarray) -> np.ndarray:
+        """``system.frequency_response(omega_dt)``, read-only, from the cache when seen before.
+
+        Parameters
+        ----------
+        system : StateSpaceData
+        omega_dt : (M,) array_like
+            Normalised frequencies, rad/sample.
+
+        Returns
+        -------
+        (M, p, m) complex ndarray
+        """
+        omega_dt = np.asarray(omega_dt, dtype=float)
+        h = hashlib.blake2b(digest_size=16)
+        for a in (system.A, system.B, system.C, system.D, omega_dt):
+            h.update(np.ascontiguousarray(a, dtype=float).tobytes())
+            h.update(str(a.shape).encode())
+        key = h.digest()
+        hit = self._store.get(key)
+        if hit is not None:
+            self._store.move_to_end(key)
+            return hit
+        H = system.frequency_response(omega_dt)
+        H.setflags(write=False)
+        self._store[key] = H
+        if len(self._store) > self.size:
+            self._store.popitem(last=False)
+        return H
+
+    def clear(self) -> None:
+        """Forget every memoised response."""
+        self._store.clear()
