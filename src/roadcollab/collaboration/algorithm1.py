@@ -42,7 +42,7 @@ from ..wire.message import ExchangeMessage, InversionMessage
 from ..lti.realisation import StateSpaceData, series
 from ..models.simulation import DiscretePlant, discretize_plant
 from ..estimation.grid import SegmentGrid
-from ..lti.batch2x2 import inv2x2, matvec
+from ..lti.batch2x2 import inv2x2, matvec, receiver_z
 from ..lti.response import FrequencyResponseCache
 from ..models.vehicle import FleetSpec, Vehicle
 
@@ -277,7 +277,7 @@ class CollaborativeEstimator:
         # L1 w^f + L2 e = (-S_j^-1 T_j) W T_prev^-1 (e - S_prev w^f): eqs. 11-12 applied in
         # factored form, matrix-vector products only (3x faster than forming L1 and L2;
         # ``learning_filters`` forms them explicitly and the tests check both agree).
-        z = self._w_act[:, None] * matvec(inv2x2(T_prev), E_prev - matvec(S_prev, Wf_prev))
+        z = receiver_z(T_prev, S_prev, E_prev, Wf_prev, self._w_act)
         Wf = np.zeros((g.n_bins, 2), complex)
         Wf[act] = matvec(self._minus_Sinv_T, z)
         return Wf

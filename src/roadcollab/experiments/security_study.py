@@ -19,9 +19,9 @@ from .._validation import check_int
 from ..errors import ParameterError
 from ..experiments.reproduction import ExperimentConfig
 from ..collaboration.relay import Exchange, Relay
-from ..privacy.attacks import (PhysicalPrior, SUCCESS_TOLERANCE, arx_poles, attack_model_reduction, attack_multiplicity,
-                       attack_physical_fit, attack_pole_intersection, attack_signals_prior,
-                       attack_signals_reduction, intersect_pole_sets, pole_errors)
+from ..privacy.attacks import (PhysicalPrior, SUCCESS_TOLERANCE, attack_model_reduction, attack_multiplicity, attack_physical_fit, attack_pole_intersection, attack_signals_prior, attack_signals_reduction, intersect_pole_sets, pole_errors)
+from ..lti.arx import arx_poles
+from ..lti.batch2x2 import receiver_z
 from ..models.simulation import add_sensor_noise, simulate_response
 
 __all__ = ["AttackStudyConfig", "AttackStudyResult", "run_attack_study"]
@@ -375,14 +375,12 @@ def run_attack_study(config: AttackStudyConfig, seed: int, *, progress: Callable
 
 def _recover_z(message, grid) -> np.ndarray:
     """What a receiver computes from an (obfuscated) exchange message: W T^-1 (e - S w^f)."""
-    from ..lti.batch2x2 import inv2x2, matvec
-
     act = grid.active
     om = grid.omega_dt[act]
     T, S = message.T.frequency_response(om), message.S.frequency_response(om)
     Z = np.zeros((grid.n_bins, 2), complex)
     E, Wf = grid.rfft(message.e)[act], grid.rfft(message.wf)[act]
-    Z[act] = grid.reg_weight[act, None] * matvec(inv2x2(T), E - matvec(S, Wf))
+    Z[act] = receiver_z(T, S, E, Wf, grid.reg_weight[act])
     return Z
 
 

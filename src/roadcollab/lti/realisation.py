@@ -9,7 +9,25 @@ import scipy.linalg
 
 from .response import dlti_frequency_response
 
-__all__ = ["StateSpaceData", "series", "random_orthogonal", "similarity"]
+__all__ = ["StateSpaceData", "continuous_poles", "series", "random_orthogonal", "similarity"]
+
+
+def continuous_poles(poles_z, dt: float) -> np.ndarray:
+    """Discrete poles mapped to the s-plane, ``log(z) / dt`` (rad/s; ``-inf`` for ``z = 0``).
+
+    Parameters
+    ----------
+    poles_z : array_like
+        Discrete poles.
+    dt : float
+        Sample period, s.
+
+    Returns
+    -------
+    complex ndarray
+    """
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return np.log(np.asarray(poles_z, dtype=complex)) / dt
 
 
 @dataclass(frozen=True, eq=False)
@@ -42,7 +60,7 @@ class StateSpaceData:
 
     def continuous_poles(self) -> np.ndarray:
         """Poles mapped back to the s-plane, ``log(z) / dt`` (rad/s)."""
-        return np.log(self.poles().astype(complex)) / self.dt
+        return continuous_poles(self.poles(), self.dt)
 
     def frequency_response(self, omega_dt: np.ndarray) -> np.ndarray:
         """Response at ``z = exp(j omega_dt)``, shape (M, p, m).

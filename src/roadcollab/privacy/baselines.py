@@ -51,6 +51,7 @@ from scipy.stats import norm
 
 from .._validation import check_int, check_matrix, check_nonnegative, check_positive, check_real
 from ..errors import MessageError, ParameterError
+from ..lti.batch2x2 import sigma_max_2x2
 from ..wire.message import ExchangeMessage, InversionMessage
 
 __all__ = [
@@ -156,13 +157,10 @@ def _bin_gains(P: np.ndarray, weight: np.ndarray) -> np.ndarray:
     """
     gains = np.zeros(weight.shape)
     act = weight > 0
-    Pa = P[act]
-    det = np.abs(Pa[:, 0, 0] * Pa[:, 1, 1] - Pa[:, 0, 1] * Pa[:, 1, 0])
-    fro2 = np.sum(np.abs(Pa) ** 2, axis=(1, 2))
+    smax, det = sigma_max_2x2(P[act])
     if np.any(det == 0.0):
         k = int(np.flatnonzero(act)[np.flatnonzero(det == 0.0)[0]])
         raise ParameterError(f"estimator.P_f is singular at active bin {k}: the sensitivity is unbounded")
-    smax = np.sqrt(0.5 * (fro2 + np.sqrt(np.maximum(fro2 ** 2 - 4.0 * det ** 2, 0.0))))
     gains[act] = weight[act] * smax / det
     return gains
 

@@ -36,7 +36,7 @@ from ..lti.discretisation import bilinear_discretize
 from ..wire.message import ExchangeMessage
 from ..lti.realisation import StateSpaceData, random_orthogonal, series, similarity
 from ..estimation.grid import SegmentGrid
-from ..lti.batch2x2 import inv2x2, matvec
+from ..lti.batch2x2 import condition_2x2, inv2x2, matvec, receiver_z
 
 __all__ = ["ObfuscationSpec", "Obfuscator", "ObfuscationChannel", "draw_obfuscator", "obfuscate", "theorem1_errors"]
 
@@ -100,19 +100,6 @@ class ObfuscationSpec:
         check_real("min_pole_separation", self.min_pole_separation, low=0.0, high=1.0)
         check_positive("min_zero_distance", self.min_zero_distance)
         check_real("max_condition", self.max_condition, low=1.0, low_open=True)
-
-
-def condition_2x2(H: np.ndarray) -> np.ndarray:
-    """2-norm condition numbers of a stack of 2x2 matrices, in closed form.
-
-    ``s1 s2 = |det H|`` and ``s1^2 + s2^2 = ||H||_F^2``; about 20x faster than a batched SVD.
-    """
-    fro2 = np.sum(np.abs(H) ** 2, axis=(-2, -1))
-    det = np.abs(H[..., 0, 0] * H[..., 1, 1] - H[..., 0, 1] * H[..., 1, 0])
-    disc = np.sqrt(np.maximum(fro2**2 - 4 * det**2, 0.0))
-    s1 = np.sqrt((fro2 + disc) / 2)
-    with np.errstate(divide="ignore"):
-        return np.where(det > 0, s1**2 / np.where(det > 0, det, 1.0), np.inf)
 
 
 def _min_relative_separation(roots: np.ndarray) -> float:
@@ -407,7 +394,7 @@ def obfuscate(message: ExchangeMessage, grid: SegmentGrid, spec: ObfuscationSpec
         om = grid.omega_dt[act]
         T_f = message.T.frequency_response(om) if T_response is None else T_response
         S_f = message.S.frequency_response(om) if S_response is None else S_response
-        z = matvec(inv2x2(T_f), E[act] - matvec(S_f, Wf[act]))
+        z = receiver_z(T_f, S_f, E[act], Wf[act])
         E_t[act] = matvec(ch.T_f, z) + matvec(ch.S_f, Wf_t[act])
     # Bins outside the band carry nothing to the receiver (W = 0 there) but are obfuscated
     # too, so the time signals hold no clear component.
