@@ -32,6 +32,7 @@ from .._validation import check_nonnegative
 from ..collaboration.algorithm1 import CollaborativeEstimator, VehicleEstimate
 from ..errors import ParameterError
 from ..wire.message import ExchangeMessage, InversionMessage
+from ..privacy.baselines import dp_message
 from ..privacy.obfuscation import ObfuscationChannel, ObfuscationSpec, Obfuscator, obfuscate
 from ..models.simulation import add_sensor_noise, simulate_response
 
@@ -171,8 +172,6 @@ class Relay:
             return RelayStep(result, est.hardened_message(result))
         if mech in ("fused", "fused_posterior"):
             return RelayStep(result, est.fused_message(result, incoming, posterior=mech == "fused_posterior"))
-        from ..privacy.baselines import dp_message     # baselines imports the optional crypto packages
-
         return RelayStep(result, dp_message(est.hardened_message(result), self.exchange.dp_sigma, rng=self.rng))
 
     def step(self, j: int, y, incoming=None, *, Y: np.ndarray | None = None) -> RelayStep:

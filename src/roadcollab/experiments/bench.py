@@ -17,11 +17,13 @@ import statistics
 import time
 
 import numpy as np
+from threadpoolctl import threadpool_limits
 
 from ..wire import protocol
 from .._validation import check_int
 from ..errors import ParameterError
 from ..experiments.reproduction import ExperimentConfig, FleetPipeline
+from ..collaboration.algorithm1 import CollaborativeEstimator
 from ..collaboration.relay import Exchange, Relay
 from ..models.simulation import add_sensor_noise, simulate_response
 from ..models.vehicle import sample_fleet
@@ -60,8 +62,6 @@ def bench_segment(n_samples: int = 4000, *, mechanism: str = "paper", repeats: i
     t0 = time.perf_counter()
     pipe = FleetPipeline(cfg, fleet)     # the linear MMSE statistics are lazy: not built here
     setup_total = time.perf_counter() - t0
-    from ..collaboration.algorithm1 import CollaborativeEstimator
-
     setups = []
     for _ in range(3):
         t0 = time.perf_counter()
@@ -123,8 +123,6 @@ def run_bench(*, sizes=(1000, 2000, 4000, 8000, 16000, 32000, 64000), repeats: i
         ``paper_per_nlogn_rel``, ``hardened_per_nlogn_rel``: cost per ``N log2 N`` relative to the
         reference point, 1 everywhere for ``N log N`` scaling) and ``threads`` (1).
     """
-    from threadpoolctl import threadpool_limits
-
     with threadpool_limits(limits=1):
         main = {m: bench_segment(4000, mechanism=m, repeats=repeats, seed=seed) for m in MECHANISMS}
         scaling = []

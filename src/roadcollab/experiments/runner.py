@@ -12,6 +12,8 @@ import contextlib
 from dataclasses import dataclass
 from typing import Callable, Sequence
 
+from threadpoolctl import threadpool_limits
+
 from .._validation import check_int
 from ..errors import ParameterError
 
@@ -38,8 +40,6 @@ class _SingleThreaded:
     task: Callable
 
     def __call__(self, indices):
-        from threadpoolctl import threadpool_limits
-
         with threadpool_limits(limits=1):
             return self.task(indices)
 

@@ -28,7 +28,7 @@ from dataclasses import asdict, dataclass, fields, replace
 
 import numpy as np
 
-from .._validation import check_positive, check_real
+from .._validation import check_int, check_positive, check_real
 from ..errors import ParameterError
 from ..lti.response import ss_response
 
@@ -235,8 +235,6 @@ def sample_fleet(n_vehicles: int, spec: FleetSpec = FleetSpec(), *, rng=None) ->
     -------
     list of Vehicle
     """
-    from .._validation import check_int
-
     n_vehicles = check_int("n_vehicles", n_vehicles, low=1)
     if not isinstance(spec, FleetSpec):
         raise ParameterError(f"spec must be a FleetSpec, got {type(spec).__name__}")

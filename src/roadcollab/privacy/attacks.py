@@ -39,8 +39,10 @@ import scipy.linalg
 import scipy.optimize
 
 from ..errors import ParameterError
+from ..models.vehicle import HalfCarParameters, half_car_model
 from ..wire.message import ExchangeMessage
 from ..lti.arx import arx_poles, arx_state_space
+from ..lti.batch2x2 import inv2x2, matvec
 from ..lti.realisation import StateSpaceData, continuous_poles
 
 __all__ = ["PhysicalPrior", "pole_errors", "select_by_prior", "attack_model_reduction",
@@ -373,8 +375,6 @@ def attack_signals_intersection(segments: list[tuple[np.ndarray, np.ndarray]], d
 
 def _ratio_model(log_ratios: np.ndarray):
     """Half-car model from scale-free parameters ``log [k/m, c/m, I/m, L1, L2]`` (m = 1)."""
-    from ..models.vehicle import HalfCarParameters, half_car_model
-
     k, c, I, L1, L2 = np.exp(log_ratios)
     return half_car_model(HalfCarParameters(sprung_mass=1.0, roll_inertia=I, left_arm=L1, right_arm=L2,
                                             stiffness=k, damping=c))
@@ -416,8 +416,6 @@ def attack_physical_fit(z: np.ndarray, w_band: np.ndarray, grid, nominal, *, ban
         Poles of the fitted ``P(theta_hat)``, rad/s, sorted by imaginary part; empty if the
         fit fails.
     """
-    from ..lti.batch2x2 import matvec
-
     Z = grid.rfft(z)
     Wb = grid.rfft(w_band)
     f = grid.freqs
@@ -432,8 +430,6 @@ def attack_physical_fit(z: np.ndarray, w_band: np.ndarray, grid, nominal, *, ban
     def resid(x):
         Ph = _ratio_model(x[:5]).frequency_response(s)
         P = _ratio_model(x[5:]).frequency_response(s)
-        from ..lti.batch2x2 import inv2x2
-
         r = (Zs - matvec(inv2x2(Ph) @ P, Ws)) / norm
         return np.concatenate([r.real.ravel(), r.imag.ravel()])
 
