@@ -9,7 +9,7 @@ each sample period and the zero-order-hold discretisation of the plant is exact:
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 import scipy.signal
@@ -39,6 +39,14 @@ class DiscretePlant:
     C: np.ndarray
     D: np.ndarray
     dt: float
+    # Derived in __post_init__: the modal form used by simulate_response.
+    _modal: bool = field(init=False, repr=False)
+    _keep: np.ndarray = field(init=False, repr=False)
+    _weight: np.ndarray = field(init=False, repr=False)
+    _lam: np.ndarray | None = field(init=False, repr=False, default=None)
+    _CV: np.ndarray | None = field(init=False, repr=False, default=None)
+    _VinvB: np.ndarray | None = field(init=False, repr=False, default=None)
+    _Vinv: np.ndarray | None = field(init=False, repr=False, default=None)
 
     def __post_init__(self) -> None:
         lam, V = np.linalg.eig(self.Ad)
