@@ -194,14 +194,35 @@ class CollaborativeEstimator:
 
     # -- per-segment work ---------------------------------------------------------------------
     def spectrum(self, y) -> np.ndarray:
-        """Zero-padded spectrum of a measured window ``y`` (N, 2)."""
+        """Zero-padded spectrum of a measured window.
+
+        Parameters
+        ----------
+        y : (N, 2) array_like
+            Body-tip accelerations on this segment, m/s^2; ``N`` is the grid's window.
+
+        Returns
+        -------
+        (K, 2) complex ndarray
+        """
         y = check_signal("y", y, 2)
         if y.shape[0] != self.grid.n_samples:
             raise ParameterError(f"y must have {self.grid.n_samples} samples (the segment grid), got {y.shape[0]}")
         return self.grid.rfft(y)
 
     def wf_from_z(self, Z: np.ndarray) -> np.ndarray:
-        """``w^f_j = -S_j^-1 T_j z`` for a band-limited road-input spectrum ``Z`` (K, 2)."""
+        """``w^f_j = -S_j^-1 T_j z`` for a band-limited road-input spectrum.
+
+        Parameters
+        ----------
+        Z : (K, 2) complex ndarray
+            Spectrum of ``z`` (m/s) on the grid.
+
+        Returns
+        -------
+        (K, 2) complex ndarray
+            ``w^f_j``, zero outside the active bins.
+        """
         Wf = np.zeros_like(Z)
         Wf[self._act] = matvec(self._minus_Sinv_T, Z[self._act])
         return Wf
@@ -251,6 +272,16 @@ class CollaborativeEstimator:
 
         For an :class:`InversionMessage` (hardened or fused exchange) the update is
         ``w^f_j = -S_j^-1 T_j z``, identical to the optimal filters applied to ``(T, S, e, w^f)``.
+
+        Parameters
+        ----------
+        message : ExchangeMessage | InversionMessage
+            From vehicle ``j - 1``, on this vehicle's grid.
+
+        Returns
+        -------
+        (K, 2) complex ndarray
+            ``w^f_j`` (spectrum).
 
         Raises
         ------
@@ -313,7 +344,17 @@ class CollaborativeEstimator:
                                offset=self._offset)
 
     def hardened_message(self, result: VehicleEstimate) -> InversionMessage:
-        """The hardened message: ``z_j = W P_hat_j^-1 y_j`` only (no dynamics)."""
+        """The hardened message: ``z_j = W P_hat_j^-1 y_j`` only (no dynamics).
+
+        Parameters
+        ----------
+        result : VehicleEstimate
+            This vehicle's estimate on the segment.
+
+        Returns
+        -------
+        InversionMessage
+        """
         g = self.grid
         return InversionMessage(mechanism="hardened", sample_rate=g.sample_rate, n_samples=g.n_samples,
                                 z=g.irfft(self.invert(result.Y)), count=1)
@@ -349,7 +390,17 @@ class CollaborativeEstimator:
                                 count=count)
 
     def message(self, result: VehicleEstimate) -> ExchangeMessage:
-        """The plain message ``(T_j, S_j, e_j, w^f_j)`` of Algorithm 1."""
+        """The plain message ``(T_j, S_j, e_j, w^f_j)`` of Algorithm 1.
+
+        Parameters
+        ----------
+        result : VehicleEstimate
+            This vehicle's estimate on the segment.
+
+        Returns
+        -------
+        ExchangeMessage
+        """
         g = self.grid
         return ExchangeMessage(mechanism="none", sample_rate=g.sample_rate, n_samples=g.n_samples,
                                T=self.T_ss, S=self.S_ss, e=g.irfft(result.E), wf=g.irfft(result.Wf))

@@ -136,7 +136,17 @@ class Relay:
         return self.estimators[0].grid
 
     def channel(self, j: int) -> ObfuscationChannel:
-        """Vehicle ``j``'s persistent ``Psi`` draw (``paper_vehicle``), drawn on first use."""
+        """Vehicle ``j``'s persistent ``Psi`` draw (``paper_vehicle``), drawn on first use.
+
+        Parameters
+        ----------
+        j : int
+            Index of the vehicle in driving order.
+
+        Returns
+        -------
+        ObfuscationChannel
+        """
         if j not in self._channels:
             est = self.estimators[j]
             self._channels[j] = ObfuscationChannel.draw(est.T_ss, est.S_ss, self.grid, self.exchange.obfuscation,

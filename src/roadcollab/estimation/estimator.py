@@ -149,6 +149,16 @@ def observer_corner(gamma: float) -> float:
 
     With ``S = 0.5 (1 + gamma) I``, ``w_hat' = gamma S (w - w_hat)`` is a first-order low-pass
     per channel with this corner.
+
+    Parameters
+    ----------
+    gamma : float
+        Observer gain (> 0).
+
+    Returns
+    -------
+    float
+        rad/s.
     """
     gamma = check_positive("gamma", gamma)
     return gamma * (1.0 + gamma) / 2.0
@@ -215,11 +225,31 @@ class RoadInputEstimator:
         return self.Cd @ x + self.bias_out
 
     def frequency_response(self, omega_dt: np.ndarray) -> np.ndarray:
-        """``D_j(e^{j omega dt})``, shape (M, 2, 2), of the discrete estimator."""
+        """``D_j(e^{j omega dt})`` of the discrete estimator.
+
+        Parameters
+        ----------
+        omega_dt : (M,) array_like
+            Normalised frequencies, rad/sample.
+
+        Returns
+        -------
+        (M, 2, 2) complex ndarray
+        """
         return dlti_frequency_response(self.Ad, self.Bd, self.Cd, self.Dd, omega_dt)
 
     def continuous_response(self, s: np.ndarray) -> np.ndarray:
-        """``D_j(s)`` of the continuous design, shape (M, 2, 2)."""
+        """``D_j(s)`` of the continuous design.
+
+        Parameters
+        ----------
+        s : (M,) complex array_like
+            Complex frequencies, rad/s.
+
+        Returns
+        -------
+        (M, 2, 2) complex ndarray
+        """
         return ss_response(self.Ac, self.Bc, self.Cc, self.Dc, s)
 
     def filter(self, y, *, include_bias: bool = True) -> np.ndarray:

@@ -20,7 +20,7 @@ that contain inverses are not weighted twice inside the band.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 import scipy.fft
@@ -54,6 +54,19 @@ class SegmentGrid:
         ``band_low_hz / 2``). It sits below the evaluation band so that estimates built from
         inverses are not weighted twice in band (``W W_reg`` is within 0.5 % of ``W`` from
         ``band_low_hz`` up).
+
+    Attributes
+    ----------
+    nfft : int
+        Padded length, a fast FFT length ``>= pad_factor * N``.
+    freqs : (n_bins,) ndarray
+        Bin frequencies, Hz.
+    omega_dt : (n_bins,) ndarray
+        Normalised bin frequencies, rad/sample.
+    weight, reg_weight : (n_bins,) ndarray
+        The band weight ``W`` and the regularisation weight ``W_reg`` (0 at DC).
+    active : (n_bins,) bool ndarray
+        Bins where ``W_reg > 0``.
     """
 
     n_samples: int
@@ -63,6 +76,13 @@ class SegmentGrid:
     band_order: int = 4
     pad_factor: float = 1.5
     regularization_low_hz: float | None = None
+    # Derived in __post_init__ (see Attributes).
+    nfft: int = field(init=False)
+    freqs: np.ndarray = field(init=False, repr=False)
+    omega_dt: np.ndarray = field(init=False, repr=False)
+    weight: np.ndarray = field(init=False, repr=False)
+    reg_weight: np.ndarray = field(init=False, repr=False)
+    active: np.ndarray = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
         check_int("n_samples", self.n_samples, low=16)
@@ -97,13 +117,6 @@ class SegmentGrid:
         object.__setattr__(self, "reg_weight", Wr)
         object.__setattr__(self, "active", Wr > 0)
 
-    nfft: int = 0          # set in __post_init__
-    freqs: np.ndarray = None  # type: ignore[assignment]
-    omega_dt: np.ndarray = None  # type: ignore[assignment]
-    weight: np.ndarray = None  # type: ignore[assignment]
-    reg_weight: np.ndarray = None  # type: ignore[assignment]
-    active: np.ndarray = None  # type: ignore[assignment]
-
     @property
     def dt(self) -> float:
         return 1.0 / self.sample_rate
@@ -113,18 +126,50 @@ class SegmentGrid:
         return self.freqs.size
 
     def rfft(self, x) -> np.ndarray:
-        """Spectrum (n_bins, channels) of a signal of up to ``nfft`` samples (zero-padded)."""
+        """Spectrum (n_bins, channels) of a signal of up to ``nfft`` samples (zero-padded).
+
+        Parameters
+        ----------
+        x : (N, channels) array_like
+            ``N <= nfft`` samples.
+
+        Returns
+        -------
+        (n_bins, channels) complex ndarray
+        """
         x = np.asarray(x, dtype=float)
         if x.ndim != 2 or x.shape[0] > self.nfft:
             raise ParameterError(f"signal must have shape (<= {self.nfft}, channels), got {x.shape}")
         return scipy.fft.rfft(x, n=self.nfft, axis=0)
 
     def irfft(self, X, n: int | None = None) -> np.ndarray:
-        """Time signal of the first ``n`` (default ``nfft``) samples of a spectrum."""
+        """Time signal of the first ``n`` (default ``nfft``) samples of a spectrum.
+
+        Parameters
+        ----------
+        X : (n_bins, channels) complex array_like
+        n : int, optional
+            Samples kept (default ``nfft``).
+
+        Returns
+        -------
+        (n, channels) ndarray
+        """
         x = scipy.fft.irfft(X, n=self.nfft, axis=0)
         return x if n is None else x[:n]
 
     def band_limit(self, x, n: int | None = None) -> np.ndarray:
-        """Apply the zero-phase band weight ``W`` to a time signal; returns ``n`` samples."""
+        """Apply the zero-phase band weight ``W`` to a time signal.
+
+        Parameters
+        ----------
+        x : (N, channels) array_like
+        n : int, optional
+            Samples returned (default ``N``).
+
+        Returns
+        -------
+        (n, channels) ndarray
+        """
         x = check_signal("x", x)
         return self.irfft(self.weight[:, None] * self.rfft(x), x.shape[0] if n is None else n)

@@ -23,7 +23,22 @@ _CACHE: dict = {}
 
 
 def cached(key, build: Callable[[], object]):
-    """Per-process memo for expensive setup (keyed by a hashable description of it)."""
+    """Per-process memo for expensive setup (keyed by a hashable description of it).
+
+    A worker process builds a fleet's pipeline once for all the runs it is given; results do
+    not depend on whether the memo hits (the builders are deterministic).
+
+    Parameters
+    ----------
+    key : hashable
+        Description of what ``build`` makes (e.g. the configuration's repr and the seed).
+    build : callable
+        Makes the object on a miss.
+
+    Returns
+    -------
+    object
+    """
     if key not in _CACHE:
         if len(_CACHE) > 8:
             _CACHE.clear()

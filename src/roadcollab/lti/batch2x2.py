@@ -12,6 +12,14 @@ def inv2x2(M: np.ndarray) -> np.ndarray:
 
     Closed form because ``np.linalg.inv`` on a (4097, 2, 2) stack is about 6x slower and
     this runs several times per vehicle-segment.
+
+    Parameters
+    ----------
+    M : (..., 2, 2) ndarray
+
+    Returns
+    -------
+    (..., 2, 2) ndarray
     """
     a, b, c, d = M[..., 0, 0], M[..., 0, 1], M[..., 1, 0], M[..., 1, 1]
     det = a * d - b * c
@@ -28,6 +36,15 @@ def matvec(M: np.ndarray, x: np.ndarray) -> np.ndarray:
 
     Written out for 2x2 (about 2x faster than ``einsum`` on 3000 bins); general sizes fall
     back to ``einsum``.
+
+    Parameters
+    ----------
+    M : (K, p, m) ndarray
+    x : (K, m) ndarray
+
+    Returns
+    -------
+    (K, p) ndarray
     """
     if M.shape[-2:] != (2, 2):
         return np.einsum("kij,kj->ki", M, x)
@@ -39,7 +56,17 @@ def matvec(M: np.ndarray, x: np.ndarray) -> np.ndarray:
 
 
 def matmul(*Ms: np.ndarray) -> np.ndarray:
-    """Per-bin product of stacks of matrices, left to right."""
+    """Per-bin product of stacks of matrices, left to right.
+
+    Parameters
+    ----------
+    *Ms : (K, ., .) ndarray
+        At least one stack, with compatible inner dimensions.
+
+    Returns
+    -------
+    ndarray
+    """
     out = Ms[0]
     for M in Ms[1:]:
         out = out @ M

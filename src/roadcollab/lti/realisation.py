@@ -96,6 +96,16 @@ def series(first: StateSpaceData, second: StateSpaceData) -> StateSpaceData:
         A = [[A1,     0 ],      B = [[B1   ],
              [B2 C1,  A2]]           [B2 D1]]
         C = [D2 C1,  C2],       D = D2 D1
+
+    Parameters
+    ----------
+    first, second : StateSpaceData
+        Systems with the same sample period; ``first``'s outputs feed ``second``'s inputs.
+
+    Returns
+    -------
+    StateSpaceData
+        Order ``first.order + second.order``.
     """
     n1, n2 = first.order, second.order
     A = np.zeros((n1 + n2, n1 + n2))
@@ -109,7 +119,18 @@ def series(first: StateSpaceData, second: StateSpaceData) -> StateSpaceData:
 
 
 def random_orthogonal(n: int, rng: np.random.Generator) -> np.ndarray:
-    """Haar-random orthogonal matrix (QR of a Gaussian matrix with sign fix)."""
+    """Haar-random orthogonal matrix (QR of a Gaussian matrix with sign fix).
+
+    Parameters
+    ----------
+    n : int
+        Size.
+    rng : numpy.random.Generator
+
+    Returns
+    -------
+    (n, n) ndarray
+    """
     if n == 0:
         return np.zeros((0, 0))
     Q, R = np.linalg.qr(rng.standard_normal((n, n)))

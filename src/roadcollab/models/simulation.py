@@ -65,7 +65,17 @@ class DiscretePlant:
             object.__setattr__(self, "_Vinv", np.linalg.inv(V))
 
     def frequency_response(self, omega_dt: np.ndarray) -> np.ndarray:
-        """``P_d(e^{j omega dt})``, shape (M, 2, 2)."""
+        """``P_d(e^{j omega dt})``.
+
+        Parameters
+        ----------
+        omega_dt : (M,) array_like
+            Normalised frequencies, rad/sample.
+
+        Returns
+        -------
+        (M, 2, 2) complex ndarray
+        """
         return dlti_frequency_response(self.Ad, self.Bd, self.C, self.D, omega_dt)
 
     def to_control(self):
@@ -76,7 +86,18 @@ class DiscretePlant:
 
 
 def discretize_plant(model: HalfCarModel, dt: float) -> DiscretePlant:
-    """ZOH discretisation of a half-car model (exact for piecewise-constant ``w``)."""
+    """ZOH discretisation of a half-car model (exact for piecewise-constant ``w``).
+
+    Parameters
+    ----------
+    model : HalfCarModel
+    dt : float
+        Sample period, s.
+
+    Returns
+    -------
+    DiscretePlant
+    """
     dt = check_positive("dt", dt)
     Ad, Bd, C, D = zoh_discretize(model.A, model.B, model.C, model.D, dt)
     return DiscretePlant(Ad, Bd, C, D, dt)

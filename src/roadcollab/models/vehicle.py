@@ -78,7 +78,17 @@ class HalfCarParameters:
         return asdict(self)
 
     def scaled(self, factors: dict[str, float]) -> "HalfCarParameters":
-        """Return a copy with each named field multiplied by its factor."""
+        """Return a copy with each named field multiplied by its factor.
+
+        Parameters
+        ----------
+        factors : dict of str to float
+            Field name -> multiplier.
+
+        Returns
+        -------
+        HalfCarParameters
+        """
         unknown = set(factors) - {f.name for f in fields(self)}
         if unknown:
             raise ParameterError(f"factors has unknown parameter names {sorted(unknown)}")
@@ -121,7 +131,17 @@ class HalfCarModel:
         return ev[np.argsort(ev.imag)]
 
     def frequency_response(self, s: np.ndarray) -> np.ndarray:
-        """``P(s)`` at complex frequencies ``s`` (shape (M,)); returns (M, 2, 2)."""
+        """``P(s)`` at complex frequencies.
+
+        Parameters
+        ----------
+        s : (M,) complex array_like
+            rad/s.
+
+        Returns
+        -------
+        (M, 2, 2) complex ndarray
+        """
         return ss_response(self.A, self.B, self.C, self.D, s)
 
 

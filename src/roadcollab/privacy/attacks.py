@@ -169,7 +169,20 @@ def balanced_truncation_poles(sys: StateSpaceData, order: int) -> np.ndarray:
 
 
 def attack_model_reduction(message: ExchangeMessage, order: int = 4) -> np.ndarray:
-    """The paper's attack: balanced truncation of ``S~`` to the known order; its poles."""
+    """The paper's attack: balanced truncation of ``S~`` to the known order; its poles.
+
+    Parameters
+    ----------
+    message : ExchangeMessage
+        An obfuscated (or clear) message.
+    order : int
+        The known order of ``S_j``.
+
+    Returns
+    -------
+    complex ndarray
+        Continuous poles of the reduced model, rad/s (empty if the reduction fails).
+    """
     return balanced_truncation_poles(message.S, order)
 
 
