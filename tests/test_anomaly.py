@@ -16,7 +16,9 @@ from roadcollab.detection.detector import Detection, DetectorSpec, detect_anomal
 from roadcollab.experiments.anomaly_study import ESTIMATORS, AnomalyStudyConfig, run_anomaly_study
 from roadcollab.errors import ParameterError
 from roadcollab.experiments.reproduction import ExperimentConfig
-from roadcollab.models.road import Anomaly, RoadProfile, RoadSpec, generate_road
+from roadcollab.models.anomaly import Anomaly
+from roadcollab.models.profile import RoadProfile
+from roadcollab.models.road import RoadSpec, generate_road
 from roadcollab.estimation.grid import SegmentGrid
 
 SPEED, FS = 15.0, 200.0
@@ -342,7 +344,8 @@ def test_study_validation():
 
 def test_measured_profile_with_injected_anomalies():
     """Measured roughness plus synthetic anomalies: ground truth survives and is found."""
-    from roadcollab.models.road import RoadSpec, measured_road, with_anomalies
+    from roadcollab.io.profiles import measured_road
+    from roadcollab.models.road import RoadSpec, with_anomalies
 
     base = measured_road(spacing=0.05, rng=0)
     road = with_anomalies(base, RoadSpec(anomaly_density=0.02, depth_range=(0.05, 0.05)), rng=1)

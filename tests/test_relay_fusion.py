@@ -11,7 +11,7 @@ from roadcollab.experiments.reproduction import FleetPipeline, run_reproduction
 from roadcollab.collaboration.fusion import LinearMMSE, plant_moments, posterior_draws
 from roadcollab.privacy.obfuscation import obfuscate, theorem1_errors
 from roadcollab.collaboration.relay import Exchange, Relay, simulate_measurements
-from roadcollab.models.road import Anomaly
+from roadcollab.models.anomaly import Anomaly
 from roadcollab.estimation.grid import SegmentGrid
 from roadcollab.lti.batch2x2 import matvec
 from roadcollab.models.vehicle import FleetSpec

@@ -10,17 +10,15 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from roadcollab.errors import ParameterError
+from roadcollab.io.profiles import load_profile, measured_road, packaged_profile_path
+from roadcollab.models.anomaly import Anomaly
+from roadcollab.models.profile import RoadProfile
 from roadcollab.models.road import (
     ISO_8608_GD0,
-    Anomaly,
     JumpStatistics,
-    RoadProfile,
     RoadSpec,
     generate_road,
     jump_statistics,
-    load_profile,
-    measured_road,
-    packaged_profile_path,
     road_velocity_psd,
     wiener_intensity,
 )

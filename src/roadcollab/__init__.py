@@ -17,7 +17,8 @@ from .wire.message import ExchangeMessage, InversionMessage
 from .lti.realisation import StateSpaceData
 from .privacy.obfuscation import ObfuscationSpec, obfuscate
 from .collaboration.relay import Exchange, Relay, simulate_measurements
-from .models.road import RoadSpec, generate_road, measured_road
+from .io.profiles import measured_road
+from .models.road import RoadSpec, generate_road
 from .models.simulation import discretize_plant, simulate_response
 from .estimation.grid import SegmentGrid
 from .models.vehicle import FleetSpec, HalfCarParameters, Vehicle, half_car_model, sample_fleet

@@ -191,7 +191,7 @@ def _config_from_args(args):
         raise ParameterError(f"--road-profile must be an existing file, got {args.road_profile!r}")
     if args.road_profile is not None:
         # A measured profile covers a fixed stretch: score as much of it as fits.
-        from ..models.road import measured_road
+        from ..io.profiles import measured_road
 
         length = measured_road(None if args.road_profile == "packaged" else args.road_profile, rng=0).length
         kw["segment_length"] = min(300.0, length - 2 * 15.0 - 1.0)

@@ -84,7 +84,7 @@ from scipy.optimize import linear_sum_assignment
 
 from .._validation import check_matrix, check_positive, check_probability, check_real, check_signal
 from ..errors import ParameterError
-from ..models.road import Anomaly, check_anomaly_fields
+from ..models.anomaly import Anomaly, check_anomaly_fields
 
 __all__ = ["Detection", "DetectorSpec", "detect_anomalies", "match_detections"]
 

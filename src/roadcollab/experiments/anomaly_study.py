@@ -38,7 +38,8 @@ from .._validation import check_int, check_positive, check_real
 from ..detection.detector import DetectorSpec, detect_anomalies, match_detections
 from ..errors import ParameterError
 from ..experiments.reproduction import ExperimentConfig, FleetPipeline, RunEstimates, run_estimates
-from ..models.road import RoadSpec, generate_road, measured_road, with_anomalies
+from ..io.profiles import measured_road
+from ..models.road import RoadSpec, generate_road, with_anomalies
 from ..models.vehicle import Vehicle, sample_fleet
 
 __all__ = ["ESTIMATORS", "AnomalyStudyConfig", "AnomalyStudyResult", "run_anomaly_study"]

@@ -30,7 +30,9 @@ from ..estimation.estimator import JDPNoise
 from ..collaboration.fusion import LinearMMSE, plant_moments, road_second_moment
 from ..privacy.obfuscation import ObfuscationSpec, theorem1_errors
 from ..collaboration.relay import Exchange, Relay, simulate_measurements
-from ..models.road import RoadSpec, TimeRoad, generate_road, jump_statistics, measured_road, wiener_intensity
+from ..io.profiles import measured_road
+from ..models.profile import TimeRoad
+from ..models.road import RoadSpec, generate_road, jump_statistics, wiener_intensity
 from ..estimation.grid import SegmentGrid
 from ..models.vehicle import FleetSpec, Vehicle, sample_fleet
 

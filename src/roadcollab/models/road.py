@@ -1,4 +1,4 @@
-"""Road profiles: ISO 8608 roughness, anomalies with ground truth, measured profiles.
+"""Synthetic roads: ISO 8608 roughness and the jump-diffusion (JDP) pothole model.
 
 A road has two wheel tracks (columns ``[left, right]``). The synthetic roughness uses ISO 8608
 with waviness 2, so each track's elevation is a random walk in distance: the slope is white
@@ -6,29 +6,32 @@ with one-sided spatial PSD ``4 pi^2 n0^2 Gd(n0)`` and an increment over ``ds`` h
 ``2 pi^2 n0^2 Gd(n0) ds``. Seen by a vehicle at speed ``V`` the road velocity is white in time,
 one-sided PSD ``4 pi^2 n0^2 Gd(n0) V`` ((m/s)^2/Hz), i.e. a Wiener process of intensity
 ``2 pi^2 n0^2 Gd(n0) V`` (m^2/s). Pothole edges are the jumps of the jump-diffusion (JDP) model.
+
+:func:`generate_road` draws a whole road from a :class:`RoadSpec`; :func:`with_anomalies` adds
+anomalies drawn from a spec to an existing (measured) profile. Both live here, next to the
+spec and the anomaly drawing they share. Anomaly records are in :mod:`.anomaly`, profile
+containers in :mod:`.profile`, measured profiles in :mod:`roadcollab.io.profiles`.
 """
 
 from __future__ import annotations
 
 import bisect
-import math
-import os
 import dataclasses
+import math
 from dataclasses import dataclass
-from importlib import resources
-from pathlib import Path
 
 import numpy as np
 from scipy.ndimage import uniform_filter1d
 
-from .._validation import (check_matrix, check_nonnegative, check_positive, check_probability, check_psd,
-                          check_real)
+from .._validation import check_matrix, check_nonnegative, check_positive, check_probability, check_psd
 from ..errors import ParameterError
+from .anomaly import ANOMALY_SIDES, Anomaly
+from .profile import RoadProfile
 
 __all__ = [
-    "ISO_8608_GD0", "ISO_8608_N0", "road_velocity_psd", "wiener_intensity",
-    "Anomaly", "RoadSpec", "JumpStatistics", "RoadProfile", "TimeRoad", "MeasuredProfile",
-    "generate_road", "jump_statistics", "load_profile", "measured_road", "packaged_profile_path", "with_anomalies",
+    "ISO_8608_GD0", "ISO_8608_N0", "MAX_SAMPLES", "iso_gd0", "road_velocity_psd", "wiener_intensity",
+    "RoadSpec", "JumpStatistics", "jump_statistics", "random_walk", "moving_average",
+    "generate_road", "with_anomalies",
 ]
 
 #: Geometric-mean displacement PSD Gd(n0) (m^3) of the ISO 8608 classes at n0 = 0.1 cycle/m.
@@ -36,14 +39,25 @@ ISO_8608_GD0 = {"A": 16e-6, "B": 64e-6, "C": 256e-6, "D": 1024e-6, "E": 4096e-6,
                 "F": 16384e-6, "G": 65536e-6, "H": 262144e-6}
 #: Reference spatial frequency of ISO 8608 (cycle/m).
 ISO_8608_N0 = 0.1
-_SIDES = ("left", "right", "both")
-_KINDS = ("pothole", "bump")
-_MAX_SAMPLES = 50_000_000   # per track; a clear error beats a MemoryError deep in numpy
-_LATERAL_HIGHPASS = 20.0    # m, window of the moving average removed from the lateral residual
+MAX_SAMPLES = 50_000_000   # per track; a clear error beats a MemoryError deep in numpy
 
 
-def _gd0(name: str, value) -> float:
-    """Resolve an ISO class letter (or a ``RoadSpec``, or a float Gd(n0) in m^3) to Gd(n0)."""
+def iso_gd0(name: str, value) -> float:
+    """Resolve an ISO class letter (or a ``RoadSpec``, or a float Gd(n0) in m^3) to Gd(n0).
+
+    Parameters
+    ----------
+    name : str
+        Argument name used in error messages.
+    value : str, RoadSpec or float
+        Class letter ``"A"``..``"H"`` (case and surrounding spaces ignored), a spec (its
+        ``iso_class``), or Gd(n0) itself in m^3 (> 0).
+
+    Returns
+    -------
+    float
+        Gd(n0), m^3.
+    """
     if isinstance(value, RoadSpec):
         return ISO_8608_GD0[value.iso_class]
     if isinstance(value, str):
@@ -74,7 +88,7 @@ def road_velocity_psd(iso_class_or_gd0, speed) -> float:
     float
         PSD in (m/s)^2/Hz, flat in frequency (waviness 2).
     """
-    gd0 = _gd0("iso_class_or_gd0", iso_class_or_gd0)
+    gd0 = iso_gd0("iso_class_or_gd0", iso_class_or_gd0)
     return 4.0 * math.pi**2 * ISO_8608_N0**2 * gd0 * check_positive("speed", speed)
 
 
@@ -82,60 +96,21 @@ def wiener_intensity(spec_or_class, speed) -> np.ndarray:
     """Two-sided intensity (m^2/s) of the white road velocity of both tracks, shape (2, 2).
 
     Half the one-sided PSD of :func:`road_velocity_psd` times the identity (the two tracks'
-    random walks are independent). ``spec_or_class`` is a :class:`RoadSpec`, a class letter or
-    Gd(n0) in m^3; ``speed`` in m/s.
+    random walks are independent).
+
+    Parameters
+    ----------
+    spec_or_class : RoadSpec, str or float
+        A spec, an ISO 8608 class letter or Gd(n0) in m^3.
+    speed : float
+        Vehicle speed, m/s, > 0.
+
+    Returns
+    -------
+    numpy.ndarray
+        Shape (2, 2), m^2/s.
     """
-    return 0.5 * road_velocity_psd(_gd0("spec_or_class", spec_or_class), speed) * np.eye(2)
-
-
-@dataclass(frozen=True)
-class Anomaly:
-    """Ground truth of a pothole (rectangular, ``-depth``) or bump (raised cosine of height ``depth``)."""
-
-    position: float   # m, start of the anomaly along the road
-    side: str         # "left" | "right" | "both"
-    kind: str         # "pothole" | "bump"
-    depth: float      # m, > 0: depth of a pothole or height of a bump
-    length: float     # m, > 0, extent along the road
-
-    def __post_init__(self):
-        check_anomaly_fields(self)
-        object.__setattr__(self, "length", check_positive("length", self.length))
-
-    @property
-    def center(self) -> float:
-        """Middle of the anomaly (m)."""
-        return self.position + 0.5 * self.length
-
-    @property
-    def end(self) -> float:
-        """End of the anomaly (m)."""
-        return self.position + self.length
-
-    @property
-    def tracks(self) -> tuple[int, ...]:
-        """Elevation columns hit: ``(0,)`` left, ``(1,)`` right, ``(0, 1)`` both."""
-        return {"left": (0,), "right": (1,), "both": (0, 1)}[self.side]
-
-    def elevation(self, distance) -> np.ndarray:
-        """Elevation added by this anomaly at ``distance`` (m, shape (n,)); returns (n,) m."""
-        x = np.asarray(distance, dtype=float)
-        u = (x - self.position) / self.length
-        if self.kind == "pothole":
-            # Half-open so that the two edges are single jumps of -depth and +depth.
-            return np.where((u >= 0.0) & (u < 1.0), -self.depth, 0.0)
-        return np.where((u >= 0.0) & (u <= 1.0), self.depth * 0.5 * (1.0 - np.cos(2 * np.pi * u)), 0.0)
-
-
-def check_anomaly_fields(obj) -> None:
-    """Validate (and normalise) ``position``, ``side``, ``kind`` and ``depth`` of a frozen
-    anomaly-like dataclass (a true :class:`Anomaly` or a detection)."""
-    object.__setattr__(obj, "position", check_real("position", obj.position))
-    if obj.side not in _SIDES:
-        raise ParameterError(f"side must be one of {_SIDES}, got {obj.side!r}")
-    if obj.kind not in _KINDS:
-        raise ParameterError(f"kind must be one of {_KINDS}, got {obj.kind!r}")
-    object.__setattr__(obj, "depth", check_positive("depth", obj.depth))
+    return 0.5 * road_velocity_psd(iso_gd0("spec_or_class", spec_or_class), speed) * np.eye(2)
 
 
 def _check_range(name: str, value) -> tuple[float, float]:
@@ -150,7 +125,31 @@ def _check_range(name: str, value) -> tuple[float, float]:
 
 @dataclass(frozen=True)
 class RoadSpec:
-    """Parameters of a synthetic two-track road (see :func:`generate_road`)."""
+    """Parameters of a synthetic two-track road (see :func:`generate_road`).
+
+    Parameters
+    ----------
+    length : float
+        Total generated length, m.
+    spacing : float
+        Spatial grid step, m (at most ``length / 2`` and ``length / MAX_SAMPLES`` or more).
+    iso_class : str
+        ISO 8608 class ``"A"``..``"H"`` of both tracks (independent random walks).
+    anomaly_density : float
+        Anomalies per metre (Poisson) in ``[margin, length - margin]``.
+    anomaly_margin : float
+        Anomaly-free stretch at both ends, m.
+    pothole_fraction : float
+        Probability that an anomaly is a pothole (else a bump).
+    depth_range, pothole_length_range, bump_length_range : (float, float)
+        Uniform ranges of depth / height and of the lengths, m, ``0 < low <= high``.
+    side_probabilities : (float, float, float)
+        Probabilities of left, right and both tracks; sum to 1.
+    min_anomaly_gap : float
+        Clear distance between anomalies sharing a track, m.
+    enveloping_length : float
+        Tyre enveloping moving-average width, m (0 disables).
+    """
 
     length: float = 330.0            # m, total generated length
     spacing: float = 0.05            # m, spatial grid step
@@ -173,8 +172,8 @@ class RoadSpec:
         put("spacing", check_positive("spacing", self.spacing))
         if self.spacing > 0.5 * self.length:
             raise ParameterError(f"spacing must be <= length / 2 = {0.5 * self.length:g}, got {self.spacing:g}")
-        if self.length / self.spacing > _MAX_SAMPLES:
-            raise ParameterError(f"length / spacing must be <= {_MAX_SAMPLES}, got {self.length / self.spacing:.3g}")
+        if self.length / self.spacing > MAX_SAMPLES:
+            raise ParameterError(f"length / spacing must be <= {MAX_SAMPLES}, got {self.length / self.spacing:.3g}")
         if not isinstance(self.iso_class, str) or self.iso_class.strip().upper() not in ISO_8608_GD0:
             raise ParameterError(f"iso_class must be an ISO 8608 class in A..H, got {self.iso_class!r}")
         put("iso_class", self.iso_class.strip().upper())
@@ -201,7 +200,18 @@ class RoadSpec:
 
 @dataclass(frozen=True, eq=False)
 class JumpStatistics:
-    """Compound-Poisson jump parameters of the pothole edges seen by one vehicle."""
+    """Compound-Poisson jump parameters of the pothole edges seen by one vehicle.
+
+    Parameters
+    ----------
+    rate : float
+        Jumps per second per track, 1/s, >= 0.
+    mean : numpy.ndarray
+        Mean jump of ``[left, right]``, m, shape (2,).
+    covariance : numpy.ndarray
+        Jump covariance, m^2, shape (2, 2), positive semidefinite; ``rate * covariance`` is
+        the second-moment intensity when the mean is 0.
+    """
 
     rate: float              # 1/s, jumps per second per track
     mean: np.ndarray         # m, shape (2,), mean jump of [left, right]
@@ -236,6 +246,16 @@ def jump_statistics(spec: RoadSpec, speed) -> JumpStatistics:
 
     Ignores the slight thinning by ``min_anomaly_gap`` (anomalies are redrawn, not dropped,
     so the count is kept whenever there is room) and the smoothing of edges by enveloping.
+
+    Parameters
+    ----------
+    spec : RoadSpec
+    speed : float
+        Vehicle speed, m/s, > 0.
+
+    Returns
+    -------
+    JumpStatistics
     """
     if not isinstance(spec, RoadSpec):
         raise ParameterError(f"spec must be a RoadSpec, got {type(spec).__name__}")
@@ -249,18 +269,52 @@ def jump_statistics(spec: RoadSpec, speed) -> JumpStatistics:
     return JumpStatistics(rate=rate, mean=np.zeros(2), covariance=depth_sq / p_mean * hit)
 
 
-def _random_walk(n: int, spacing: float, gd0: float, rng: np.random.Generator, tracks: int = 2) -> np.ndarray:
-    """ISO 8608 (waviness 2) random-walk elevation, starting at 0, shape (n, tracks) in m."""
+def random_walk(n: int, spacing: float, gd0: float, rng: np.random.Generator, tracks: int = 2) -> np.ndarray:
+    """ISO 8608 (waviness 2) random-walk elevation, starting at 0, shape (n, tracks) in m.
+
+    Parameters
+    ----------
+    n : int
+        Samples per track (>= 1).
+    spacing : float
+        Grid step, m.
+    gd0 : float
+        Gd(n0), m^3.
+    rng : numpy.random.Generator
+        Draws ``(n - 1, tracks)`` standard normals.
+    tracks : int
+        Independent tracks (columns).
+
+    Returns
+    -------
+    numpy.ndarray
+        Shape (n, tracks), m; row 0 is 0.
+    """
     steps = rng.standard_normal((n - 1, tracks)) * math.sqrt(_increment_variance(gd0, spacing))
     return np.vstack([np.zeros((1, tracks)), np.cumsum(steps, axis=0)])
 
 
-def _moving_average(elevation: np.ndarray, spacing: float, width: float) -> np.ndarray:
+def moving_average(elevation: np.ndarray, spacing: float, width: float) -> np.ndarray:
     """Centred moving average along axis 0 over ``width`` m; same length as the input.
 
     Uses the odd number of samples nearest to ``width / spacing`` (rounded up when even) and
     replicates the end values beyond the profile, so there is no start-up transient. A window
-    of one sample returns the input unchanged.
+    of one sample returns the input unchanged. Used as tyre enveloping and as the lateral
+    high-pass of measured profiles.
+
+    Parameters
+    ----------
+    elevation : numpy.ndarray
+        Shape (n,) or (n, tracks), m, on a grid of step ``spacing``.
+    spacing : float
+        Grid step, m.
+    width : float
+        Window width, m (0 disables).
+
+    Returns
+    -------
+    numpy.ndarray
+        Same shape as ``elevation``, m (a copy when the window is one sample).
     """
     size = int(round(width / spacing))
     size += 1 - size % 2
@@ -282,7 +336,7 @@ def _draw_anomalies(spec: RoadSpec, rng: np.random.Generator) -> tuple[Anomaly, 
     placed: list[Anomaly] = []
     for _ in range(count):
         kind = "pothole" if rng.random() < spec.pothole_fraction else "bump"
-        side = _SIDES[rng.choice(3, p=spec.side_probabilities)]
+        side = ANOMALY_SIDES[rng.choice(3, p=spec.side_probabilities)]
         depth = rng.uniform(*spec.depth_range)
         length = rng.uniform(*(spec.pothole_length_range if kind == "pothole" else spec.bump_length_range))
         last_start = spec.length - spec.anomaly_margin - length
@@ -324,7 +378,7 @@ def generate_road(spec: RoadSpec, *, rng=None) -> RoadProfile:
     rng = np.random.default_rng(rng)
     n = int(math.floor(spec.length / spec.spacing + 1e-9)) + 1
     distance = spec.spacing * np.arange(n)
-    elevation = _random_walk(n, spec.spacing, ISO_8608_GD0[spec.iso_class], rng)
+    elevation = random_walk(n, spec.spacing, ISO_8608_GD0[spec.iso_class], rng)
     anomalies = _draw_anomalies(spec, rng)
     for anomaly in anomalies:
         # Evaluate on the anomaly's own stretch only: O(length) instead of O(road) per anomaly.
@@ -333,247 +387,9 @@ def generate_road(spec: RoadSpec, *, rng=None) -> RoadProfile:
         shape = anomaly.elevation(distance[lo:hi])
         for col in anomaly.tracks:
             elevation[lo:hi, col] += shape
-    elevation = _moving_average(elevation, spec.spacing, spec.enveloping_length)
+    elevation = moving_average(elevation, spec.spacing, spec.enveloping_length)
     return RoadProfile(distance, elevation, anomalies, f"synthetic ISO {spec.iso_class}")
 
-
-@dataclass(frozen=True, eq=False)
-class TimeRoad:
-    """The road seen by a vehicle at constant speed, sampled in time.
-
-    The elevation is taken as linear between samples, so the road velocity is exactly
-    piecewise constant and a zero-order-hold discretisation of the vehicle is exact.
-    """
-
-    time: np.ndarray        # s, shape (N,): k / sample_rate, start of each sample interval
-    elevation: np.ndarray   # m, shape (N + 1, 2): [left, right] at k / sample_rate, k = 0..N
-    velocity: np.ndarray    # m/s, shape (N, 2): (elevation[k + 1] - elevation[k]) * sample_rate
-    speed: float            # m/s
-    sample_rate: float      # Hz
-    start: float            # m, road distance of sample 0
-    anomalies: tuple[Anomaly, ...] = ()   # overlapping the window, positions in road distance
-
-    def __post_init__(self):
-        time = check_matrix("time", self.time, (None,))
-        n = time.shape[0]
-        elevation = check_matrix("elevation", self.elevation, (n + 1, 2))
-        velocity = check_matrix("velocity", self.velocity, (n, 2))
-        for name, arr in (("time", time), ("elevation", elevation), ("velocity", velocity)):
-            arr.setflags(write=False)
-            object.__setattr__(self, name, arr)
-        object.__setattr__(self, "speed", check_positive("speed", self.speed))
-        object.__setattr__(self, "sample_rate", check_positive("sample_rate", self.sample_rate))
-        object.__setattr__(self, "start", check_real("start", self.start))
-        object.__setattr__(self, "anomalies", tuple(self.anomalies))
-
-    @property
-    def positions(self) -> np.ndarray:
-        """Road distance (m) of the elevation samples, shape (N + 1,)."""
-        return self.start + self.speed * np.arange(self.time.shape[0] + 1) / self.sample_rate
-
-    def position(self, k) -> float:
-        """Road distance (m) of elevation sample ``k`` (may be fractional)."""
-        return self.start + self.speed * check_real("k", k) / self.sample_rate
-
-
-@dataclass(frozen=True, eq=False)
-class RoadProfile:
-    """A two-track road profile on a distance grid."""
-
-    distance: np.ndarray    # m, shape (n,), strictly increasing
-    elevation: np.ndarray   # m, shape (n, 2), columns [left, right]
-    anomalies: tuple[Anomaly, ...] = ()   # ground truth (empty for measured roads)
-    source: str = ""        # e.g. "synthetic ISO C" or the file name
-
-    def __post_init__(self):
-        distance = check_matrix("distance", self.distance, (None,))
-        if distance.shape[0] < 2 or np.any(np.diff(distance) <= 0):
-            raise ParameterError(f"distance must be strictly increasing with >= 2 points, got {distance.shape[0]} "
-                                 f"points and {int(np.sum(np.diff(distance) <= 0))} non-increasing steps")
-        elevation = check_matrix("elevation", self.elevation, (distance.shape[0], 2))
-        for name, arr in (("distance", distance), ("elevation", elevation)):
-            arr.setflags(write=False)
-            object.__setattr__(self, name, arr)
-        if not all(isinstance(a, Anomaly) for a in self.anomalies):
-            raise ParameterError("anomalies must be a sequence of Anomaly")
-        object.__setattr__(self, "anomalies", tuple(self.anomalies))
-        if not isinstance(self.source, str):
-            raise ParameterError(f"source must be a str, got {type(self.source).__name__}")
-
-    @property
-    def length(self) -> float:
-        """Covered distance (m)."""
-        return float(self.distance[-1] - self.distance[0])
-
-    def sample(self, speed, sample_rate, *, start=0.0, duration=None) -> TimeRoad:
-        """Elevation seen at constant ``speed`` (m/s), sampled at ``sample_rate`` (Hz).
-
-        Linear interpolation in distance at ``x_k = start + speed * k / sample_rate`` for
-        ``k = 0..N`` with ``N = floor(duration * sample_rate)`` (``duration`` in s; default:
-        up to the end of the profile). The window ``[start, x_N]`` must lie in the profile.
-        """
-        speed = check_positive("speed", speed)
-        sample_rate = check_positive("sample_rate", sample_rate)
-        start = check_real("start", start)
-        first, last = float(self.distance[0]), float(self.distance[-1])
-        tol = 1e-9 * max(1.0, abs(first), abs(last))   # absorbs float rounding of x_N
-        if not first - tol <= start < last:
-            raise ParameterError(f"start must lie in the profile [{first:g}, {last:g}) m, got {start:g}")
-        if duration is None:
-            duration = (last - start) / speed
-        else:
-            duration = check_positive("duration", duration)
-        n = int(math.floor(duration * sample_rate + 1e-9))
-        end = start + speed * n / sample_rate
-        if n < 1:
-            raise ParameterError(f"duration must cover at least one sample interval 1/sample_rate = "
-                                 f"{1 / sample_rate:g} s, got {duration:g} s")
-        if end > last + tol:
-            raise ParameterError(f"duration must keep the window inside the profile: start + speed * duration = "
-                                 f"{end:g} m > profile end {last:g} m (max duration {(last - start) / speed:g} s)")
-        x = np.clip(start + speed * np.arange(n + 1) / sample_rate, first, last)
-        elevation = np.column_stack([np.interp(x, self.distance, self.elevation[:, c]) for c in range(2)])
-        inside = tuple(a for a in self.anomalies if a.end >= start and a.position <= end)
-        return TimeRoad(time=np.arange(n) / sample_rate, elevation=elevation,
-                        velocity=np.diff(elevation, axis=0) * sample_rate, speed=speed,
-                        sample_rate=sample_rate, start=start, anomalies=inside)
-
-
-@dataclass(frozen=True, eq=False)
-class MeasuredProfile:
-    """One measured track as read from a file: ``distance`` (n,) m, ``elevation`` (n,) m."""
-
-    distance: np.ndarray   # m, shape (n,), as in the file
-    elevation: np.ndarray  # m, shape (n,)
-    spacing: float         # m, median distance step
-    source: str            # the file path as given
-
-    def __post_init__(self):
-        distance = check_matrix("distance", self.distance, (None,))
-        elevation = check_matrix("elevation", self.elevation, (distance.shape[0],))
-        for name, arr in (("distance", distance), ("elevation", elevation)):
-            arr.setflags(write=False)
-            object.__setattr__(self, name, arr)
-        object.__setattr__(self, "spacing", check_positive("spacing", self.spacing))
-
-    def __len__(self) -> int:
-        return int(self.distance.shape[0])
-
-
-def packaged_profile_path():
-    """Path (a ``Traversable``; a ``pathlib.Path`` in normal installs) of ``data/profile_1.txt``."""
-    return resources.files("roadcollab") / "data" / "profile_1.txt"
-
-
-def load_profile(path) -> MeasuredProfile:
-    """Read rows ``distance_m elevation_m`` (whitespace or comma separated; ``#`` comments).
-
-    Raises
-    ------
-    ParameterError
-        Naming the file and 1-based line: not 2 numbers, non-finite values, non-increasing or
-        non-uniform distance (relative tolerance 1e-6 of the spacing), fewer than 8 rows.
-    """
-    name = str(path)
-    try:
-        text = (Path(path) if isinstance(path, (str, os.PathLike)) else path).read_text(encoding="utf-8")
-    except (OSError, UnicodeDecodeError) as err:
-        raise ParameterError(f"path: cannot read profile file {name}: {err}") from err
-    rows, lines = [], []
-    for lineno, raw in enumerate(text.splitlines(), start=1):
-        line = raw.split("#", 1)[0].strip()
-        if not line:
-            continue
-        tokens = [t.strip() for t in line.split(",")] if "," in line else line.split()
-        try:
-            values = [float(t) for t in tokens]
-        except ValueError:
-            values = []
-        if len(values) != 2:
-            raise ParameterError(f"{name}: line {lineno}: expected 2 numbers 'distance_m elevation_m', got {raw!r}")
-        if not all(math.isfinite(v) for v in values):
-            raise ParameterError(f"{name}: line {lineno}: expected finite numbers, got {raw!r}")
-        if rows and values[0] <= rows[-1][0]:
-            raise ParameterError(f"{name}: line {lineno}: expected distance > {rows[-1][0]:g} (increasing), "
-                                 f"got {values[0]:g}")
-        rows.append(values)
-        lines.append(lineno)
-    if len(rows) < 8:
-        raise ParameterError(f"{name}: expected at least 8 data rows, got {len(rows)}")
-    data = np.array(rows)
-    steps = np.diff(data[:, 0])
-    spacing = float(np.median(steps))
-    # Tolerance relative to the spacing, plus float rounding of large distance values.
-    bad = np.flatnonzero(np.abs(steps - spacing) > 1e-6 * spacing + 1e-12 * np.abs(data[1:, 0]))
-    if bad.size:
-        i = int(bad[0])
-        raise ParameterError(f"{name}: line {lines[i + 1]}: expected uniform spacing {spacing:g} m, "
-                             f"got step {steps[i]:g} m")
-    return MeasuredProfile(data[:, 0], data[:, 1], spacing, name)
-
-
-def _detrend(distance: np.ndarray, z: np.ndarray) -> np.ndarray:
-    """Remove the least-squares line (DC and slope are unobservable to accelerometers)."""
-    slope, offset = np.polyfit(distance, z, 1)
-    return z - (offset + slope * distance)
-
-
-def measured_road(path=None, *, second_track="lateral", lateral_class="A", detrend=True, spacing=None,
-                  enveloping_length=0.25, rng=None) -> RoadProfile:
-    """Two-track road from a measured single-track profile (left track).
-
-    Parameters
-    ----------
-    path : str, PathLike or None
-        Profile file (see :func:`load_profile`); None uses :func:`packaged_profile_path`.
-    second_track : {"lateral", "same", "synthetic"}
-        Right track: ``"lateral"`` = left + an independent ISO ``lateral_class`` random walk
-        high-passed by subtracting its 20 m centred moving average (coherent at long, independent
-        at short wavelengths); ``"same"`` = left; ``"synthetic"`` = an independent ISO
-        ``lateral_class`` random walk (also detrended when ``detrend``).
-    lateral_class : str or float
-        ISO 8608 class (or Gd(n0) in m^3) of the right-track random walk.
-    detrend : bool
-        Remove a least-squares line from the measured track.
-    spacing : float or None
-        Resample linearly to this grid step (m); None keeps the file's spacing.
-    enveloping_length : float
-        Tyre enveloping moving-average width (m), as in :func:`generate_road`; 0 disables.
-    rng : None, int or numpy.random.Generator
-
-    Returns
-    -------
-    RoadProfile
-        Distance starting at 0, elevation (n, 2) m, no anomalies, ``source`` = file name.
-    """
-    if second_track not in ("lateral", "same", "synthetic"):
-        raise ParameterError(f"second_track must be 'lateral', 'same' or 'synthetic', got {second_track!r}")
-    gd0 = _gd0("lateral_class", lateral_class)
-    enveloping_length = check_nonnegative("enveloping_length", enveloping_length)
-    if not isinstance(detrend, (bool, np.bool_)):
-        raise ParameterError(f"detrend must be a bool, got {detrend!r}")
-    rng = np.random.default_rng(rng)
-    measured = load_profile(packaged_profile_path() if path is None else path)
-    distance = measured.distance - measured.distance[0]
-    left = _detrend(distance, measured.elevation) if detrend else measured.elevation.copy()
-    step = measured.spacing
-    if spacing is not None:
-        step = check_positive("spacing", spacing)
-        if not distance[-1] / _MAX_SAMPLES <= step <= 0.5 * distance[-1]:
-            raise ParameterError(f"spacing must lie in [{distance[-1] / _MAX_SAMPLES:g}, {0.5 * distance[-1]:g}] m "
-                                 f"(at most {_MAX_SAMPLES} samples, at least 3), got {step:g}")
-        grid = step * np.arange(int(math.floor(distance[-1] / step + 1e-9)) + 1)
-        left, distance = np.interp(grid, distance, left), grid
-    if second_track == "same":
-        right = left.copy()
-    else:
-        walk = _random_walk(distance.shape[0], step, gd0, rng, tracks=1)[:, 0]
-        if second_track == "lateral":
-            right = left + walk - _moving_average(walk, step, _LATERAL_HIGHPASS)
-        else:
-            right = _detrend(distance, walk) if detrend else walk
-    elevation = _moving_average(np.column_stack([left, right]), step, enveloping_length)
-    return RoadProfile(distance, elevation, (), Path(measured.source).name)
 
 
 def with_anomalies(profile: RoadProfile, spec: RoadSpec, *, rng=None) -> RoadProfile:
@@ -586,6 +402,7 @@ def with_anomalies(profile: RoadProfile, spec: RoadSpec, *, rng=None) -> RoadPro
     Parameters
     ----------
     profile : RoadProfile
+        The road, e.g. from :func:`roadcollab.io.profiles.measured_road`.
     spec : RoadSpec
         Anomaly settings (its ``length`` and ``spacing`` are replaced by the profile's).
     rng : numpy.random.Generator | int | None
@@ -593,6 +410,8 @@ def with_anomalies(profile: RoadProfile, spec: RoadSpec, *, rng=None) -> RoadPro
     Returns
     -------
     RoadProfile
+        Same distance grid; elevation plus the enveloped anomalies, m; ``anomalies`` are the
+        profile's followed by the new ones (positions in the profile's distance).
     """
     if not isinstance(profile, RoadProfile):
         raise ParameterError(f"profile must be a RoadProfile, got {type(profile).__name__}")
@@ -610,7 +429,7 @@ def with_anomalies(profile: RoadProfile, spec: RoadSpec, *, rng=None) -> RoadPro
         for t in a.tracks:
             bumps[:, t] += shape
     if spec.enveloping_length > 0:
-        bumps = _moving_average(bumps, spacing, spec.enveloping_length)
+        bumps = moving_average(bumps, spacing, spec.enveloping_length)
     shifted = tuple(dataclasses.replace(a, position=a.position + float(d[0])) for a in anomalies)
     return RoadProfile(d, profile.elevation + bumps, profile.anomalies + shifted,
                        f"{profile.source} + synthetic anomalies")

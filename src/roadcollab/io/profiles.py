@@ -1,0 +1,209 @@
+"""Measured road profiles: the packaged profile, profile files, two-track roads built from them.
+
+A profile file holds one measured wheel track as rows ``distance_m elevation_m``;
+:func:`measured_road` turns it into a two-track :class:`~roadcollab.models.profile.RoadProfile`
+with a synthetic second track.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from dataclasses import dataclass
+from importlib import resources
+from pathlib import Path
+
+import numpy as np
+
+from .._validation import check_matrix, check_nonnegative, check_positive
+from ..errors import ParameterError
+from ..models.profile import RoadProfile
+from ..models.road import MAX_SAMPLES, iso_gd0, moving_average, random_walk
+
+__all__ = ["MeasuredProfile", "packaged_profile_path", "load_profile", "measured_road"]
+
+_LATERAL_HIGHPASS = 20.0    # m, window of the moving average removed from the lateral residual
+
+
+@dataclass(frozen=True, eq=False)
+class MeasuredProfile:
+    """One measured track as read from a file: ``distance`` (n,) m, ``elevation`` (n,) m.
+
+    Parameters
+    ----------
+    distance : numpy.ndarray
+        Shape (n,), m, as in the file.
+    elevation : numpy.ndarray
+        Shape (n,), m.
+    spacing : float
+        Median distance step, m, > 0.
+    source : str
+        The file path as given.
+    """
+
+    distance: np.ndarray   # m, shape (n,), as in the file
+    elevation: np.ndarray  # m, shape (n,)
+    spacing: float         # m, median distance step
+    source: str            # the file path as given
+
+    def __post_init__(self):
+        distance = check_matrix("distance", self.distance, (None,))
+        elevation = check_matrix("elevation", self.elevation, (distance.shape[0],))
+        for name, arr in (("distance", distance), ("elevation", elevation)):
+            arr.setflags(write=False)
+            object.__setattr__(self, name, arr)
+        object.__setattr__(self, "spacing", check_positive("spacing", self.spacing))
+
+    def __len__(self) -> int:
+        return int(self.distance.shape[0])
+
+
+def packaged_profile_path():
+    """Path of the packaged measured profile ``data/profile_1.txt``.
+
+    Returns
+    -------
+    importlib.resources.abc.Traversable
+        A ``pathlib.Path`` in normal installs; readable by :func:`load_profile`.
+    """
+    return resources.files("roadcollab") / "data" / "profile_1.txt"
+
+
+def _read_text(path, name: str) -> str:
+    """The UTF-8 text of ``path`` (str, PathLike or ``Traversable``); ParameterError if unreadable."""
+    try:
+        return (Path(path) if isinstance(path, (str, os.PathLike)) else path).read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as err:
+        raise ParameterError(f"path: cannot read profile file {name}: {err}") from err
+
+
+def _parse_rows(text: str, name: str) -> tuple[list[list[float]], list[int]]:
+    """Data rows ``[distance, elevation]`` with increasing distance, and their 1-based line numbers."""
+    rows, lines = [], []
+    for lineno, raw in enumerate(text.splitlines(), start=1):
+        line = raw.split("#", 1)[0].strip()
+        if not line:
+            continue
+        tokens = [t.strip() for t in line.split(",")] if "," in line else line.split()
+        try:
+            values = [float(t) for t in tokens]
+        except ValueError:
+            values = []
+        if len(values) != 2:
+            raise ParameterError(f"{name}: line {lineno}: expected 2 numbers 'distance_m elevation_m', got {raw!r}")
+        if not all(math.isfinite(v) for v in values):
+            raise ParameterError(f"{name}: line {lineno}: expected finite numbers, got {raw!r}")
+        if rows and values[0] <= rows[-1][0]:
+            raise ParameterError(f"{name}: line {lineno}: expected distance > {rows[-1][0]:g} (increasing), "
+                                 f"got {values[0]:g}")
+        rows.append(values)
+        lines.append(lineno)
+    return rows, lines
+
+
+def _uniform_spacing(distance: np.ndarray, lines: list[int], name: str) -> float:
+    """Median step of ``distance`` (m); ParameterError naming the line of the first step off it."""
+    steps = np.diff(distance)
+    spacing = float(np.median(steps))
+    # Tolerance relative to the spacing, plus float rounding of large distance values.
+    bad = np.flatnonzero(np.abs(steps - spacing) > 1e-6 * spacing + 1e-12 * np.abs(distance[1:]))
+    if bad.size:
+        i = int(bad[0])
+        raise ParameterError(f"{name}: line {lines[i + 1]}: expected uniform spacing {spacing:g} m, "
+                             f"got step {steps[i]:g} m")
+    return spacing
+
+
+def load_profile(path) -> MeasuredProfile:
+    """Read rows ``distance_m elevation_m`` (whitespace or comma separated; ``#`` comments).
+
+    Parameters
+    ----------
+    path : str, os.PathLike or importlib.resources.abc.Traversable
+        The profile file, UTF-8.
+
+    Returns
+    -------
+    MeasuredProfile
+        Distance and elevation in m as in the file, ``source = str(path)``.
+
+    Raises
+    ------
+    ParameterError
+        Naming the file and 1-based line: not 2 numbers, non-finite values, non-increasing or
+        non-uniform distance (relative tolerance 1e-6 of the spacing), fewer than 8 rows.
+    """
+    name = str(path)
+    rows, lines = _parse_rows(_read_text(path, name), name)
+    if len(rows) < 8:
+        raise ParameterError(f"{name}: expected at least 8 data rows, got {len(rows)}")
+    data = np.array(rows)
+    spacing = _uniform_spacing(data[:, 0], lines, name)
+    return MeasuredProfile(data[:, 0], data[:, 1], spacing, name)
+
+
+def _detrend(distance: np.ndarray, z: np.ndarray) -> np.ndarray:
+    """Remove the least-squares line (DC and slope are unobservable to accelerometers)."""
+    slope, offset = np.polyfit(distance, z, 1)
+    return z - (offset + slope * distance)
+
+
+def measured_road(path=None, *, second_track="lateral", lateral_class="A", detrend=True, spacing=None,
+                  enveloping_length=0.25, rng=None) -> RoadProfile:
+    """Two-track road from a measured single-track profile (left track).
+
+    Parameters
+    ----------
+    path : str, PathLike or None
+        Profile file (see :func:`load_profile`); None uses :func:`packaged_profile_path`.
+    second_track : {"lateral", "same", "synthetic"}
+        Right track: ``"lateral"`` = left + an independent ISO ``lateral_class`` random walk
+        high-passed by subtracting its 20 m centred moving average (coherent at long, independent
+        at short wavelengths); ``"same"`` = left; ``"synthetic"`` = an independent ISO
+        ``lateral_class`` random walk (also detrended when ``detrend``).
+    lateral_class : str or float
+        ISO 8608 class (or Gd(n0) in m^3) of the right-track random walk.
+    detrend : bool
+        Remove a least-squares line from the measured track.
+    spacing : float or None
+        Resample linearly to this grid step (m); None keeps the file's spacing.
+    enveloping_length : float
+        Tyre enveloping moving-average width (m), as in
+        :func:`~roadcollab.models.road.generate_road`; 0 disables.
+    rng : None, int or numpy.random.Generator
+
+    Returns
+    -------
+    RoadProfile
+        Distance starting at 0, elevation (n, 2) m, no anomalies, ``source`` = file name.
+    """
+    if second_track not in ("lateral", "same", "synthetic"):
+        raise ParameterError(f"second_track must be 'lateral', 'same' or 'synthetic', got {second_track!r}")
+    gd0 = iso_gd0("lateral_class", lateral_class)
+    enveloping_length = check_nonnegative("enveloping_length", enveloping_length)
+    if not isinstance(detrend, (bool, np.bool_)):
+        raise ParameterError(f"detrend must be a bool, got {detrend!r}")
+    rng = np.random.default_rng(rng)
+    measured = load_profile(packaged_profile_path() if path is None else path)
+    distance = measured.distance - measured.distance[0]
+    left = _detrend(distance, measured.elevation) if detrend else measured.elevation.copy()
+    step = measured.spacing
+    if spacing is not None:
+        step = check_positive("spacing", spacing)
+        if not distance[-1] / MAX_SAMPLES <= step <= 0.5 * distance[-1]:
+            raise ParameterError(f"spacing must lie in [{distance[-1] / MAX_SAMPLES:g}, {0.5 * distance[-1]:g}] m "
+                                 f"(at most {MAX_SAMPLES} samples, at least 3), got {step:g}")
+        grid = step * np.arange(int(math.floor(distance[-1] / step + 1e-9)) + 1)
+        left, distance = np.interp(grid, distance, left), grid
+    if second_track == "same":
+        right = left.copy()
+    else:
+        walk = random_walk(distance.shape[0], step, gd0, rng, tracks=1)[:, 0]
+        if second_track == "lateral":
+            right = left + walk - moving_average(walk, step, _LATERAL_HIGHPASS)
+        else:
+            right = _detrend(distance, walk) if detrend else walk
+    elevation = moving_average(np.column_stack([left, right]), step, enveloping_length)
+    return RoadProfile(distance, elevation, (), Path(measured.source).name)
+
+

@@ -1,0 +1,167 @@
+"""Limits of the wire format and the single validation path shared by encode and decode.
+
+:func:`check_header` decides from the header alone, before any array is allocated, whether
+the declared message is acceptable; :func:`check_payload` then checks the arrays (finite
+values, stable dynamics). The table of limits is in :mod:`roadcollab.wire.protocol`. Every
+refusal is a :class:`~roadcollab.errors.MessageError`.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ..errors import MessageError
+from .layout import MECHANISM_CODES, MECHANISM_TYPE, MESSAGE_TYPE_EXCHANGE, TYPE_NAMES, Header, exchange_nbytes, inversion_nbytes
+
+__all__ = [
+    "MAX_ORDER",
+    "MAX_SIGNAL_LENGTH",
+    "MAX_MESSAGE_BYTES",
+    "MAX_SAMPLE_RATE",
+    "MAX_COUNT",
+    "DT_RTOL",
+    "check_mechanism",
+    "check_header",
+    "check_payload",
+]
+
+MAX_ORDER = 64
+MAX_SIGNAL_LENGTH = 2 ** 20
+MAX_SAMPLE_RATE = 1e6
+MAX_COUNT = 10 ** 6
+DT_RTOL = 1e-12
+
+# The largest valid message bounds what decode will even look at.
+MAX_MESSAGE_BYTES = max(exchange_nbytes(MAX_ORDER, MAX_ORDER, MAX_SIGNAL_LENGTH),
+                        inversion_nbytes(MAX_SIGNAL_LENGTH))
+
+
+def check_mechanism(mechanism) -> str:
+    """``mechanism`` if it is one of the names of ``MECHANISM_CODES``.
+
+    Parameters
+    ----------
+    mechanism : object
+        ``"none"``, ``"paper"``, ``"hardened"`` or ``"fused"``.
+
+    Returns
+    -------
+    str
+        ``mechanism`` unchanged.
+
+    Raises
+    ------
+    MessageError
+        For anything else (also for non-strings).
+    """
+    if not isinstance(mechanism, str) or mechanism not in MECHANISM_CODES:
+        raise MessageError(f"mechanism must be one of {sorted(MECHANISM_CODES)}, got {mechanism!r}")
+    return mechanism
+
+
+def _check_exchange_header(h: Header) -> None:
+    """Orders and sample times of T and S against ``MAX_ORDER`` and ``1 / sample_rate``."""
+    dt = 1.0 / h.sample_rate
+    if not math.isfinite(dt):
+        # A subnormal sample_rate makes 1/sample_rate overflow, and inf would pass the dt test.
+        raise MessageError(f"sample_rate {h.sample_rate!r} is too small: 1/sample_rate is not finite")
+    for name, order, sys_dt in (("T", h.order_T, h.dt_T), ("S", h.order_S, h.dt_S)):
+        if not 0 <= order <= MAX_ORDER:
+            raise MessageError(f"oversized: order of {name} must be in [0, {MAX_ORDER}] (MAX_ORDER), got {order}")
+        if not abs(sys_dt - dt) <= DT_RTOL * dt:
+            raise MessageError(f"{name}.dt must equal 1/sample_rate = {dt!r} to {DT_RTOL:g} relative, "
+                               f"got {sys_dt!r}")
+
+
+def _check_inversion_header(h: Header) -> None:
+    """``count`` within ``[1, MAX_COUNT]``, and exactly 1 for a "hardened" message."""
+    if not 1 <= h.count <= MAX_COUNT:
+        raise MessageError(f"count must be in [1, {MAX_COUNT}], got {h.count}")
+    if h.mechanism == "hardened" and h.count != 1:
+        # A "hardened" message is one vehicle's own inversion by definition.
+        raise MessageError(f"count must be 1 for mechanism 'hardened', got {h.count}")
+
+
+def check_header(h: Header) -> None:
+    """Check every header field against the limits; uses no payload, allocates nothing.
+
+    Parameters
+    ----------
+    h : Header
+        Fields of a message, with ``mechanism`` a key of ``MECHANISM_CODES`` and
+        ``msg_type`` a key of ``TYPE_NAMES``.
+
+    Raises
+    ------
+    MessageError
+        If a field is out of its limits, the mechanism does not fit the message type, or
+        ``payload_nbytes`` differs from the size the dimensions imply.
+    """
+    expected_type = MECHANISM_TYPE[h.mechanism]
+    if h.msg_type != expected_type:
+        raise MessageError(
+            f"mechanism {h.mechanism!r} requires an {TYPE_NAMES[expected_type]} message, "
+            f"got an {TYPE_NAMES[h.msg_type]} message")
+    # Written as "not (ok)" so that NaN fails every check.
+    if not (math.isfinite(h.sample_rate) and 0.0 < h.sample_rate <= MAX_SAMPLE_RATE):
+        raise MessageError(f"sample_rate must be finite and in (0, {MAX_SAMPLE_RATE:g}] Hz, got {h.sample_rate!r}")
+    if not 1 <= h.length <= MAX_SIGNAL_LENGTH:
+        raise MessageError(f"oversized or empty: signal length must be in [1, {MAX_SIGNAL_LENGTH}] "
+                           f"(MAX_SIGNAL_LENGTH), got {h.length}")
+    if not 1 <= h.n_samples <= h.length:
+        raise MessageError(f"n_samples must be in [1, signal length {h.length}], got {h.n_samples}")
+    if h.msg_type == MESSAGE_TYPE_EXCHANGE:
+        _check_exchange_header(h)
+    else:
+        _check_inversion_header(h)
+    expected = h.expected_payload_nbytes()
+    if h.payload_nbytes != expected:
+        raise MessageError(f"header declares {h.payload_nbytes} payload bytes but its dimensions imply {expected}")
+
+
+def _check_finite(name: str, arr: np.ndarray) -> None:
+    """MessageError naming ``name`` unless every entry of ``arr`` is finite."""
+    if not np.isfinite(arr).all():
+        bad = int(arr.size - np.count_nonzero(np.isfinite(arr)))
+        raise MessageError(f"{name} must be finite, got {bad} non-finite entries (NaN or inf)")
+
+
+def _check_system(name: str, A: np.ndarray, B: np.ndarray, C: np.ndarray, D: np.ndarray) -> None:
+    """Finite entries and a discrete-time stable A (spectral radius < 1)."""
+    for part, arr in (("A", A), ("B", B), ("C", C), ("D", D)):
+        _check_finite(f"{name}.{part}", arr)
+    if A.shape[0] == 0:
+        return
+    try:
+        # Huge but finite entries may overflow inside LAPACK; the result is checked below.
+        with np.errstate(all="ignore"):
+            radius = float(np.max(np.abs(np.linalg.eigvals(A))))
+    except (np.linalg.LinAlgError, ValueError) as err:
+        raise MessageError(f"{name}.A: eigenvalues could not be computed ({err})") from err
+    if not radius < 1.0:
+        raise MessageError(f"{name} must be discrete-time stable (spectral radius of A < 1), got {radius:.6g}")
+
+
+def check_payload(h: Header, arrays: dict[str, np.ndarray]) -> None:
+    """Check the arrays of a message whose header passed :func:`check_header`.
+
+    Parameters
+    ----------
+    h : Header
+    arrays : dict of str to numpy.ndarray
+        The payload arrays by wire name (see :func:`~.layout.payload_shapes`), float64.
+
+    Raises
+    ------
+    MessageError
+        If an entry is NaN or infinite, or ``T`` or ``S`` is not discrete-time stable.
+    """
+    if h.msg_type == MESSAGE_TYPE_EXCHANGE:
+        for name in ("T", "S"):
+            _check_system(name, *(arrays[f"{name}.{p}"] for p in "ABCD"))
+        _check_finite("e", arrays["e"])
+        _check_finite("wf", arrays["wf"])
+    else:
+        _check_finite("z", arrays["z"])
