@@ -1,7 +1,7 @@
 """Sampled-data simulation of a vehicle driven by the road.
 
 Exactness: the road elevation is linear between samples (see
-:meth:`roadcollab.models.road.RoadProfile.sample`), so the road velocity ``w`` is constant over
+:meth:`roadcollab.models.profile.RoadProfile.sample`), so the road velocity ``w`` is constant over
 each sample period and the zero-order-hold discretisation of the plant is exact:
 
 .. math:: x_{k+1} = e^{A\\,dt} x_k + \\int_0^{dt} e^{A s} ds\\, B\\, w_k,\\qquad y_k = C x_k + D w_k.
