@@ -15,7 +15,7 @@ from scipy.ndimage import uniform_filter1d
 from roadcollab.detection.detector import Detection, DetectorSpec, detect_anomalies, match_detections
 from roadcollab.experiments.anomaly_study import ESTIMATORS, AnomalyStudyConfig, run_anomaly_study
 from roadcollab.errors import ParameterError
-from roadcollab.experiments.reproduction import ExperimentConfig
+from roadcollab.experiments.config import ExperimentConfig
 from roadcollab.models.road import Anomaly, RoadProfile, RoadSpec, generate_road
 from roadcollab.estimation.grid import SegmentGrid
 

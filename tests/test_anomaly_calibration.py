@@ -15,7 +15,7 @@ from roadcollab.experiments.anomaly_calibration import (EVALUATION_SEEDS, Anomal
 from roadcollab.experiments.anomaly_study import ESTIMATORS, AnomalyStudyConfig, run_anomaly_study
 from roadcollab.cli.main import build_parser, main
 from roadcollab.errors import ParameterError
-from roadcollab.experiments.reproduction import ExperimentConfig
+from roadcollab.experiments.config import ExperimentConfig
 
 # 1 seed, 2 runs, 3 vehicles, a 2 x 2 grid whose thresholds are far apart (different objectives).
 TINY = ["--seeds", "1000", "--runs-per-seed", "2", "--vehicles", "3", "--snr-thresholds", "3.5", "4.5",

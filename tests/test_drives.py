@@ -23,7 +23,9 @@ from roadcollab.io.drives import (
     write_drive_csv,
     write_drive_params,
 )
-from roadcollab.experiments.reproduction import ExperimentConfig, FleetPipeline, run_estimates
+from roadcollab.experiments.config import ExperimentConfig
+from roadcollab.experiments.estimates import run_estimates
+from roadcollab.experiments.pipeline import FleetPipeline
 from roadcollab.models.simulation import add_sensor_noise, simulate_response
 from roadcollab.models.vehicle import HalfCarParameters, sample_fleet
 

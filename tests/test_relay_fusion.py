@@ -7,7 +7,8 @@ import pytest
 
 from roadcollab import ExperimentConfig, ParameterError, sample_fleet
 from roadcollab.detection.detector import Detection, match_detections
-from roadcollab.experiments.reproduction import FleetPipeline, run_reproduction
+from roadcollab.experiments.pipeline import FleetPipeline
+from roadcollab.experiments.reproduction import run_reproduction
 from roadcollab.collaboration.fusion import LinearMMSE, plant_moments, posterior_draws
 from roadcollab.privacy.obfuscation import obfuscate, theorem1_errors
 from roadcollab.collaboration.relay import Exchange, Relay, simulate_measurements

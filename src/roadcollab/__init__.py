@@ -11,7 +11,9 @@ from .detection.detector import Detection, DetectorSpec, detect_anomalies, match
 from .collaboration.algorithm1 import CollaborativeEstimator, VehicleEstimate, learning_filters
 from .errors import MessageError, ParameterError
 from .estimation.estimator import JDPNoise, RoadInputEstimator, build_road_input_estimator, jdp_estimator_gain
-from .experiments.reproduction import ExperimentConfig, FleetPipeline, ReproductionResult, run_reproduction
+from .experiments.config import ExperimentConfig
+from .experiments.pipeline import FleetPipeline
+from .experiments.reproduction import ReproductionResult, run_reproduction
 from .collaboration.fusion import LinearMMSE
 from .wire.message import ExchangeMessage, InversionMessage
 from .lti.realisation import StateSpaceData

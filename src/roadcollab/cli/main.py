@@ -174,7 +174,7 @@ def _progress(total: int, description: str):
 def _config_from_args(args):
     import dataclasses
 
-    from ..experiments.reproduction import ExperimentConfig
+    from ..experiments.config import ExperimentConfig
     from ..models.vehicle import FleetSpec
 
     kw = dict(n_runs=args.runs, n_vehicles=args.vehicles, speed=args.speed, oracle=args.oracle,
@@ -243,7 +243,7 @@ def _cmd_attack(args, argv) -> int:
     from rich.console import Console
     from rich.table import Table
 
-    from ..experiments.reproduction import ExperimentConfig
+    from ..experiments.config import ExperimentConfig
     from ..reporting.report import write_attack
     from ..experiments.security_study import AttackStudyConfig, run_attack_study
 
@@ -301,7 +301,7 @@ def _cmd_anomalies(args, argv) -> int:
 def _cmd_calibrate_anomalies(args, argv) -> int:
     from ..experiments.anomaly_calibration import (AnomalyCalibrationConfig, calibrate_anomalies, parse_seeds,
                                       write_calibration)
-    from ..experiments.reproduction import ExperimentConfig
+    from ..experiments.config import ExperimentConfig
 
     kw = {}
     if args.snr_thresholds is not None:

@@ -49,7 +49,8 @@ from ..detection.detector import DetectorSpec
 from ..experiments.anomaly_study import (ESTIMATORS, AnomalyStudyConfig, _check_levels, _condition_pipelines, _fresh,
                             _run_seeds, _score, _Tally)
 from ..errors import ParameterError
-from ..experiments.reproduction import ExperimentConfig, run_estimates
+from ..experiments.config import ExperimentConfig
+from ..experiments.estimates import run_estimates
 
 __all__ = ["EVALUATION_SEEDS", "OBJECTIVE_ESTIMATORS", "AnomalyCalibrationConfig", "CalibrationPoint",
            "AnomalyCalibrationResult", "parse_seeds", "calibrate_anomalies", "write_calibration"]

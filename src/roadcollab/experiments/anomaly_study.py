@@ -37,7 +37,9 @@ import numpy as np
 from .._validation import check_int, check_positive, check_real
 from ..detection.detector import DetectorSpec, detect_anomalies, match_detections
 from ..errors import ParameterError
-from ..experiments.reproduction import ExperimentConfig, FleetPipeline, RunEstimates, run_estimates
+from ..experiments.config import ExperimentConfig
+from ..experiments.estimates import RunEstimates, run_estimates
+from ..experiments.pipeline import FleetPipeline
 from ..models.road import RoadSpec, generate_road, measured_road, with_anomalies
 from ..models.vehicle import Vehicle, sample_fleet
 
@@ -246,7 +248,7 @@ def _run_seeds(seed: int, n_runs: int) -> list[np.random.SeedSequence]:
 
 def _condition_pipelines(config: AnomalyStudyConfig, seed: int) -> tuple[_RoadOverride, list[_RoadOverride]]:
     """The default condition's pipeline and one per sweep depth (same fleet and estimators)."""
-    from ..experiments.reproduction import pipeline_for
+    from ..experiments.pipeline import pipeline_for
 
     pipe = _RoadOverride(pipeline_for(config.experiment, seed), config.road_spec())
     return pipe, [_RoadOverride(pipe, config.road_spec(d)) for d in config.depths]

@@ -21,7 +21,8 @@ import numpy as np
 from ..wire import protocol
 from .._validation import check_int
 from ..errors import ParameterError
-from ..experiments.reproduction import ExperimentConfig, FleetPipeline
+from ..experiments.config import ExperimentConfig
+from ..experiments.pipeline import FleetPipeline
 from ..collaboration.relay import Exchange, Relay
 from ..models.simulation import add_sensor_noise, simulate_response
 from ..models.vehicle import sample_fleet

@@ -35,7 +35,9 @@ import numpy as np
 
 from .._validation import check_int, check_matrix, check_nonnegative, check_positive, check_real
 from ..errors import ParameterError
-from ..experiments.reproduction import ExperimentConfig, FleetPipeline, simulate_run
+from ..experiments.config import ExperimentConfig
+from ..experiments.pipeline import FleetPipeline
+from ..experiments.reproduction import simulate_run
 from ..models.vehicle import sample_fleet
 
 __all__ = ["SWEPT_ESTIMATORS", "SweepConfig", "SweepRow", "SweepFinding", "SweepResult", "run_sweep",
