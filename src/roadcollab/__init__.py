@@ -7,7 +7,8 @@ with Application to Road Anomaly Detection". See the README for the architecture
 from importlib import metadata as _metadata
 
 from .wire import protocol
-from .detection.detector import Detection, DetectorSpec, detect_anomalies, match_detections
+from .detection.detector import Detection, DetectorSpec, detect_anomalies
+from .detection.scoring import MatchResult, match_detections
 from .collaboration.algorithm1 import CollaborativeEstimator, VehicleEstimate, learning_filters
 from .errors import MessageError, ParameterError
 from .estimation.estimator import JDPNoise, RoadInputEstimator, build_road_input_estimator, jdp_estimator_gain
@@ -30,7 +31,7 @@ except _metadata.PackageNotFoundError:  # running from a source tree without ins
     __version__ = "0.0.0+unknown"
 
 __all__ = [
-    "Detection", "DetectorSpec", "detect_anomalies", "match_detections",
+    "Detection", "DetectorSpec", "detect_anomalies", "MatchResult", "match_detections",
     "CollaborativeEstimator", "VehicleEstimate", "learning_filters",
     "MessageError", "ParameterError",
     "JDPNoise", "RoadInputEstimator", "build_road_input_estimator", "jdp_estimator_gain",

@@ -46,8 +46,9 @@ import numpy as np
 
 from .._validation import check_int, check_positive, check_real
 from ..detection.detector import DetectorSpec
+from ..detection.scoring import MatchTally
 from ..experiments.anomaly_study import (ESTIMATORS, AnomalyStudyConfig, _check_levels, _condition_pipelines, _fresh,
-                            _run_seeds, _score, _Tally)
+                                         _run_seeds, _score)
 from ..errors import ParameterError
 from ..experiments.config import ExperimentConfig
 from ..experiments.estimates import run_estimates
@@ -274,7 +275,7 @@ def parse_seeds(items: Sequence[str] | str) -> tuple[int, ...]:
 @dataclass(frozen=True)
 class _CalibrationTask:
     """Picklable task: run ``k`` is run ``k % runs_per_seed`` of seed ``seeds[k // runs_per_seed]``;
-    returns, per run, ``(grid index, condition index, estimator) -> _Tally`` over vehicles 2..V."""
+    returns, per run, ``(grid index, condition index, estimator) -> MatchTally`` over vehicles 2..V."""
 
     config: AnomalyCalibrationConfig
 
@@ -295,7 +296,7 @@ class _CalibrationTask:
                 for c, est in enumerate(ests):
                     matches = _score(est, cfg, pooled)[1]
                     for name in ESTIMATORS:
-                        tally = rec[g, c, name] = _Tally()
+                        tally = rec[g, c, name] = MatchTally()
                         for j in pooled:
                             tally.add(matches[name, j])
             out.append(rec)
@@ -348,8 +349,8 @@ def calibrate_anomalies(config: AnomalyCalibrationConfig, *, progress: Callable[
     S, R = len(config.seeds), config.runs_per_seed
     n_grid, n_cond = len(config.snr_thresholds) * len(config.min_depths), len(config.conditions)
     keys = [(g, c, e) for g in range(n_grid) for c in range(n_cond) for e in ESTIMATORS]
-    per_seed = [{key: _Tally() for key in keys} for _ in range(S)]
-    total = {key: _Tally() for key in keys}
+    per_seed = [{key: MatchTally() for key in keys} for _ in range(S)]
+    total = {key: MatchTally() for key in keys}
     runs = map_runs(_CalibrationTask(config), S * R, workers=workers, scheduler=scheduler, progress=progress)
     for k, rec in enumerate(runs):
         for key in keys:

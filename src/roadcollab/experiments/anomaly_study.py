@@ -4,7 +4,7 @@ For every run the fleet drives one road; every vehicle's three band-limited esti
 (``observer_only``, ``collaborative`` = Algorithm 1, ``fused`` = running fleet average of the
 inversions ``z``; see :func:`roadcollab.experiments.reproduction.run_estimates`) go through
 :func:`roadcollab.detection.detector.detect_anomalies` and are scored with
-:func:`roadcollab.detection.detector.match_detections` on the scored segment (the window minus the lead-in
+:func:`roadcollab.detection.scoring.match_detections` on the scored segment (the window minus the lead-in
 and lead-out margins), with a center tolerance of ``AnomalyStudyConfig.tolerance``.
 
 Pooling: counts (matches, detections, true anomalies) are summed over runs and over vehicles
@@ -35,7 +35,8 @@ from typing import Callable
 import numpy as np
 
 from .._validation import check_int, check_positive, check_real
-from ..detection.detector import DetectorSpec, detect_anomalies, match_detections
+from ..detection.detector import DetectorSpec, detect_anomalies
+from ..detection.scoring import MatchTally, match_detections
 from ..errors import ParameterError
 from ..experiments.config import ExperimentConfig
 from ..experiments.estimates import RunEstimates, run_estimates
@@ -170,49 +171,6 @@ class _RoadOverride:
         return profile.sample(cfg.speed, cfg.sample_rate, duration=cfg.n_samples / cfg.sample_rate)
 
 
-class _Tally:
-    """Pooled counts and pair statistics of one (condition, estimator[, vehicle])."""
-
-    __slots__ = ("n_true", "n_detected", "n_matched", "n_kind", "n_side", "pos_err", "depth_err")
-
-    def __init__(self) -> None:
-        self.n_true = self.n_detected = self.n_matched = self.n_kind = self.n_side = 0
-        self.pos_err: list[float] = []
-        self.depth_err: list[float] = []
-
-    def add(self, m: dict) -> None:
-        self.n_true += m["n_true"]
-        self.n_detected += m["n_detected"]
-        self.n_matched += m["n_matched"]
-        self.n_kind += m["n_kind_correct"]
-        self.n_side += m["n_side_correct"]
-        self.pos_err += m["position_errors"]
-        self.depth_err += m["depth_rel_errors"]
-
-    def merge(self, other: "_Tally") -> None:
-        """Add the counts and pairs of another tally (e.g. one pooled on a worker)."""
-        self.n_true += other.n_true
-        self.n_detected += other.n_detected
-        self.n_matched += other.n_matched
-        self.n_kind += other.n_kind
-        self.n_side += other.n_side
-        self.pos_err += other.pos_err
-        self.depth_err += other.depth_err
-
-    def row(self) -> dict:
-        p = self.n_matched / self.n_detected if self.n_detected else 1.0
-        r = self.n_matched / self.n_true if self.n_true else 1.0
-        nan = float("nan")
-        return {
-            "precision": p, "recall": r, "f1": 2 * p * r / (p + r) if p + r > 0 else 0.0,
-            "median_position_error_m": float(np.median(self.pos_err)) if self.pos_err else nan,
-            "median_depth_rel_error": float(np.median(self.depth_err)) if self.depth_err else nan,
-            "kind_accuracy": self.n_kind / self.n_matched if self.n_matched else nan,
-            "side_accuracy": self.n_side / self.n_matched if self.n_matched else nan,
-            "n_true": self.n_true, "n_detected": self.n_detected, "n_matched": self.n_matched,
-        }
-
-
 def _region(est: RunEstimates) -> tuple[float, float]:
     """Road stretch (m) of the scored samples."""
     sl = est.scored
@@ -221,7 +179,7 @@ def _region(est: RunEstimates) -> tuple[float, float]:
 
 def _score(est: RunEstimates, config: AnomalyStudyConfig, vehicles) -> tuple[dict, dict]:
     """Detections and matches of every estimator for the given 0-based ``vehicles`` of one run:
-    two dicts ``(estimator, vehicle) -> list of Detection`` and ``-> match_detections dict``."""
+    two dicts ``(estimator, vehicle) -> list of Detection`` and ``-> MatchResult``."""
     exp = config.experiment
     region = _region(est)
     dets, matches = {}, {}
@@ -317,10 +275,10 @@ def run_anomaly_study(config: AnomalyStudyConfig, seed: int, *, progress: Callab
     fleet_ss, _ = np.random.SeedSequence(seed).spawn(2)
     fleet = sample_fleet(exp.n_vehicles, exp.fleet, rng=np.random.default_rng(fleet_ss))
     V = exp.n_vehicles
-    main = {name: _Tally() for name in ESTIMATORS}
-    per_vehicle = {(name, j): _Tally() for name in ESTIMATORS for j in range(V)}
-    by_depth = {(i, name): _Tally() for i in range(len(config.depths)) for name in ESTIMATORS}
-    by_noise = {(i, name): _Tally() for i in range(len(config.noise_levels)) for name in ESTIMATORS}
+    main = {name: MatchTally() for name in ESTIMATORS}
+    per_vehicle = {(name, j): MatchTally() for name in ESTIMATORS for j in range(V)}
+    by_depth = {(i, name): MatchTally() for i in range(len(config.depths)) for name in ESTIMATORS}
+    by_noise = {(i, name): MatchTally() for i in range(len(config.noise_levels)) for name in ESTIMATORS}
     pooled = range(1, V)   # vehicles 2..V
     runs = map_runs(_AnomalyTask(config, seed), config.n_runs, workers=workers, scheduler=scheduler,
                     progress=progress)
