@@ -326,7 +326,8 @@ def _cmd_sweep(args, argv) -> int:
     from rich.console import Console
     from rich.table import Table
 
-    from ..experiments.sweep import SweepConfig, run_sweep
+    from ..experiments.sweep import run_sweep
+    from ..experiments.sweep_config import SweepConfig
     from ..reporting.sweep_report import write_sweep
 
     def floats(option: str, text: str) -> tuple[float, ...]:
