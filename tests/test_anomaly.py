@@ -14,7 +14,8 @@ from scipy.ndimage import uniform_filter1d
 
 from roadcollab.detection.detector import Detection, DetectorSpec, detect_anomalies
 from roadcollab.detection.scoring import match_detections
-from roadcollab.experiments.anomaly_study import ESTIMATORS, AnomalyStudyConfig, run_anomaly_study
+from roadcollab.experiments.anomaly_config import ESTIMATORS, AnomalyStudyConfig
+from roadcollab.experiments.anomaly_study import run_anomaly_study
 from roadcollab.errors import ParameterError
 from roadcollab.experiments.config import ExperimentConfig
 from roadcollab.models.road import Anomaly, RoadProfile, RoadSpec, generate_road

@@ -269,7 +269,8 @@ def _cmd_attack(args, argv) -> int:
 def _cmd_anomalies(args, argv) -> int:
     import argparse as _ap
 
-    from ..experiments.anomaly_study import AnomalyStudyConfig, run_anomaly_study
+    from ..experiments.anomaly_config import AnomalyStudyConfig
+    from ..experiments.anomaly_study import run_anomaly_study
     from ..reporting.report import write_anomalies
 
     ns = _ap.Namespace(runs=1, vehicles=args.vehicles, speed=args.speed, oracle=False, road_profile=args.road_profile,
@@ -299,8 +300,9 @@ def _cmd_anomalies(args, argv) -> int:
 
 
 def _cmd_calibrate_anomalies(args, argv) -> int:
-    from ..experiments.anomaly_calibration import (AnomalyCalibrationConfig, calibrate_anomalies, parse_seeds,
-                                      write_calibration)
+    from ..experiments.anomaly_calibration import calibrate_anomalies
+    from ..experiments.calibration_config import AnomalyCalibrationConfig, parse_seeds
+    from ..reporting.calibration_report import write_calibration
     from ..experiments.config import ExperimentConfig
 
     kw = {}
