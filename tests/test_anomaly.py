@@ -12,10 +12,12 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.ndimage import uniform_filter1d
 
-from roadcollab.detection.detector import Detection, DetectorSpec, detect_anomalies, match_detections
-from roadcollab.experiments.anomaly_study import ESTIMATORS, AnomalyStudyConfig, run_anomaly_study
+from roadcollab.detection.detector import Detection, DetectorSpec, detect_anomalies
+from roadcollab.detection.scoring import match_detections
+from roadcollab.experiments.anomaly_config import ESTIMATORS, AnomalyStudyConfig
+from roadcollab.experiments.anomaly_study import run_anomaly_study
 from roadcollab.errors import ParameterError
-from roadcollab.experiments.reproduction import ExperimentConfig
+from roadcollab.experiments.config import ExperimentConfig
 from roadcollab.models.anomaly import Anomaly
 from roadcollab.models.profile import RoadProfile
 from roadcollab.models.road import RoadSpec, generate_road
@@ -134,10 +136,10 @@ def test_detects_anomalies_on_a_seeded_rough_road_truth():
     road = generate_road(spec, rng=11).sample(SPEED, FS, duration=330.0 / SPEED)
     w = SegmentGrid(road.velocity.shape[0], FS).band_limit(road.velocity)
     m = match_detections(detect(w, road.positions[:-1]), road.anomalies, region=(15.0, 315.0))
-    assert m["n_true"] >= 4
-    assert m["recall"] == 1.0 and m["precision"] == 1.0
-    assert m["median_position_error_m"] <= 0.2
-    assert m["kind_accuracy"] == 1.0
+    assert m.n_true >= 4
+    assert m.recall == 1.0 and m.precision == 1.0
+    assert m.median_position_error_m <= 0.2
+    assert m.kind_accuracy == 1.0
 
 
 # --- scoring -----------------------------------------------------------------------------------
@@ -154,38 +156,38 @@ TRUTH = (Anomaly(9.5, "left", "pothole", 0.05, 1.0),     # center 10
 def test_match_oracle_one_false_positive_one_miss():
     dets = [_det(10.0, "left"), _det(20.0, "right", "bump"), _det(50.0, "right")]
     m = match_detections(dets, TRUTH)
-    assert (m["n_true"], m["n_detected"], m["n_matched"]) == (3, 3, 2)
-    assert m["precision"] == pytest.approx(2 / 3) and m["recall"] == pytest.approx(2 / 3)
-    assert m["f1"] == pytest.approx(2 / 3)
-    assert m["median_position_error_m"] == pytest.approx(0.0, abs=1e-12)
-    assert m["kind_accuracy"] == 1.0 and m["side_accuracy"] == 1.0
-    assert m["median_depth_rel_error"] == pytest.approx(0.125)   # median of 0 (pothole), 0.25 (bump)
+    assert (m.n_true, m.n_detected, m.n_matched) == (3, 3, 2)
+    assert m.precision == pytest.approx(2 / 3) and m.recall == pytest.approx(2 / 3)
+    assert m.f1 == pytest.approx(2 / 3)
+    assert m.median_position_error_m == pytest.approx(0.0, abs=1e-12)
+    assert m.kind_accuracy == 1.0 and m.side_accuracy == 1.0
+    assert m.median_depth_rel_error == pytest.approx(0.125)   # median of 0 (pothole), 0.25 (bump)
 
 
 def test_match_exact_sides_kinds_and_tolerance():
     exact = [_det(10.0, "left"), _det(20.0, "right", "bump"), _det(30.0, "both")]
     m = match_detections(exact, TRUTH)
-    assert (m["precision"], m["recall"], m["f1"]) == (1.0, 1.0, 1.0)
+    assert (m.precision, m.recall, m.f1) == (1.0, 1.0, 1.0)
     # A "both" truth is matched by a one-sided detection (side_accuracy records it); a "both"
     # detection matches a one-sided truth; left never matches right.
     m = match_detections([_det(30.2, "right"), _det(10.3, "both")], TRUTH)
-    assert m["n_matched"] == 2 and m["side_accuracy"] == 0.0
-    assert sorted(m["position_errors"]) == pytest.approx([0.2, 0.3])
-    assert match_detections([_det(20.0, "left", "bump")], TRUTH)["n_matched"] == 0
+    assert m.n_matched == 2 and m.side_accuracy == 0.0
+    assert sorted(m.position_errors) == pytest.approx([0.2, 0.3])
+    assert match_detections([_det(20.0, "left", "bump")], TRUTH).n_matched == 0
     # Kind need not agree for a match; it is reported separately.
     m = match_detections([_det(10.0, "left", "bump"), _det(20.0, "right", "bump")], TRUTH)
-    assert m["n_matched"] == 2 and m["kind_accuracy"] == 0.5
+    assert m.n_matched == 2 and m.kind_accuracy == 0.5
     # Tolerance on the center distance.
-    assert match_detections([_det(11.2, "left")], TRUTH)["n_matched"] == 0
-    assert match_detections([_det(11.2, "left")], TRUTH, tolerance=1.5)["n_matched"] == 1
+    assert match_detections([_det(11.2, "left")], TRUTH).n_matched == 0
+    assert match_detections([_det(11.2, "left")], TRUTH, tolerance=1.5).n_matched == 1
 
 
 def test_match_is_optimal_not_greedy():
     truth = [Anomaly(9.5, "left", "pothole", 0.05, 1.0), Anomaly(10.5, "left", "pothole", 0.05, 1.0)]  # 10, 11
     # Greedy closest-first would pair 10.6 with 11 (0.4) and leave 11.8 unmatched (1.8 from 10).
     m = match_detections([_det(10.6), _det(11.8)], truth, tolerance=1.0)
-    assert m["n_matched"] == 2
-    assert sorted(m["position_errors"]) == pytest.approx([0.6, 0.8])
+    assert m.n_matched == 2
+    assert sorted(m.position_errors) == pytest.approx([0.6, 0.8])
 
 
 def test_match_region_filtering():
@@ -193,25 +195,25 @@ def test_match_region_filtering():
     # Region [15, 40]: truths at 20 and 30 count; the detection at 10 matches an uncounted truth
     # (ignored), the one at 50 is outside and unmatched (ignored).
     m = match_detections(dets, TRUTH, region=(15.0, 40.0))
-    assert (m["n_true"], m["n_detected"], m["n_matched"]) == (2, 2, 2)
-    assert m["precision"] == 1.0 and m["recall"] == 1.0
+    assert (m.n_true, m.n_detected, m.n_matched) == (2, 2, 2)
+    assert m.precision == 1.0 and m.recall == 1.0
     # Region [0, 60] counts everything: the detection at 50 is a false positive.
     m = match_detections(dets, TRUTH, region=(0.0, 60.0))
-    assert (m["n_true"], m["n_detected"], m["n_matched"]) == (3, 4, 3)
-    assert m["precision"] == pytest.approx(0.75)
+    assert (m.n_true, m.n_detected, m.n_matched) == (3, 4, 3)
+    assert m.precision == pytest.approx(0.75)
     # A truth just inside the edge matched by a detection just outside it counts as found.
     m = match_detections([_det(14.6)], [Anomaly(15.0, "left", "pothole", 0.05, 0.2)], region=(15.0, 40.0))
-    assert (m["n_true"], m["n_detected"], m["n_matched"]) == (1, 1, 1)
+    assert (m.n_true, m.n_detected, m.n_matched) == (1, 1, 1)
 
 
 def test_match_empty_conventions():
     m = match_detections([], [])
-    assert (m["precision"], m["recall"], m["n_true"], m["n_detected"]) == (1.0, 1.0, 0, 0)
+    assert (m.precision, m.recall, m.n_true, m.n_detected) == (1.0, 1.0, 0, 0)
     m = match_detections([], TRUTH)
-    assert (m["precision"], m["recall"], m["f1"]) == (1.0, 0.0, 0.0)
-    assert math.isnan(m["median_position_error_m"]) and math.isnan(m["kind_accuracy"])
+    assert (m.precision, m.recall, m.f1) == (1.0, 0.0, 0.0)
+    assert math.isnan(m.median_position_error_m) and math.isnan(m.kind_accuracy)
     m = match_detections([_det(5.0)], [])
-    assert (m["precision"], m["recall"], m["f1"]) == (0.0, 1.0, 0.0)
+    assert (m.precision, m.recall, m.f1) == (0.0, 1.0, 0.0)
 
 
 @settings(max_examples=60)
@@ -222,12 +224,12 @@ def test_match_properties(d_spec, t_spec, tol):
     dets = [_det(p, s) for p, s in d_spec]
     truth = [Anomaly(p, s, "pothole", 0.05, 0.4) for p, s in t_spec]
     m = match_detections(dets, truth, tolerance=tol)
-    assert 0 <= m["n_matched"] <= min(m["n_true"], m["n_detected"])
-    assert all(0.0 <= m[k] <= 1.0 for k in ("precision", "recall", "f1"))
-    assert all(e <= tol + 1e-9 for e in m["position_errors"])
+    assert 0 <= m.n_matched <= min(m.n_true, m.n_detected)
+    assert all(0.0 <= getattr(m, k) <= 1.0 for k in ("precision", "recall", "f1"))
+    assert all(e <= tol + 1e-9 for e in m.position_errors)
     # Order of the inputs does not change the counts.
     r = match_detections(dets[::-1], truth[::-1], tolerance=tol)
-    assert r["n_matched"] == m["n_matched"]
+    assert r.n_matched == m.n_matched
 
 
 # --- study -------------------------------------------------------------------------------------

@@ -10,12 +10,13 @@ import numpy as np
 import pytest
 
 from roadcollab.detection.detector import DetectorSpec
-from roadcollab.experiments.anomaly_calibration import (EVALUATION_SEEDS, AnomalyCalibrationConfig, calibrate_anomalies,
-                                            parse_seeds)
-from roadcollab.experiments.anomaly_study import ESTIMATORS, AnomalyStudyConfig, run_anomaly_study
+from roadcollab.experiments.anomaly_calibration import calibrate_anomalies
+from roadcollab.experiments.anomaly_config import ESTIMATORS, AnomalyStudyConfig
+from roadcollab.experiments.anomaly_study import run_anomaly_study
+from roadcollab.experiments.calibration_config import EVALUATION_SEEDS, AnomalyCalibrationConfig, parse_seeds
 from roadcollab.cli.main import build_parser, main
 from roadcollab.errors import ParameterError
-from roadcollab.experiments.reproduction import ExperimentConfig
+from roadcollab.experiments.config import ExperimentConfig
 
 # 1 seed, 2 runs, 3 vehicles, a 2 x 2 grid whose thresholds are far apart (different objectives).
 TINY = ["--seeds", "1000", "--runs-per-seed", "2", "--vehicles", "3", "--snr-thresholds", "3.5", "4.5",

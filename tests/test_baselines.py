@@ -167,7 +167,7 @@ def test_sensitivity_rejects_bad_arguments():
 @pytest.fixture(scope="module")
 def vehicle():
     from roadcollab import ExperimentConfig, sample_fleet
-    from roadcollab.experiments.reproduction import FleetPipeline
+    from roadcollab.experiments.pipeline import FleetPipeline
 
     cfg = ExperimentConfig(n_vehicles=1, n_runs=1, segment_length=60.0, margin=15.0)
     return FleetPipeline(cfg, sample_fleet(1, cfg.fleet, rng=11)).estimators[0]

@@ -9,7 +9,7 @@ from hypothesis import strategies as st
 
 from roadcollab import CollaborativeEstimator, learning_filters, ExperimentConfig, MessageError, ObfuscationSpec, ParameterError, \
     obfuscate, run_reproduction, sample_fleet
-from roadcollab.experiments.reproduction import FleetPipeline
+from roadcollab.experiments.pipeline import FleetPipeline
 from roadcollab.privacy.obfuscation import draw_obfuscator
 from roadcollab.models.simulation import add_sensor_noise, simulate_response
 from roadcollab.lti.batch2x2 import inv2x2, matvec

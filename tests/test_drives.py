@@ -23,7 +23,9 @@ from roadcollab.io.drives import (
     write_drive_csv,
     write_drive_params,
 )
-from roadcollab.experiments.reproduction import ExperimentConfig, FleetPipeline, run_estimates
+from roadcollab.experiments.config import ExperimentConfig
+from roadcollab.experiments.estimates import run_estimates
+from roadcollab.experiments.pipeline import FleetPipeline
 from roadcollab.models.simulation import add_sensor_noise, simulate_response
 from roadcollab.models.vehicle import HalfCarParameters, sample_fleet
 
@@ -106,6 +108,7 @@ def test_command_writes_all_outputs(simulated):
 
 def test_anomalies_match_the_detector(simulated):
     anomaly = pytest.importorskip("roadcollab.detection.detector")
+    scoring = pytest.importorskip("roadcollab.detection.scoring")
     ref, out, cfg = simulated["ref"], simulated["out"], simulated["cfg"]
     with (out / "anomalies.csv").open() as fh:
         rows = list(csv.DictReader(fh))
@@ -123,8 +126,8 @@ def test_anomalies_match_the_detector(simulated):
     # The simulated road's anomalies are found by the fused estimate of the last drive.
     dets = anomaly.detect_anomalies(ref.fused[-1], positions=ref.positions, speed=cfg.speed,
                                     sample_rate=cfg.sample_rate)
-    score = anomaly.match_detections(dets, ref.road.anomalies, region=(15.0, 315.0))
-    assert score["n_true"] == 0 or score["recall"] > 0.5
+    score = scoring.match_detections(dets, ref.road.anomalies, region=(15.0, 315.0))
+    assert score.n_true == 0 or score.recall > 0.5
 
 
 def test_drives_of_different_length_are_truncated(simulated, tmp_path):

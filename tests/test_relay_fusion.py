@@ -6,8 +6,10 @@ import numpy as np
 import pytest
 
 from roadcollab import ExperimentConfig, ParameterError, sample_fleet
-from roadcollab.detection.detector import Detection, match_detections
-from roadcollab.experiments.reproduction import FleetPipeline, run_reproduction
+from roadcollab.detection.detector import Detection
+from roadcollab.detection.scoring import match_detections
+from roadcollab.experiments.pipeline import FleetPipeline
+from roadcollab.experiments.reproduction import run_reproduction
 from roadcollab.collaboration.fusion import LinearMMSE, plant_moments, posterior_draws
 from roadcollab.privacy.obfuscation import obfuscate, theorem1_errors
 from roadcollab.collaboration.relay import Exchange, Relay, simulate_measurements
@@ -172,5 +174,5 @@ def test_relay_refuses_bad_arguments(pipe):
 def test_match_tolerance_is_inclusive_at_the_boundary():
     truth = [Anomaly(9.75, "left", "pothole", 0.05, 0.5)]       # center 10.0 m
     det = lambda x: Detection(position=x, side="left", kind="pothole", depth=0.05, confidence=0.9)  # noqa: E731
-    assert match_detections([det(10.0 + 0.999)], truth, tolerance=1.0)["n_matched"] == 1
-    assert match_detections([det(10.0 + 1.001)], truth, tolerance=1.0)["n_matched"] == 0
+    assert match_detections([det(10.0 + 0.999)], truth, tolerance=1.0).n_matched == 1
+    assert match_detections([det(10.0 + 1.001)], truth, tolerance=1.0).n_matched == 0

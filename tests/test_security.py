@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from roadcollab import ExperimentConfig, sample_fleet
-from roadcollab.experiments.reproduction import FleetPipeline
+from roadcollab.experiments.pipeline import FleetPipeline
 from roadcollab.privacy.obfuscation import obfuscate
 from roadcollab.privacy.attacks import (PhysicalPrior, attack_model_reduction, attack_multiplicity, attack_pole_intersection, attack_signals_prior, pole_errors, select_by_prior)
 from roadcollab.experiments.security_study import AttackStudyConfig, _linkability, run_attack_study

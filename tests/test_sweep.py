@@ -10,7 +10,10 @@ import pytest
 
 from roadcollab import ExperimentConfig, ParameterError
 from roadcollab.cli.main import main
-from roadcollab.experiments.sweep import SWEPT_ESTIMATORS, SweepConfig, SweepResult, ratio_of_means, run_sweep
+from roadcollab.experiments.sweep import run_sweep
+from roadcollab.experiments.sweep_config import SWEPT_ESTIMATORS, SweepConfig
+from roadcollab.experiments.sweep_findings import ratio_of_means
+from roadcollab.experiments.sweep_result import SweepResult
 from roadcollab.reporting.sweep_report import write_sweep
 
 FIRST_COLUMNS = ["gamma", "sensor_noise_std", "parameter_uncertainty", "vehicle1_observer_mse", "algorithm1_mse",

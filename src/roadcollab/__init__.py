@@ -7,11 +7,14 @@ with Application to Road Anomaly Detection". See the README for the architecture
 from importlib import metadata as _metadata
 
 from .wire import protocol
-from .detection.detector import Detection, DetectorSpec, detect_anomalies, match_detections
+from .detection.detector import Detection, DetectorSpec, detect_anomalies
+from .detection.scoring import MatchResult, match_detections
 from .collaboration.algorithm1 import CollaborativeEstimator, VehicleEstimate, learning_filters
 from .errors import MessageError, ParameterError
 from .estimation.estimator import JDPNoise, RoadInputEstimator, build_road_input_estimator, jdp_estimator_gain
-from .experiments.reproduction import ExperimentConfig, FleetPipeline, ReproductionResult, run_reproduction
+from .experiments.config import ExperimentConfig
+from .experiments.pipeline import FleetPipeline
+from .experiments.reproduction import ReproductionResult, run_reproduction
 from .collaboration.fusion import LinearMMSE
 from .wire.message import ExchangeMessage, InversionMessage
 from .lti.realisation import StateSpaceData
@@ -29,7 +32,7 @@ except _metadata.PackageNotFoundError:  # running from a source tree without ins
     __version__ = "0.0.0+unknown"
 
 __all__ = [
-    "Detection", "DetectorSpec", "detect_anomalies", "match_detections",
+    "Detection", "DetectorSpec", "detect_anomalies", "MatchResult", "match_detections",
     "CollaborativeEstimator", "VehicleEstimate", "learning_filters",
     "MessageError", "ParameterError",
     "JDPNoise", "RoadInputEstimator", "build_road_input_estimator", "jdp_estimator_gain",

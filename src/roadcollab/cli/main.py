@@ -174,7 +174,7 @@ def _progress(total: int, description: str):
 def _config_from_args(args):
     import dataclasses
 
-    from ..experiments.reproduction import ExperimentConfig
+    from ..experiments.config import ExperimentConfig
     from ..models.vehicle import FleetSpec
 
     kw = dict(n_runs=args.runs, n_vehicles=args.vehicles, speed=args.speed, oracle=args.oracle,
@@ -243,7 +243,7 @@ def _cmd_attack(args, argv) -> int:
     from rich.console import Console
     from rich.table import Table
 
-    from ..experiments.reproduction import ExperimentConfig
+    from ..experiments.config import ExperimentConfig
     from ..reporting.report import write_attack
     from ..experiments.security_study import AttackStudyConfig, run_attack_study
 
@@ -269,7 +269,8 @@ def _cmd_attack(args, argv) -> int:
 def _cmd_anomalies(args, argv) -> int:
     import argparse as _ap
 
-    from ..experiments.anomaly_study import AnomalyStudyConfig, run_anomaly_study
+    from ..experiments.anomaly_config import AnomalyStudyConfig
+    from ..experiments.anomaly_study import run_anomaly_study
     from ..reporting.report import write_anomalies
 
     ns = _ap.Namespace(runs=1, vehicles=args.vehicles, speed=args.speed, oracle=False, road_profile=args.road_profile,
@@ -299,9 +300,10 @@ def _cmd_anomalies(args, argv) -> int:
 
 
 def _cmd_calibrate_anomalies(args, argv) -> int:
-    from ..experiments.anomaly_calibration import (AnomalyCalibrationConfig, calibrate_anomalies, parse_seeds,
-                                      write_calibration)
-    from ..experiments.reproduction import ExperimentConfig
+    from ..experiments.anomaly_calibration import calibrate_anomalies
+    from ..experiments.calibration_config import AnomalyCalibrationConfig, parse_seeds
+    from ..reporting.calibration_report import write_calibration
+    from ..experiments.config import ExperimentConfig
 
     kw = {}
     if args.snr_thresholds is not None:
@@ -326,7 +328,8 @@ def _cmd_sweep(args, argv) -> int:
     from rich.console import Console
     from rich.table import Table
 
-    from ..experiments.sweep import SweepConfig, run_sweep
+    from ..experiments.sweep import run_sweep
+    from ..experiments.sweep_config import SweepConfig
     from ..reporting.sweep_report import write_sweep
 
     def floats(option: str, text: str) -> tuple[float, ...]:

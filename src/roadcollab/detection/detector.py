@@ -80,13 +80,12 @@ from dataclasses import dataclass
 
 import numpy as np
 import scipy.fft
-from scipy.optimize import linear_sum_assignment
 
 from .._validation import check_matrix, check_positive, check_probability, check_real, check_signal
 from ..errors import ParameterError
-from ..models.anomaly import Anomaly, check_anomaly_fields
+from ..models.anomaly import check_anomaly_fields
 
-__all__ = ["Detection", "DetectorSpec", "detect_anomalies", "match_detections"]
+__all__ = ["Detection", "DetectorSpec", "detect_anomalies"]
 
 _SIDE_TRACKS = {"left": (0,), "right": (1,), "both": (0, 1)}
 _MAD_TO_STD = 1.4826            # sigma of a Gaussian per median absolute deviation
@@ -414,111 +413,3 @@ def _merge_tracks(per_track: list[list[tuple]], spec: DetectorSpec) -> list[Dete
             out.append(Detection(position=centers[t][i], side=side, kind=kind, depth=d,
                                  confidence=float(spec.confidence(s))))
     return sorted(out, key=lambda d: (d.position, d.side))
-
-
-# --- scoring ----------------------------------------------------------------------------------
-
-def _center(obj) -> float:
-    return float(obj.center if isinstance(obj, Anomaly) else obj.position)
-
-
-def _tracks(obj) -> tuple[int, ...]:
-    return _SIDE_TRACKS[obj.side]
-
-
-def match_detections(detections, truth, *, tolerance=1.0, region=None) -> dict:
-    """Score detections against ground-truth anomalies.
-
-    Matching: a detection and a true anomaly are *compatible* when their centers (``Detection.
-    position`` vs ``Anomaly.center``) are within ``tolerance`` m and their sides share a track
-    (``"both"`` is compatible with ``"left"``, ``"right"`` and ``"both"``; ``"left"`` is not
-    compatible with ``"right"``). Kinds need not agree; ``kind_accuracy`` and ``side_accuracy``
-    report agreement over the matched pairs. The one-to-one matching maximises the number of
-    pairs and, among those, minimises the summed center distance (Hungarian algorithm).
-
-    Region: with ``region=(start_m, end_m)`` the matching is done over all inputs, then a true
-    anomaly counts iff its center is in the region, a matched pair counts iff its true anomaly
-    counts, and an unmatched detection counts (as a false positive) iff its center is in the
-    region; a detection matched to a true anomaly outside the region is ignored. So nothing
-    just across the region's edge is penalised twice.
-
-    Parameters
-    ----------
-    detections : sequence of Detection
-    truth : sequence of roadcollab.models.road.Anomaly
-    tolerance : float
-        Maximum center distance of a match, m, > 0.
-    region : (float, float) or None
-        Scored stretch of road, m.
-
-    Returns
-    -------
-    dict
-        ``precision`` (1.0 when nothing is detected), ``recall`` (1.0 when there is nothing to
-        find), ``f1`` (0.0 when precision + recall = 0), ``median_position_error_m`` (over
-        matched pairs, NaN if none), ``median_depth_rel_error`` (``|d_hat - d| / d`` over pairs of
-        the same kind, NaN if none), ``kind_accuracy``, ``side_accuracy`` (NaN if no pair),
-        ``n_true``, ``n_detected``, ``n_matched``, ``n_kind_correct``, ``n_side_correct``,
-        ``position_errors`` (list, m) and ``pairs`` (list of (detection index, truth index)).
-    """
-    dets = _check_sequence("detections", detections, Detection)
-    trs = _check_sequence("truth", truth, Anomaly)
-    tolerance = check_positive("tolerance", tolerance)
-    if region is None:
-        lo, hi = -math.inf, math.inf
-    else:
-        if not isinstance(region, (tuple, list)) or len(region) != 2:
-            raise ParameterError(f"region must be a (start_m, end_m) pair or None, got {region!r}")
-        lo, hi = check_real("region[0]", region[0]), check_real("region[1]", region[1])
-        if hi < lo:
-            raise ParameterError(f"region must have start_m <= end_m, got ({lo:g}, {hi:g})")
-    dc = np.array([_center(d) for d in dets])
-    tc = np.array([_center(a) for a in trs])
-    pairs: list[tuple[int, int]] = []
-    if dets and trs:
-        dist = np.abs(dc[:, None] - tc[None, :])
-        compat = np.array([[bool(set(_tracks(d)) & set(_tracks(a))) for a in trs] for d in dets])
-        ok = compat & (dist <= tolerance)
-        if ok.any():
-            # Infeasible pairs cost more than all feasible ones together: the optimum has the
-            # most feasible pairs and, among those, the smallest summed distance.
-            big = tolerance * (min(len(dets), len(trs)) + 1) + 1.0
-            rows, cols = linear_sum_assignment(np.where(ok, dist, big))
-            pairs = [(int(i), int(k)) for i, k in zip(rows, cols) if ok[i, k]]
-    t_in = (tc >= lo) & (tc <= hi) if trs else np.zeros(0, bool)
-    d_in = (dc >= lo) & (dc <= hi) if dets else np.zeros(0, bool)
-    counted = [(i, k) for i, k in pairs if t_in[k]]
-    matched_dets = {i for i, _ in pairs}
-    false_pos = sum(1 for i in range(len(dets)) if i not in matched_dets and d_in[i])
-    n_true = int(t_in.sum())
-    n_matched = len(counted)
-    n_detected = n_matched + false_pos
-    precision = n_matched / n_detected if n_detected else 1.0
-    recall = n_matched / n_true if n_true else 1.0
-    f1 = 2 * precision * recall / (precision + recall) if precision + recall > 0 else 0.0
-    errs = [abs(dc[i] - tc[k]) for i, k in counted]
-    kind_ok = [dets[i].kind == trs[k].kind for i, k in counted]
-    side_ok = [dets[i].side == trs[k].side for i, k in counted]
-    depth_rel = [abs(dets[i].depth - trs[k].depth) / trs[k].depth for i, k in counted if dets[i].kind == trs[k].kind]
-    nan = float("nan")
-    return {
-        "precision": float(precision), "recall": float(recall), "f1": float(f1),
-        "median_position_error_m": float(np.median(errs)) if errs else nan,
-        "median_depth_rel_error": float(np.median(depth_rel)) if depth_rel else nan,
-        "kind_accuracy": float(np.mean(kind_ok)) if kind_ok else nan,
-        "side_accuracy": float(np.mean(side_ok)) if side_ok else nan,
-        "n_true": n_true, "n_detected": int(n_detected), "n_matched": n_matched,
-        "n_kind_correct": int(sum(kind_ok)), "n_side_correct": int(sum(side_ok)),
-        "position_errors": [float(e) for e in errs], "depth_rel_errors": [float(e) for e in depth_rel],
-        "pairs": counted,
-    }
-
-
-def _check_sequence(name: str, value, typ) -> list:
-    if isinstance(value, (str, bytes)) or not hasattr(value, "__iter__"):
-        raise ParameterError(f"{name} must be a sequence of {typ.__name__}, got {type(value).__name__}")
-    items = list(value)
-    for i, item in enumerate(items):
-        if not isinstance(item, typ):
-            raise ParameterError(f"{name}[{i}] must be a {typ.__name__}, got {type(item).__name__}")
-    return items

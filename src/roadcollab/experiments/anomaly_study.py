@@ -2,9 +2,9 @@
 
 For every run the fleet drives one road; every vehicle's three band-limited estimates
 (``observer_only``, ``collaborative`` = Algorithm 1, ``fused`` = running fleet average of the
-inversions ``z``; see :func:`roadcollab.experiments.reproduction.run_estimates`) go through
+inversions ``z``; see :func:`roadcollab.experiments.estimates.run_estimates`) go through
 :func:`roadcollab.detection.detector.detect_anomalies` and are scored with
-:func:`roadcollab.detection.detector.match_detections` on the scored segment (the window minus the lead-in
+:func:`roadcollab.detection.scoring.match_detections` on the scored segment (the window minus the lead-in
 and lead-out margins), with a center tolerance of ``AnomalyStudyConfig.tolerance``.
 
 Pooling: counts (matches, detections, true anomalies) are summed over runs and over vehicles
@@ -19,96 +19,33 @@ each noise level), so the sweeps use common random numbers (same roughness, anom
 and noise draws; only the swept quantity changes) and results do not depend on scheduling.
 The sweep point equal to the configured sensor noise is the default condition itself.
 
+The configuration is :class:`~roadcollab.experiments.anomaly_config.AnomalyStudyConfig`; the
+conditions, seeds and per-run scoring are in :mod:`roadcollab.experiments.anomaly_runs`.
+
 Cost: one run is ``1 + len(depths) + len(noise_levels) - 1`` calls of ``run_estimates`` (about
 0.05 s each for 10 vehicles) and ``3 V`` detections per condition (about 3 ms each); the default
 study (20 runs, 10 vehicles, 6 depths, 5 noise levels) took 16 s with ``--workers 2`` on the
 2-core machine, including the pipeline set-up.
 """
-
 from __future__ import annotations
 
 import dataclasses
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Callable
 
 import numpy as np
 
-from .._validation import check_int, check_positive, check_real
-from ..detection.detector import DetectorSpec, detect_anomalies, match_detections
+from .._validation import check_int
+from ..detection.scoring import MatchTally
 from ..errors import ParameterError
-from ..experiments.reproduction import ExperimentConfig, FleetPipeline, RunEstimates, run_estimates
-from ..io.profiles import measured_road
-from ..models.road import RoadSpec, generate_road, with_anomalies
 from ..models.vehicle import Vehicle, sample_fleet
+from .anomaly_config import ESTIMATORS, AnomalyStudyConfig
+from .anomaly_runs import condition_pipelines, fresh_seed_sequence, run_seed_sequences, score_estimates, scored_region
+from .estimates import RunEstimates, run_estimates
+from .runner import map_runs
 
-__all__ = ["ESTIMATORS", "AnomalyStudyConfig", "AnomalyStudyResult", "run_anomaly_study"]
-
-#: Estimates scored by the study (attributes of :class:`~roadcollab.experiments.reproduction.RunEstimates`).
-ESTIMATORS = ("observer_only", "collaborative", "fused")
-
-
-def _check_levels(name: str, value, *, positive: bool) -> tuple[float, ...]:
-    if not isinstance(value, (tuple, list)):
-        raise ParameterError(f"{name} must be a tuple of numbers, got {type(value).__name__}")
-    check = check_positive if positive else (lambda n, v: check_real(n, v, low=0.0))
-    return tuple(check(f"{name}[{i}]", v) for i, v in enumerate(value))
-
-
-@dataclass(frozen=True)
-class AnomalyStudyConfig:
-    """Everything the anomaly study depends on besides the seed.
-
-    Parameters
-    ----------
-    experiment : ExperimentConfig
-        Fleet, road and sensors of the default condition (its ``n_runs`` is not used), at
-        least 2 vehicles. With ``road_profile`` set, the measured profile's roughness gets
-        synthetic anomalies with ground truth (:func:`roadcollab.models.road.with_anomalies`).
-    n_runs : int
-        Roads (runs); every condition uses the same runs.
-    depths : tuple of float
-        Anomaly depths/heights (m) of the F1-vs-depth sweep: every anomaly of the default road
-        gets this depth (``RoadSpec.depth_range = (d, d)``). Empty: no sweep.
-    noise_levels : tuple of float
-        Accelerometer noise std (m/s^2) of the F1-vs-noise sweep; the estimators stay designed
-        for ``experiment.sensor_noise_std``. Empty: no sweep.
-    detector : DetectorSpec
-    tolerance : float
-        Center distance (m) within which a detection matches a true anomaly.
-    map_vehicle : int
-        1-based vehicle whose detections on run 1 make ``map_example``.
-    """
-
-    experiment: ExperimentConfig = field(default_factory=ExperimentConfig)
-    n_runs: int = 20
-    depths: tuple[float, ...] = (0.01, 0.015, 0.02, 0.03, 0.05, 0.08)
-    noise_levels: tuple[float, ...] = (0.01, 0.025, 0.05, 0.1, 0.2)
-    detector: DetectorSpec = field(default_factory=DetectorSpec)
-    tolerance: float = 1.0
-    map_vehicle: int = 2
-
-    def __post_init__(self):
-        if not isinstance(self.experiment, ExperimentConfig):
-            raise ParameterError(f"experiment must be an ExperimentConfig, got {type(self.experiment).__name__}")
-        check_int("experiment.n_vehicles", self.experiment.n_vehicles, low=2)
-        check_int("n_runs", self.n_runs, low=1)
-        object.__setattr__(self, "depths", _check_levels("depths", self.depths, positive=True))
-        object.__setattr__(self, "noise_levels", _check_levels("noise_levels", self.noise_levels, positive=False))
-        if not isinstance(self.detector, DetectorSpec):
-            raise ParameterError(f"detector must be a DetectorSpec, got {type(self.detector).__name__}")
-        object.__setattr__(self, "tolerance", check_positive("tolerance", self.tolerance))
-        check_int("map_vehicle", self.map_vehicle, low=1, high=self.experiment.n_vehicles)
-        for d in self.depths:   # the road spec must accept every sweep depth
-            self.road_spec(d)
-
-    def road_spec(self, depth: float | None = None) -> RoadSpec:
-        """The default road, or with every anomaly ``depth`` m deep (high)."""
-        spec = self.experiment.road_spec()
-        return spec if depth is None else dataclasses.replace(spec, depth_range=(depth, depth))
-
-    def to_dict(self) -> dict:
-        return dataclasses.asdict(self)
+__all__ = ["AnomalyStudyResult", "run_anomaly_study"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -117,6 +54,11 @@ class AnomalyStudyResult:
 
     Attributes
     ----------
+    config : AnomalyStudyConfig
+    seed : int
+        Root seed.
+    fleet : list of Vehicle
+        The fleet of every run and condition.
     detection_rows : list of dict
         One per estimator on the default condition, pooled over runs and vehicles 2..V:
         ``estimator, precision, recall, f1, median_position_error_m, median_depth_rel_error,
@@ -146,140 +88,35 @@ class AnomalyStudyResult:
     elapsed_s: float
 
 
-class _RoadOverride:
-    """A :class:`FleetPipeline` whose roads come from another :class:`RoadSpec`.
-
-    :func:`run_estimates` only uses ``config``, ``grid``, ``estimators`` and ``road(rng)``;
-    the estimators (designed for the configuration's road statistics) are shared, so a sweep
-    changes the road and nothing else. ``road`` mirrors :meth:`FleetPipeline.road`; with a
-    measured profile, the anomalies of ``spec`` are added to it.
-    """
-
-    def __init__(self, pipe: FleetPipeline, spec: RoadSpec) -> None:
-        self.config, self.grid, self.fleet, self.estimators = pipe.config, pipe.grid, pipe.fleet, pipe.estimators
-        self.spec = spec
-
-    def road(self, rng: np.random.Generator):
-        cfg = self.config
-        if cfg.road_profile is None:
-            profile = generate_road(self.spec, rng=rng)
-        else:
-            path = None if cfg.road_profile == "packaged" else cfg.road_profile
-            profile = with_anomalies(measured_road(path, spacing=self.spec.spacing, rng=rng), self.spec, rng=rng)
-        return profile.sample(cfg.speed, cfg.sample_rate, duration=cfg.n_samples / cfg.sample_rate)
-
-
-class _Tally:
-    """Pooled counts and pair statistics of one (condition, estimator[, vehicle])."""
-
-    __slots__ = ("n_true", "n_detected", "n_matched", "n_kind", "n_side", "pos_err", "depth_err")
-
-    def __init__(self) -> None:
-        self.n_true = self.n_detected = self.n_matched = self.n_kind = self.n_side = 0
-        self.pos_err: list[float] = []
-        self.depth_err: list[float] = []
-
-    def add(self, m: dict) -> None:
-        self.n_true += m["n_true"]
-        self.n_detected += m["n_detected"]
-        self.n_matched += m["n_matched"]
-        self.n_kind += m["n_kind_correct"]
-        self.n_side += m["n_side_correct"]
-        self.pos_err += m["position_errors"]
-        self.depth_err += m["depth_rel_errors"]
-
-    def merge(self, other: "_Tally") -> None:
-        """Add the counts and pairs of another tally (e.g. one pooled on a worker)."""
-        self.n_true += other.n_true
-        self.n_detected += other.n_detected
-        self.n_matched += other.n_matched
-        self.n_kind += other.n_kind
-        self.n_side += other.n_side
-        self.pos_err += other.pos_err
-        self.depth_err += other.depth_err
-
-    def row(self) -> dict:
-        p = self.n_matched / self.n_detected if self.n_detected else 1.0
-        r = self.n_matched / self.n_true if self.n_true else 1.0
-        nan = float("nan")
-        return {
-            "precision": p, "recall": r, "f1": 2 * p * r / (p + r) if p + r > 0 else 0.0,
-            "median_position_error_m": float(np.median(self.pos_err)) if self.pos_err else nan,
-            "median_depth_rel_error": float(np.median(self.depth_err)) if self.depth_err else nan,
-            "kind_accuracy": self.n_kind / self.n_matched if self.n_matched else nan,
-            "side_accuracy": self.n_side / self.n_matched if self.n_matched else nan,
-            "n_true": self.n_true, "n_detected": self.n_detected, "n_matched": self.n_matched,
-        }
-
-
-def _region(est: RunEstimates) -> tuple[float, float]:
-    """Road stretch (m) of the scored samples."""
-    sl = est.scored
-    return float(est.positions[sl.start]), float(est.positions[sl.stop - 1])
-
-
-def _score(est: RunEstimates, config: AnomalyStudyConfig, vehicles) -> tuple[dict, dict]:
-    """Detections and matches of every estimator for the given 0-based ``vehicles`` of one run:
-    two dicts ``(estimator, vehicle) -> list of Detection`` and ``-> match_detections dict``."""
-    exp = config.experiment
-    region = _region(est)
-    dets, matches = {}, {}
-    for name in ESTIMATORS:
-        w = getattr(est, name)
-        for j in vehicles:
-            dets[name, j] = detect_anomalies(w[j], positions=est.positions, speed=exp.speed,
-                                             sample_rate=exp.sample_rate, spec=config.detector)
-            matches[name, j] = match_detections(dets[name, j], est.road.anomalies, tolerance=config.tolerance,
-                                                region=region)
-    return dets, matches
-
-
-def _fresh(ss: np.random.SeedSequence) -> np.random.SeedSequence:
-    """An unspawned copy: run_estimates spawns children, and each condition needs the same ones."""
-    return np.random.SeedSequence(ss.entropy, spawn_key=ss.spawn_key, pool_size=ss.pool_size)
-
-
-def _run_seeds(seed: int, n_runs: int) -> list[np.random.SeedSequence]:
-    """One SeedSequence per run: the children of ``SeedSequence(seed).spawn(2)[1]`` (the first
-    child draws the fleet, see :func:`roadcollab.experiments.reproduction.pipeline_for`)."""
-    return np.random.SeedSequence(seed).spawn(2)[1].spawn(n_runs)
-
-
-def _condition_pipelines(config: AnomalyStudyConfig, seed: int) -> tuple[_RoadOverride, list[_RoadOverride]]:
-    """The default condition's pipeline and one per sweep depth (same fleet and estimators)."""
-    from ..experiments.reproduction import pipeline_for
-
-    pipe = _RoadOverride(pipeline_for(config.experiment, seed), config.road_spec())
-    return pipe, [_RoadOverride(pipe, config.road_spec(d)) for d in config.depths]
-
-
 @dataclass(frozen=True)
 class _AnomalyTask:
-    """Picklable task: the matches of runs ``indices`` under every condition."""
+    """Picklable task: the matches (:class:`~roadcollab.detection.scoring.MatchResult`) of runs
+    ``indices`` under every condition."""
 
     config: AnomalyStudyConfig
     seed: int
 
     def __call__(self, indices) -> list[dict]:
         config, exp = self.config, self.config.experiment
-        pipe, depth_pipes = _condition_pipelines(config, self.seed)
-        runs_ss = _run_seeds(self.seed, config.n_runs)
+        pipe, depth_pipes = condition_pipelines(config, self.seed)
+        runs_ss = run_seed_sequences(self.seed, config.n_runs)
         V = exp.n_vehicles
         pooled = range(1, V)   # vehicles 2..V
         out = []
         for i in indices:
             rs = runs_ss[i]
-            est = run_estimates(pipe, _fresh(rs))
-            dets, matches = _score(est, config, range(V))
+            est = run_estimates(pipe, fresh_seed_sequence(rs))
+            dets, matches = score_estimates(est, config, range(V))
             rec = {"main": matches, "noise": {}, "depth": {},
                    "map": _map_example(est, dets, config) if i == 0 else None}
             for k, level in enumerate(config.noise_levels):
                 nm = matches   # the default condition itself (same seeds) ...
                 if level != exp.sensor_noise_std:   # ... unless the level differs
-                    _, nm = _score(run_estimates(pipe, _fresh(rs), sensor_noise_std=level), config, pooled)
+                    noisy = run_estimates(pipe, fresh_seed_sequence(rs), sensor_noise_std=level)
+                    nm = score_estimates(noisy, config, pooled)[1]
                 rec["noise"][k] = nm
             for k, dpipe in enumerate(depth_pipes):
-                rec["depth"][k] = _score(run_estimates(dpipe, _fresh(rs)), config, pooled)[1]
+                rec["depth"][k] = score_estimates(run_estimates(dpipe, fresh_seed_sequence(rs)), config, pooled)[1]
             out.append(rec)
         return out
 
@@ -304,8 +141,6 @@ def run_anomaly_study(config: AnomalyStudyConfig, seed: int, *, progress: Callab
     -------
     AnomalyStudyResult
     """
-    from ..experiments.runner import map_runs
-
     if not isinstance(config, AnomalyStudyConfig):
         raise ParameterError(f"config must be an AnomalyStudyConfig, got {type(config).__name__}")
     seed = check_int("seed", seed, low=0)
@@ -316,10 +151,10 @@ def run_anomaly_study(config: AnomalyStudyConfig, seed: int, *, progress: Callab
     fleet_ss, _ = np.random.SeedSequence(seed).spawn(2)
     fleet = sample_fleet(exp.n_vehicles, exp.fleet, rng=np.random.default_rng(fleet_ss))
     V = exp.n_vehicles
-    main = {name: _Tally() for name in ESTIMATORS}
-    per_vehicle = {(name, j): _Tally() for name in ESTIMATORS for j in range(V)}
-    by_depth = {(i, name): _Tally() for i in range(len(config.depths)) for name in ESTIMATORS}
-    by_noise = {(i, name): _Tally() for i in range(len(config.noise_levels)) for name in ESTIMATORS}
+    main = {name: MatchTally() for name in ESTIMATORS}
+    per_vehicle = {(name, j): MatchTally() for name in ESTIMATORS for j in range(V)}
+    by_depth = {(i, name): MatchTally() for i in range(len(config.depths)) for name in ESTIMATORS}
+    by_noise = {(i, name): MatchTally() for i in range(len(config.noise_levels)) for name in ESTIMATORS}
     pooled = range(1, V)   # vehicles 2..V
     runs = map_runs(_AnomalyTask(config, seed), config.n_runs, workers=workers, scheduler=scheduler,
                     progress=progress)
@@ -350,11 +185,12 @@ def run_anomaly_study(config: AnomalyStudyConfig, seed: int, *, progress: Callab
 
 
 def _map_example(est: RunEstimates, dets: dict, config: AnomalyStudyConfig) -> dict:
+    """Truth and detections of vehicle ``map_vehicle`` on one run (see ``AnomalyStudyResult.map_example``)."""
     j = config.map_vehicle - 1
     truth = [{"start": a.position, "end": a.end, "center": a.center, "side": a.side, "kind": a.kind,
               "depth": a.depth} for a in est.road.anomalies]
     return {
-        "vehicle": config.map_vehicle, "run": 1, "region": _region(est), "tolerance": config.tolerance,
+        "vehicle": config.map_vehicle, "run": 1, "region": scored_region(est), "tolerance": config.tolerance,
         "truth": truth,
         "detections": {name: [dataclasses.asdict(d) for d in dets[name, j]] for name in ESTIMATORS},
     }

@@ -22,7 +22,8 @@ from threadpoolctl import threadpool_limits
 from ..wire import protocol
 from .._validation import check_int
 from ..errors import ParameterError
-from ..experiments.reproduction import ExperimentConfig, FleetPipeline
+from ..experiments.config import ExperimentConfig
+from ..experiments.pipeline import FleetPipeline
 from ..collaboration.algorithm1 import CollaborativeEstimator
 from ..collaboration.relay import Exchange, Relay
 from ..models.simulation import add_sensor_noise, simulate_response

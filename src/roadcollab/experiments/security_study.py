@@ -17,7 +17,7 @@ import numpy as np
 from ..wire import protocol
 from .._validation import check_int
 from ..errors import ParameterError
-from ..experiments.reproduction import ExperimentConfig
+from ..experiments.config import ExperimentConfig
 from ..collaboration.relay import Exchange, Relay
 from ..privacy.attacks import (PhysicalPrior, SUCCESS_TOLERANCE, attack_model_reduction, attack_multiplicity, attack_physical_fit, attack_pole_intersection, attack_signals_prior, attack_signals_reduction, intersect_pole_sets, pole_errors)
 from ..lti.arx import arx_poles
@@ -133,7 +133,7 @@ def _linkability(features: dict[tuple[int, int], np.ndarray]) -> dict:
 
 
 def _study_pipeline(config: AttackStudyConfig, seed: int):
-    from ..experiments.reproduction import pipeline_for
+    from ..experiments.pipeline import pipeline_for
 
     return pipeline_for(config.experiment, seed)
 

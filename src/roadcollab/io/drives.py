@@ -465,7 +465,7 @@ def estimate_drives(drives: list[Drive], *, gamma: float | None = None, band_low
         Default: the :class:`~roadcollab.experiments.reproduction.ExperimentConfig` defaults (512, 0.5 Hz).
     """
     from ..collaboration.algorithm1 import CollaborativeEstimator
-    from ..experiments.reproduction import ExperimentConfig
+    from ..experiments.config import ExperimentConfig
     from ..collaboration.relay import Relay
     from ..estimation.grid import SegmentGrid
 
@@ -731,7 +731,7 @@ def write_estimates(est: DriveEstimates, out, *, command: str, anomalies: list[d
                      "band edge: the estimates are dominated by window-edge effects; log longer drives.")
     if anomaly_note:
         notes.append(anomaly_note)
-    from ..experiments.reproduction import ExperimentConfig
+    from ..experiments.config import ExperimentConfig
 
     design = ExperimentConfig()
     config = {

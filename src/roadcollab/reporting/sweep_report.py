@@ -10,7 +10,8 @@ import dataclasses
 from pathlib import Path
 
 from ..reporting.report import markdown_table, write_config, write_csv
-from ..experiments.sweep import SweepFinding, SweepResult
+from ..experiments.sweep_findings import SweepFinding
+from ..experiments.sweep_result import SweepResult
 
 __all__ = ["write_sweep", "findings_markdown"]
 

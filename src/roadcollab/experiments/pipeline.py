@@ -1,0 +1,190 @@
+"""Per-fleet setup of a configuration and the seeds of a reproduction.
+
+A :class:`FleetPipeline` holds what every run of one fleet shares: the vehicles' estimators,
+the frequency grid and the fleet's linear MMSE estimators. :func:`pipeline_for` builds it once
+per process for a configuration and root seed. Seeds: ``SeedSequence(seed).spawn(2)`` gives the
+fleet (first child) and the runs' parent (second child, one child per run).
+"""
+
+from __future__ import annotations
+
+import functools
+
+import numpy as np
+
+from ..collaboration.algorithm1 import CollaborativeEstimator
+from ..collaboration.fusion import LinearMMSE, plant_moments, road_second_moment
+from ..collaboration.relay import simulate_measurements
+from ..errors import ParameterError
+from ..models.profile import TimeRoad
+from ..models.road import generate_road
+from ..io.profiles import measured_road
+from ..models.vehicle import Vehicle, sample_fleet
+from .config import ExperimentConfig
+from .runner import cached
+
+__all__ = ["FleetPipeline", "fleet_and_run_seeds", "pipeline_for", "record_run", "spawn_seeds"]
+
+
+class FleetPipeline:
+    """Per-vehicle setup for a configuration: estimators, grids, realisations, and the linear
+    MMSE estimators (centralised and oracle) of the fleet.
+
+    Parameters
+    ----------
+    config : ExperimentConfig
+    fleet : list of Vehicle
+        ``config.n_vehicles`` vehicles in driving order.
+
+    Attributes
+    ----------
+    grid : SegmentGrid
+        The configuration's frequency grid.
+    estimators : list of CollaborativeEstimator
+        One per vehicle, designed for ``config.noise_model()``.
+    """
+
+    def __init__(self, config: ExperimentConfig, fleet: list[Vehicle]) -> None:
+        if len(fleet) != config.n_vehicles:
+            raise ParameterError(f"fleet must have n_vehicles={config.n_vehicles} vehicles, got {len(fleet)}")
+        self.config = config
+        self.fleet = fleet
+        self.grid = config.grid()
+        noise = config.noise_model()
+        self.estimators = [CollaborativeEstimator(v, noise, self.grid, gamma=config.gamma, oracle=config.oracle,
+                                                  fleet=config.fleet) for v in fleet]
+
+    @functools.cached_property
+    def road_moment(self) -> np.ndarray:
+        """Per-bin road second moment of the configuration's road model (design draws); cached
+        per process by configuration, since it depends on nothing else."""
+
+        def build():
+            return road_second_moment(lambda rng: self.road(rng).velocity[:self.grid.n_samples], self.grid)
+
+        return cached(("road_moment", repr(self.config)), build)
+
+    @functools.cached_property
+    def centralized(self) -> LinearMMSE:
+        """Linear MMSE from every record with the nominal models and the parameter uncertainty."""
+        S = self.road_moment
+        moments = [plant_moments(e.posterior_responses, S) for e in self.estimators]
+        return LinearMMSE(self.grid, S, moments, [self.config.sensor_noise_std] * len(self.fleet))
+
+    @functools.cached_property
+    def oracle_bound(self) -> LinearMMSE:
+        """Linear MMSE from every record with the true models (the bound)."""
+        S = self.road_moment
+        moments = [plant_moments(e.true_plant.frequency_response(self.grid.omega_dt[self.grid.active]), S)
+                   for e in self.estimators]
+        return LinearMMSE(self.grid, S, moments, [self.config.sensor_noise_std] * len(self.fleet))
+
+    def road(self, rng: np.random.Generator) -> TimeRoad:
+        """Draw the run's road and sample it for the fleet's speed.
+
+        Parameters
+        ----------
+        rng : numpy.random.Generator
+
+        Returns
+        -------
+        TimeRoad
+            Synthetic (``config.road_spec()``) or measured (``config.road_profile``) road,
+            sampled at ``config.speed`` m/s and ``config.sample_rate`` Hz for ``n_samples``.
+        """
+        cfg = self.config
+        if cfg.road_profile is None:
+            profile = generate_road(cfg.road_spec(), rng=rng)
+        else:
+            path = None if cfg.road_profile == "packaged" else cfg.road_profile
+            profile = measured_road(path, rng=rng)
+            if profile.length < cfg.window_length:
+                raise ParameterError(f"road_profile covers {profile.length:.1f} m, the window needs "
+                                     f"segment_length + 2 * margin = {cfg.window_length:.1f} m")
+        return profile.sample(cfg.speed, cfg.sample_rate, duration=cfg.n_samples / cfg.sample_rate)
+
+
+def spawn_seeds(rng, n: int) -> list[np.random.SeedSequence]:
+    """Independent child seeds of one run (e.g. road, sensor noise, obfuscators).
+
+    Parameters
+    ----------
+    rng : numpy.random.SeedSequence | numpy.random.Generator | int
+        A SeedSequence is spawned directly; anything else seeds a Generator whose first 63-bit
+        integer becomes the root SeedSequence.
+    n : int
+        Number of children.
+
+    Returns
+    -------
+    list of numpy.random.SeedSequence
+        ``n`` children.
+    """
+    ss = rng if isinstance(rng, np.random.SeedSequence) else np.random.SeedSequence(
+        np.random.default_rng(rng).integers(2**63))
+    return ss.spawn(n)
+
+
+def record_run(pipe: FleetPipeline, road_ss: np.random.SeedSequence, noise_ss: np.random.SeedSequence,
+               sensor_noise_std: float) -> tuple[TimeRoad, list[np.ndarray], list[np.ndarray]]:
+    """The road of one run and every vehicle's record of it.
+
+    Parameters
+    ----------
+    pipe : FleetPipeline
+        Or any object with ``grid``, ``estimators`` and ``road(rng)``.
+    road_ss, noise_ss : numpy.random.SeedSequence
+        Seeds of the road and of the sensor noise.
+    sensor_noise_std : float
+        Accelerometer noise standard deviation, m/s^2.
+
+    Returns
+    -------
+    road : TimeRoad
+    records : list of (N, 2) ndarray
+        Measured accelerations per vehicle, m/s^2.
+    spectra : list of (N // 2 + 1, 2) ndarray
+        Their spectra (``grid.rfft``).
+    """
+    road = pipe.road(np.random.default_rng(road_ss))
+    ys = simulate_measurements(pipe.estimators, road.velocity, sensor_noise_std, rng=np.random.default_rng(noise_ss))
+    return road, ys, [pipe.grid.rfft(y) for y in ys]
+
+
+def fleet_and_run_seeds(config: ExperimentConfig, seed: int) -> tuple[list[Vehicle], list[np.random.SeedSequence]]:
+    """The fleet (from the root seed's first child) and one SeedSequence per run.
+
+    Parameters
+    ----------
+    config : ExperimentConfig
+    seed : int
+        Root seed.
+
+    Returns
+    -------
+    fleet : list of Vehicle
+        ``config.n_vehicles`` vehicles.
+    run_seeds : list of numpy.random.SeedSequence
+        ``config.n_runs`` children of the root seed's second child.
+    """
+    fleet_ss, runs_ss = np.random.SeedSequence(seed).spawn(2)
+    fleet = sample_fleet(config.n_vehicles, config.fleet, rng=np.random.default_rng(fleet_ss))
+    return fleet, runs_ss.spawn(config.n_runs)
+
+
+def pipeline_for(config: ExperimentConfig, seed: int) -> FleetPipeline:
+    """The (per-process cached) pipeline of a configuration and root seed.
+
+    Parameters
+    ----------
+    config : ExperimentConfig
+    seed : int
+        Root seed; the fleet is :func:`fleet_and_run_seeds`'s.
+
+    Returns
+    -------
+    FleetPipeline
+        Built once per process and key ``(repr(config), seed)``.
+    """
+    return cached(("pipeline", repr(config), seed),
+                  lambda: FleetPipeline(config, fleet_and_run_seeds(config, seed)[0]))
