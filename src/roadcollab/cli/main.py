@@ -147,7 +147,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--quick", action="store_true", help="only up to 16k samples")
 
     p = sub.add_parser("estimate", help="estimate the road from recorded drives (CSV + parameters)")
-    from ..io.drives import add_estimate_arguments
+    from .estimate import add_estimate_arguments
 
     add_estimate_arguments(p)
 
@@ -391,7 +391,7 @@ def _cmd_bench(args) -> int:
 
 
 def _cmd_estimate(args, argv) -> int:
-    from ..io.drives import estimate_command
+    from .estimate import estimate_command
 
     command = "roadcollab " + " ".join(shlex.quote(a) for a in argv)
     summary = estimate_command(args.drive, args.out, command=command)
