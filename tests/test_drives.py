@@ -11,12 +11,9 @@ import numpy as np
 import pytest
 
 from roadcollab import ParameterError
+from roadcollab.cli.estimate import add_estimate_arguments, estimate_command
+from roadcollab.experiments.drive_estimation import ESTIMATORS, estimate_drives, integrate_elevation
 from roadcollab.io.drives import (
-    ESTIMATORS,
-    add_estimate_arguments,
-    estimate_command,
-    estimate_drives,
-    integrate_elevation,
     load_drive,
     load_drives,
     read_drive_csv,

@@ -1,1 +1,1 @@
-"""The ``roadcollab`` command line."""
+"""The ``roadcollab`` command line: one module per subcommand, dispatched by :mod:`roadcollab.cli.main`."""

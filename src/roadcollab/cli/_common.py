@@ -1,0 +1,211 @@
+"""Helpers shared by the ``roadcollab`` subcommands: argument types, common options, progress, command line."""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import shlex
+import time
+from pathlib import Path
+from typing import Callable, Sequence
+
+from rich.console import Console
+from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+from rich.table import Table
+
+from ..errors import ParameterError
+from ..experiments.config import ExperimentConfig
+from ..io.profiles import measured_road
+from ..models.vehicle import FleetSpec
+
+__all__ = ["positive_int", "nonneg_int", "positive_float", "add_out_option", "add_dask_options", "add_road_options",
+           "dask_options", "command_line", "progress", "run_with_progress", "print_table", "config_from_args"]
+
+
+# --- argument types ------------------------------------------------------------------------------
+
+def _int_at_least(low: int, what: str) -> Callable[[str], int]:
+    """argparse type: an integer >= ``low`` with a clear message otherwise."""
+    def parse(text: str) -> int:
+        try:
+            v = int(text)
+        except ValueError as err:
+            raise argparse.ArgumentTypeError(f"expected a {what} integer, got {text!r}") from err
+        if v < low:
+            raise argparse.ArgumentTypeError(f"expected a {what} integer, got {v}")
+        return v
+    return parse
+
+
+positive_int = _int_at_least(1, "positive")
+nonneg_int = _int_at_least(0, "non-negative")
+
+
+def positive_float(text: str) -> float:
+    """argparse type: a positive finite number.
+
+    Parameters
+    ----------
+    text : str
+        The option's value as typed.
+
+    Returns
+    -------
+    float
+
+    Raises
+    ------
+    argparse.ArgumentTypeError
+        Not a number, not positive, or infinite.
+    """
+    try:
+        v = float(text)
+    except ValueError as err:
+        raise argparse.ArgumentTypeError(f"expected a positive number, got {text!r}") from err
+    if not v > 0 or v == float("inf"):
+        raise argparse.ArgumentTypeError(f"expected a positive finite number, got {text!r}")
+    return v
+
+
+# --- common options ------------------------------------------------------------------------------
+
+def add_out_option(p: argparse.ArgumentParser) -> None:
+    """``--out DIR`` (required): the folder every study writes its outputs to."""
+    p.add_argument("--out", type=Path, required=True, help="output folder")
+
+
+def add_dask_options(p: argparse.ArgumentParser) -> None:
+    """``--workers N`` or ``--scheduler ADDRESS`` (mutually exclusive): where the runs are computed."""
+    g = p.add_mutually_exclusive_group()
+    g.add_argument("--workers", type=positive_int, default=None,
+                   help="run on a local Dask cluster with N worker processes (results are identical)")
+    g.add_argument("--scheduler", default=None, metavar="ADDRESS",
+                   help="run on an existing Dask cluster, e.g. tcp://host:8786")
+
+
+def add_road_options(p: argparse.ArgumentParser) -> None:
+    """``--road-profile FILE`` and ``--speed`` (m/s): the road the simulated fleet drives."""
+    p.add_argument("--road-profile", metavar="FILE", default=None,
+                   help="measured profile (rows 'distance_m elevation_m'); 'packaged' for the shipped one")
+    p.add_argument("--speed", type=positive_float, default=15.0, help="vehicle speed, m/s (default 15)")
+
+
+def dask_options(args: argparse.Namespace) -> dict:
+    """``{"workers": ..., "scheduler": ...}`` from :func:`add_dask_options`, for the study runners."""
+    return {"workers": args.workers, "scheduler": args.scheduler}
+
+
+# --- running -------------------------------------------------------------------------------------
+
+def command_line(argv: Sequence[str]) -> str:
+    """The command line as recorded in ``config.json`` and ``report.md``: ``roadcollab`` and the quoted arguments."""
+    return "roadcollab " + " ".join(shlex.quote(a) for a in argv)
+
+
+def progress(total: int, description: str) -> tuple[Progress, Callable[[int], None]]:
+    """A rich progress bar (on stderr) and a callback that advances it.
+
+    Parameters
+    ----------
+    total : int
+        Number of steps.
+    description : str
+        Label left of the bar.
+
+    Returns
+    -------
+    prog : rich.progress.Progress
+        Use as a context manager around the work.
+    advance : callable
+        ``advance(done)`` sets the number of completed steps.
+    """
+    prog = Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
+                    console=Console(stderr=True), transient=False)
+    task = prog.add_task(description, total=total)
+    return prog, (lambda done: prog.update(task, completed=done))
+
+
+def run_with_progress(total: int, description: str, work: Callable[[Callable[[int], None]], object]
+                      ) -> tuple[object, float]:
+    """Run ``work(advance)`` under a progress bar (:func:`progress`).
+
+    Parameters
+    ----------
+    total : int
+        Number of steps the bar counts.
+    description : str
+        Label left of the bar.
+    work : callable
+        Called once with the bar's ``advance(done)`` callback; returns the result.
+
+    Returns
+    -------
+    result : object
+        What ``work`` returned.
+    elapsed : float
+        Wall time of ``work``, s.
+    """
+    prog, cb = progress(total, description)
+    t0 = time.perf_counter()
+    with prog:
+        result = work(cb)
+    return result, time.perf_counter() - t0
+
+
+def print_table(title: str, columns: Sequence[str], rows: Sequence[Sequence[str]]) -> None:
+    """Print a rich table with right-justified columns to stdout.
+
+    Parameters
+    ----------
+    title : str
+        Table title.
+    columns : sequence of str
+        Column headers.
+    rows : sequence of sequence of str
+        Cell texts, one sequence per row.
+    """
+    table = Table(title=title)
+    for col in columns:
+        table.add_column(col, justify="right")
+    for row in rows:
+        table.add_row(*row)
+    Console().print(table)
+
+
+# --- simulation options --------------------------------------------------------------------------
+
+def config_from_args(args: argparse.Namespace) -> ExperimentConfig:
+    """The :class:`~roadcollab.experiments.reproduction.ExperimentConfig` of the simulation options.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        ``runs``, ``vehicles``, ``speed`` (m/s), ``oracle``, ``road_profile``, ``noise`` (m/s^2),
+        ``iso_class``, ``uncertainty`` and optionally ``redraw_fleet`` and ``gamma``; None keeps the default.
+
+    Returns
+    -------
+    ExperimentConfig
+
+    Raises
+    ------
+    ParameterError
+        ``--road-profile`` names no existing file, or a value the configuration rejects.
+    """
+    kw = dict(n_runs=args.runs, n_vehicles=args.vehicles, speed=args.speed, oracle=args.oracle,
+              road_profile=args.road_profile, redraw_fleet=getattr(args, "redraw_fleet", False))
+    if args.noise is not None:
+        kw["sensor_noise_std"] = args.noise
+    if args.iso_class is not None:
+        kw["iso_class"] = args.iso_class
+    if getattr(args, "gamma", None) is not None:
+        kw["gamma"] = args.gamma
+    if args.uncertainty is not None:
+        kw["fleet"] = dataclasses.replace(FleetSpec(), estimate_uncertainty=args.uncertainty)
+    if args.road_profile is not None and args.road_profile != "packaged" and not Path(args.road_profile).is_file():
+        raise ParameterError(f"--road-profile must be an existing file, got {args.road_profile!r}")
+    if args.road_profile is not None:
+        # A measured profile covers a fixed stretch: score as much of it as fits.
+        length = measured_road(None if args.road_profile == "packaged" else args.road_profile, rng=0).length
+        kw["segment_length"] = min(300.0, length - 2 * 15.0 - 1.0)
+    return ExperimentConfig(**kw)

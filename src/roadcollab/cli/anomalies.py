@@ -1,0 +1,64 @@
+"""``roadcollab anomalies``: the road anomaly detection study (F1, position error, sweeps)."""
+
+from __future__ import annotations
+
+import argparse
+
+from ..experiments.anomaly_config import AnomalyStudyConfig
+from ..experiments.anomaly_study import run_anomaly_study
+from ..reporting.report import write_anomalies
+from ._common import (add_dask_options, add_out_option, add_road_options, config_from_args, dask_options, nonneg_int,
+                      positive_int, print_table, run_with_progress)
+
+__all__ = ["NAME", "add_parser", "run"]
+
+NAME = "anomalies"
+
+
+def add_parser(subparsers) -> argparse.ArgumentParser:
+    """Add the ``anomalies`` subcommand and its options to ``subparsers``; returns its parser."""
+    p = subparsers.add_parser(NAME, help="road anomaly detection study (F1, position error, sweeps)")
+    p.add_argument("--runs", type=positive_int, default=20, help="roads (default 20)")
+    p.add_argument("--vehicles", type=positive_int, default=10, help="fleet size (default 10, at least 2)")
+    p.add_argument("--seed", type=nonneg_int, default=0, help="root seed (default 0)")
+    add_out_option(p)
+    p.add_argument("--noise", type=float, default=None, help="accelerometer noise std, m/s^2 (default 0.05)")
+    p.add_argument("--iso-class", default=None, help="ISO 8608 roughness class (default C)")
+    p.add_argument("--no-sweeps", action="store_true", help="skip the depth and noise sweeps")
+    add_road_options(p)
+    add_dask_options(p)
+    return p
+
+
+def run(args: argparse.Namespace, command_line: str) -> int:
+    """Run the anomaly study, write its outputs to ``args.out`` and print the detection table.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        Parsed options of :func:`add_parser`.
+    command_line : str
+        The command line, recorded in ``config.json`` and ``report.md``.
+
+    Returns
+    -------
+    int
+        Exit status 0.
+    """
+    # The study draws one road per run itself: the experiment describes a single run.
+    ns = argparse.Namespace(runs=1, vehicles=args.vehicles, speed=args.speed, oracle=False,
+                            road_profile=args.road_profile, noise=args.noise, iso_class=args.iso_class,
+                            uncertainty=None)
+    exp = config_from_args(ns)
+    kw = {"depths": (), "noise_levels": ()} if args.no_sweeps else {}
+    cfg = AnomalyStudyConfig(experiment=exp, n_runs=args.runs, **kw)
+    result, elapsed = run_with_progress(cfg.n_runs, NAME,
+                                        lambda cb: run_anomaly_study(cfg, args.seed, progress=cb,
+                                                                     **dask_options(args)))
+    write_anomalies(result, args.out, command=command_line, elapsed=elapsed)
+    print_table(f"Anomaly detection, {cfg.n_runs} runs, {elapsed:.1f} s",
+                ("estimator", "precision", "recall", "F1", "median position error (m)"),
+                [(r["estimator"], f"{r['precision']:.3f}", f"{r['recall']:.3f}", f"{r['f1']:.3f}",
+                  f"{r['median_position_error_m']:.3f}") for r in result.detection_rows])
+    print(f"wrote {args.out}/report.md")
+    return 0

@@ -1,0 +1,106 @@
+"""``roadcollab estimate --drive FILE [--drive FILE ...] --out DIR``: the road from recorded drives.
+
+Reads the drives (:mod:`roadcollab.io.drives`, file formats there), runs Algorithm 1 down them
+(:mod:`roadcollab.experiments.drive_estimation`), looks for anomalies and writes CSV files,
+figures, ``config.json`` and ``report.md`` (:mod:`roadcollab.reporting.drives_report`).
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+from dataclasses import asdict
+
+from ..errors import ParameterError
+from ..experiments.drive_estimation import estimate_drives, find_anomalies
+from ..io.drives import load_drives
+from ..reporting.drives_report import write_estimates
+
+__all__ = ["NAME", "add_estimate_arguments", "estimate_command", "add_parser", "run"]
+
+NAME = "estimate"
+
+
+def _detector_config() -> dict | None:
+    """The anomaly detector's default settings for ``config.json``; None if detection is not available."""
+    try:  # detection is optional here: the command runs (without it) when it cannot be imported
+        from ..detection.detector import DetectorSpec
+    except ImportError:
+        return None
+    return asdict(DetectorSpec())
+
+
+def estimate_command(drive_paths: list[str], out_dir, *, command: str) -> dict:
+    """Everything ``roadcollab estimate`` does: read, estimate, detect, write.
+
+    Parameters
+    ----------
+    drive_paths : list of str
+        The drive CSVs in driving order (parameters files beside them).
+    out_dir : str or Path
+        Output folder (created).
+    command : str
+        The command line, recorded in ``config.json`` and ``report.md``.
+
+    Returns
+    -------
+    dict
+        Summary: ``out_dir``, ``n_drives``, ``sample_rate_hz``, ``speed_mps``, ``start_m``,
+        ``n_samples``, ``samples_per_drive``, ``truncated``, ``duration_s``, ``length_m``,
+        ``n_anomalies`` (per estimator, summed over drives; None if detection was not run),
+        ``notes`` and ``files``.
+
+    Raises
+    ------
+    ParameterError
+        Bad input files (nothing is written then).
+    """
+    t0 = time.perf_counter()
+    drives = load_drives(drive_paths)
+    est = estimate_drives(drives)
+    note = None
+    try:
+        anomalies = find_anomalies(est)
+    except ImportError as err:  # anomaly module not available in this build
+        anomalies, note = None, f"Anomaly detection was not run: {err}."
+    except ParameterError as err:  # e.g. a window shorter than the longest template
+        anomalies, note = None, f"Anomaly detection was not run: {err}."
+    return write_estimates(est, out_dir, command=command, anomalies=anomalies, anomaly_note=note,
+                           elapsed=time.perf_counter() - t0, detector_config=_detector_config())
+
+
+def add_estimate_arguments(parser: argparse.ArgumentParser) -> None:
+    """Options of ``roadcollab estimate``: ``--drive FILE`` (repeatable, in driving order) and ``--out DIR``."""
+    parser.add_argument("--drive", action="append", required=True, metavar="FILE",
+                        help="drive CSV 'time_s,accel_left,accel_right' (m/s^2) with FILE's stem + .toml or .json "
+                             "beside it (speed_mps, [vehicle] estimated parameters); repeat in driving order")
+    parser.add_argument("--out", required=True, metavar="DIR", help="output folder")
+
+
+def add_parser(subparsers) -> argparse.ArgumentParser:
+    """Add the ``estimate`` subcommand and its options to ``subparsers``; returns its parser."""
+    p = subparsers.add_parser(NAME, help="estimate the road from recorded drives (CSV + parameters)")
+    add_estimate_arguments(p)
+    return p
+
+
+def run(args: argparse.Namespace, command_line: str) -> int:
+    """Estimate the road from ``args.drive``, write the outputs to ``args.out`` and print the notes.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        Parsed options of :func:`add_parser`.
+    command_line : str
+        The command line, recorded in ``config.json`` and ``report.md``.
+
+    Returns
+    -------
+    int
+        Exit status 0.
+    """
+    summary = estimate_command(args.drive, args.out, command=command_line)
+    for note in summary.get("notes", []):
+        print(f"note: {note}")
+    print(f"estimated {summary['n_drives']} drives over {summary['length_m']:.1f} m; wrote {args.out}/report.md")
+    return 0

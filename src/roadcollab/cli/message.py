@@ -1,0 +1,44 @@
+"""``roadcollab message example``: write a valid example wire message."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from ..wire.protocol import write_example
+from ._common import nonneg_int
+
+__all__ = ["NAME", "add_parser", "run"]
+
+NAME = "message"
+
+
+def add_parser(subparsers) -> argparse.ArgumentParser:
+    """Add the ``message`` subcommand and its ``example`` subcommand to ``subparsers``; returns its parser."""
+    p = subparsers.add_parser(NAME, help="message utilities")
+    msub = p.add_subparsers(dest="message_command", required=True)
+    q = msub.add_parser("example", help="write a valid example message")
+    q.add_argument("--out", type=Path, required=True, help="output file")
+    q.add_argument("--mechanism", choices=["none", "paper", "hardened", "fused"], default="paper")
+    q.add_argument("--seed", type=nonneg_int, default=0)
+    return p
+
+
+def run(args: argparse.Namespace, command_line: str) -> int:
+    """Write the example message of ``args.mechanism`` to ``args.out`` and print its size.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        Parsed options of :func:`add_parser` (``example`` is the only message command).
+    command_line : str
+        Unused (the message records no command line).
+
+    Returns
+    -------
+    int
+        Exit status 0.
+    """
+    n = write_example(args.out, mechanism=args.mechanism, seed=args.seed)
+    print(f"wrote {n} bytes to {args.out}")
+    return 0

@@ -1,0 +1,85 @@
+"""``roadcollab reproduce``: Monte Carlo reproduction of the paper's Figs. 4-7."""
+
+from __future__ import annotations
+
+import argparse
+
+from rich.console import Console
+
+from ..experiments.reproduction import run_reproduction
+from ..reporting.report import HEADLINE_COLUMNS, write_reproduction
+from ._common import (add_dask_options, add_out_option, add_road_options, config_from_args, dask_options, nonneg_int,
+                      positive_float, positive_int, print_table, run_with_progress)
+
+__all__ = ["NAME", "add_parser", "run"]
+
+NAME = "reproduce"
+
+
+def add_parser(subparsers) -> argparse.ArgumentParser:
+    """Add the ``reproduce`` subcommand and its options to ``subparsers``; returns its parser."""
+    p = subparsers.add_parser(NAME, help="Monte Carlo reproduction of the paper's Figs. 4-7")
+    p.add_argument("--runs", type=positive_int, default=100, help="Monte Carlo runs (default 100)")
+    p.add_argument("--vehicles", type=positive_int, default=10, help="fleet size (default 10)")
+    p.add_argument("--seed", type=nonneg_int, default=0, help="root seed (default 0)")
+    add_out_option(p)
+    p.add_argument("--noise", type=float, default=None, help="accelerometer noise std, m/s^2 (default 0.05)")
+    p.add_argument("--uncertainty", type=float, default=None,
+                   help="relative parameter uncertainty of each vehicle's model (default 0.10)")
+    p.add_argument("--iso-class", default=None, help="ISO 8608 roughness class of the synthetic road (default C)")
+    p.add_argument("--gamma", type=positive_float, default=None,
+                   help="observer parameter gamma of eq. 4 (default 512, the strongest single-vehicle observer)")
+    p.add_argument("--oracle", action="store_true", help="use the true plants in T_j (analysis only)")
+    p.add_argument("--redraw-fleet", action="store_true",
+                   help="draw a new fleet for every run (statistics over fleets)")
+    p.add_argument("--measured-runs", type=nonneg_int, default=20,
+                   help="also run this many runs on the shipped measured profile for the report (default 20; 0: skip; "
+                        "ignored with --road-profile)")
+    add_road_options(p)
+    add_dask_options(p)
+    return p
+
+
+def _measured(args: argparse.Namespace):
+    """The extra runs on the shipped measured profile for the report, or None if not wanted.
+
+    Returns
+    -------
+    (ReproductionResult, float) or None
+        The result and its wall time, s.
+    """
+    if args.road_profile is not None or args.measured_runs <= 0:
+        return None
+    margs = argparse.Namespace(**{**vars(args), "road_profile": "packaged", "runs": args.measured_runs})
+    mcfg = config_from_args(margs)
+    return run_with_progress(mcfg.n_runs, "measured profile",
+                             lambda cb: run_reproduction(mcfg, args.seed, progress=cb, **dask_options(args)))
+
+
+def run(args: argparse.Namespace, command_line: str) -> int:
+    """Run the reproduction, write its outputs to ``args.out`` and print the MSE table.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        Parsed options of :func:`add_parser`.
+    command_line : str
+        The command line, recorded in ``config.json`` and ``report.md``.
+
+    Returns
+    -------
+    int
+        Exit status 0.
+    """
+    cfg = config_from_args(args)
+    result, elapsed = run_with_progress(cfg.n_runs, NAME,
+                                        lambda cb: run_reproduction(cfg, args.seed, progress=cb, **dask_options(args)))
+    measured = _measured(args)
+    summary = write_reproduction(result, args.out, command=command_line, elapsed=elapsed, measured=measured)
+    print_table(f"MSE per vehicle ((m/s)^2), {cfg.n_runs} runs, {elapsed:.1f} s",
+                [header for _, header in HEADLINE_COLUMNS],
+                [(str(r["vehicle"]), *(f"{r[k]:.3g}" for k, _ in HEADLINE_COLUMNS[1:])) for r in result.table()])
+    Console().print(f"vehicle 1 online / Algorithm 1 (vehicles 2..{cfg.n_vehicles}): "
+                    f"{summary['vehicle1_observer_over_algorithm1']:.2f}x; fused / centralized at vehicle "
+                    f"{cfg.n_vehicles}: {summary['fused_over_centralized_last']:.2f}x; wrote {args.out}/report.md")
+    return 0

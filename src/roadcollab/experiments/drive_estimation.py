@@ -1,0 +1,262 @@
+"""Road estimates from recorded drives: the relay of Algorithm 1 down the drives, elevations, anomalies.
+
+The drives are read by :mod:`roadcollab.io.drives`; this module runs the estimators on them exactly
+as the in-memory pipeline (:func:`roadcollab.experiments.reproduction.run_estimates`) does.
+
+Processing
+----------
+* The estimators are designed (Lemma 1) as in the simulations, by
+  ``ExperimentConfig(speed=..., sample_rate=..., sensor_noise_std=...).noise_model()``: an ISO 8608
+  class C road with the default pothole statistics at the drives' speed and the drive's sensor
+  noise. Real roads differ; the design is a prior, not a fit.
+* One :class:`~roadcollab.collaboration.algorithm1.CollaborativeEstimator` per drive with
+  ``Vehicle(index=j, true_params=p, estimated_params=p)`` (the true parameters of a real car are
+  unknown; only the estimated ones are used, ``oracle=False``), observer gamma and band edge from
+  the :class:`~roadcollab.experiments.reproduction.ExperimentConfig` defaults (512, 0.5 Hz), on
+  ``SegmentGrid(n_samples, sample_rate, band_low_hz=0.5)``.
+* Per drive ``k``: ``single`` = the vehicle's own observer ``D_k y_k``; ``collaborative`` =
+  Algorithm 1 with the message of drive ``k - 1`` (drive 1: the observer only, so equal to
+  ``single``); ``fused`` = the running average of the band-limited inversions ``z`` of drives
+  1..k (:meth:`~roadcollab.collaboration.algorithm1.CollaborativeEstimator.fused_message`).
+* Every road-velocity output is band-limited by the grid's band weight ``W`` exactly as
+  :func:`~roadcollab.experiments.reproduction.run_estimates` does (DC and everything well below 0.5 Hz is
+  invisible to accelerometers and is not estimated).
+* Elevation: :func:`integrate_elevation` of the band-limited road velocity, mean removed. It is
+  defined only up to a slow drift: wavelengths above ``speed / 0.5 Hz`` (30 m at 15 m/s) are not
+  observed.
+* Anomalies: :func:`roadcollab.detection.detector.detect_anomalies` on every band-limited estimate of every
+  drive (:func:`find_anomalies`).
+
+The offline filters act on a finite window: the first and last second or so of every estimate
+carry window-edge effects (the simulations record a 15 m lead-in and lead-out for this reason);
+log a little more road than the stretch of interest.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .._validation import check_positive, check_signal
+from ..collaboration.algorithm1 import CollaborativeEstimator
+from ..collaboration.relay import Relay
+from ..errors import ParameterError
+from ..estimation.grid import SegmentGrid
+from .config import ExperimentConfig
+from ..io.drives import Drive
+from ..models.vehicle import Vehicle
+
+__all__ = ["ESTIMATORS", "ANOMALY_COLUMNS", "DriveEstimates", "integrate_elevation", "estimate_drives",
+           "find_anomalies"]
+
+ESTIMATORS = ("single", "collaborative", "fused")
+ANOMALY_COLUMNS = ["estimator", "vehicle", "position_m", "side", "kind", "depth_m", "confidence"]
+
+
+def integrate_elevation(w, sample_rate: float) -> np.ndarray:
+    """Elevation (m) from road velocity (m/s), mean removed.
+
+    The road velocity is taken as constant over each sample interval (the convention of
+    :class:`roadcollab.models.road.TimeRoad` and of the ZOH-exact simulation), so the elevation at the
+    *start* of sample ``k`` is ``h[k] = sum_{i<k} w[i] / sample_rate`` exactly (``h[0] = 0``). The
+    mean over the window is then removed: the integration constant is unknown, and for a
+    band-limited velocity the elevation is defined only up to a slow drift (wavelengths above
+    ``speed / band_low_hz`` are not observed).
+
+    Parameters
+    ----------
+    w : (N, C) array_like
+        Road velocity, m/s.
+    sample_rate : float
+        Hz.
+
+    Returns
+    -------
+    (N, C) ndarray
+        Elevation, m.
+    """
+    w = check_signal("w", w)
+    fs = check_positive("sample_rate", sample_rate)
+    h = np.zeros_like(w)
+    h[1:] = np.cumsum(w[:-1], axis=0) / fs
+    return h - h.mean(axis=0)
+
+
+@dataclass(frozen=True, eq=False)
+class DriveEstimates:
+    """Estimates of every drive on the common window.
+
+    Attributes
+    ----------
+    drives : list of Drive
+    sample_rate, speed, start_m : float
+        Hz, m/s, m.
+    n_samples : int
+        Common window length (the shortest drive).
+    time : (n,) ndarray
+        ``k / sample_rate``, s (time since each drive's first sample).
+    positions : (n,) ndarray
+        ``start_m + speed * time``, m.
+    velocity, elevation : dict
+        ``{estimator: (V, n, 2) ndarray}`` for estimator in :data:`ESTIMATORS`: band-limited road
+        velocity (m/s) and its elevation (m), columns ``[left, right]``.
+    gamma, band_low_hz : float
+        Observer parameter and band edge used.
+    """
+
+    drives: list
+    sample_rate: float
+    speed: float
+    start_m: float
+    n_samples: int
+    time: np.ndarray
+    positions: np.ndarray
+    velocity: dict
+    elevation: dict
+    gamma: float
+    band_low_hz: float
+
+    @property
+    def truncated(self) -> bool:
+        """True if some drive is longer than the common window (it was cut to the shortest)."""
+        return any(d.n_samples > self.n_samples for d in self.drives)
+
+
+def _drive_estimators(drives: list[Drive], grid: SegmentGrid, *, speed: float, sample_rate: float, gamma: float,
+                      band_low_hz: float) -> list[CollaborativeEstimator]:
+    """One estimator per drive, designed for the drive's sensor noise (one design per distinct noise level).
+
+    Parameters
+    ----------
+    drives : list of Drive
+        In driving order.
+    grid : SegmentGrid
+        The common window.
+    speed, sample_rate : float
+        m/s, Hz.
+    gamma, band_low_hz : float
+        Observer parameter and band edge (Hz).
+
+    Returns
+    -------
+    list of CollaborativeEstimator
+        ``Vehicle(index=j, true_params=p, estimated_params=p)`` for drive ``j`` (0-based).
+
+    Raises
+    ------
+    ParameterError
+        The design rejects a drive's parameters; the message starts with its parameters file.
+    """
+    noise_models: dict[float, object] = {}
+    cars = []
+    for j, d in enumerate(drives):
+        if d.sensor_noise_std not in noise_models:
+            try:
+                cfg = ExperimentConfig(speed=speed, sample_rate=sample_rate, sensor_noise_std=d.sensor_noise_std,
+                                       gamma=gamma, band_low_hz=band_low_hz)
+            except ParameterError as err:
+                raise ParameterError(f"{d.params_path}: {err}") from None
+            noise_models[d.sensor_noise_std] = cfg.noise_model()
+        vehicle = Vehicle(index=j, true_params=d.params, estimated_params=d.params)
+        cars.append(CollaborativeEstimator(vehicle, noise_models[d.sensor_noise_std], grid, gamma=gamma))
+    return cars
+
+
+def estimate_drives(drives: list[Drive], *, gamma: float | None = None, band_low_hz: float | None = None
+                    ) -> DriveEstimates:
+    """Run the single-vehicle, collaborative (Algorithm 1) and fused estimators down the drives.
+
+    Relays through the same engine as :func:`roadcollab.experiments.reproduction.run_estimates`
+    (:class:`roadcollab.collaboration.relay.Relay`, same estimator design, grid and band limiting), so
+    simulated drives give the in-memory estimates.
+
+    Parameters
+    ----------
+    drives : list of Drive
+        In driving order, sharing sample rate, speed and start (see :func:`roadcollab.io.drives.load_drives`).
+    gamma, band_low_hz : float, optional
+        Observer parameter and band edge (Hz). Default: the
+        :class:`~roadcollab.experiments.reproduction.ExperimentConfig` defaults (512, 0.5 Hz).
+
+    Returns
+    -------
+    DriveEstimates
+        Every estimator's band-limited road velocity (m/s) and elevation (m), each ``(V, n, 2)``,
+        on the common window of ``n`` samples (the shortest drive).
+
+    Raises
+    ------
+    ParameterError
+        Not a non-empty list of drives, a sample rate not above twice the band edge, or parameters
+        the estimator design rejects.
+    """
+    if not drives or not all(isinstance(d, Drive) for d in drives):
+        raise ParameterError("drives must be a non-empty list of Drive (see load_drives)")
+    d0 = drives[0]
+    base = ExperimentConfig()
+    gamma = base.gamma if gamma is None else gamma
+    band_low_hz = base.band_low_hz if band_low_hz is None else band_low_hz
+    fs, speed = d0.sample_rate, d0.speed
+    if not band_low_hz < fs / 2:
+        raise ParameterError(f"{d0.csv_path}: expected a sample rate above {2 * band_low_hz:g} Hz (twice the "
+                             f"{band_low_hz:g} Hz band edge), got {fs:.9g} Hz")
+    n = min(d.n_samples for d in drives)
+    grid = SegmentGrid(n, fs, band_low_hz=band_low_hz)
+    Wgt = grid.weight[:, None]
+
+    def band(X):
+        return grid.irfft(Wgt * X, n)
+
+    cars = _drive_estimators(drives, grid, speed=speed, sample_rate=fs, gamma=gamma, band_low_hz=band_low_hz)
+    ys = [d.accel[:n] for d in drives]
+    Ys = [grid.rfft(y) for y in ys]
+    plain = Relay(cars, "none").run(ys, spectra=Ys)
+    fused = Relay(cars, "fused").run(ys, spectra=Ys)
+    out = {"single": [band(s.result.W_obs) for s in plain],
+           "collaborative": [band(s.result.W_hat) for s in plain],
+           "fused": [band(s.estimate_spectrum) for s in fused]}
+    velocity = {k: np.array(v) for k, v in out.items()}
+    elevation = {k: np.array([integrate_elevation(x, fs) for x in v]) for k, v in velocity.items()}
+    t = np.arange(n) / fs
+    return DriveEstimates(drives=list(drives), sample_rate=fs, speed=speed, start_m=d0.start_m, n_samples=n, time=t,
+                          positions=d0.start_m + speed * t, velocity=velocity, elevation=elevation, gamma=float(gamma),
+                          band_low_hz=float(band_low_hz))
+
+
+def find_anomalies(est: DriveEstimates, spec=None) -> list[dict]:
+    """Anomalies in every band-limited estimate of every drive.
+
+    One call of :func:`roadcollab.detection.detector.detect_anomalies` per (estimator, drive).
+
+    Parameters
+    ----------
+    est : DriveEstimates
+        From :func:`estimate_drives`.
+    spec : DetectorSpec, optional
+        Detector settings (default ``DetectorSpec()``).
+
+    Returns
+    -------
+    list of dict
+        Rows with :data:`ANOMALY_COLUMNS`: estimator, vehicle (1-based drive number), position_m
+        (center, m), side, kind, depth_m (m), confidence.
+
+    Raises
+    ------
+    ImportError
+        The detection module is not available in this build (``roadcollab estimate`` then skips detection).
+    """
+    # Imported here: detection is optional for ``roadcollab estimate``, which runs without it.
+    from ..detection.detector import DetectorSpec, detect_anomalies
+
+    spec = DetectorSpec() if spec is None else spec
+    rows = []
+    for name in ESTIMATORS:
+        for j, w in enumerate(est.velocity[name]):
+            for det in detect_anomalies(w, positions=est.positions, speed=est.speed, sample_rate=est.sample_rate,
+                                        spec=spec):
+                rows.append({"estimator": name, "vehicle": j + 1, "position_m": float(det.position),
+                             "side": det.side, "kind": det.kind, "depth_m": float(det.depth),
+                             "confidence": float(det.confidence)})
+    return rows
