@@ -12,6 +12,7 @@ import time
 from dataclasses import asdict
 
 from ..errors import ParameterError
+from ..detection.detector import DetectorSpec
 from ..experiments.drive_estimation import estimate_drives, find_anomalies
 from ..io.drives import load_drives
 from ..reporting.drives_report import write_estimates
@@ -22,11 +23,7 @@ NAME = "estimate"
 
 
 def _detector_config() -> dict | None:
-    """The anomaly detector's default settings for ``config.json``; None if detection is not available."""
-    try:  # detection is optional here: the command runs (without it) when it cannot be imported
-        from ..detection.detector import DetectorSpec
-    except ImportError:
-        return None
+    """The anomaly detector's default settings for ``config.json``."""
     return asdict(DetectorSpec())
 
 
@@ -61,8 +58,6 @@ def estimate_command(drive_paths: list[str], out_dir, *, command: str) -> dict:
     note = None
     try:
         anomalies = find_anomalies(est)
-    except ImportError as err:  # anomaly module not available in this build
-        anomalies, note = None, f"Anomaly detection was not run: {err}."
     except ParameterError as err:  # e.g. a window shorter than the longest template
         anomalies, note = None, f"Anomaly detection was not run: {err}."
     return write_estimates(est, out_dir, command=command, anomalies=anomalies, anomaly_note=note,

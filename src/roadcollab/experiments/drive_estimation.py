@@ -41,6 +41,7 @@ import numpy as np
 from .._validation import check_positive, check_signal
 from ..collaboration.algorithm1 import CollaborativeEstimator
 from ..collaboration.relay import Relay
+from ..detection.detector import DetectorSpec, detect_anomalies
 from ..errors import ParameterError
 from ..estimation.grid import SegmentGrid
 from .config import ExperimentConfig
@@ -241,15 +242,7 @@ def find_anomalies(est: DriveEstimates, spec=None) -> list[dict]:
     list of dict
         Rows with :data:`ANOMALY_COLUMNS`: estimator, vehicle (1-based drive number), position_m
         (center, m), side, kind, depth_m (m), confidence.
-
-    Raises
-    ------
-    ImportError
-        The detection module is not available in this build (``roadcollab estimate`` then skips detection).
     """
-    # Imported here: detection is optional for ``roadcollab estimate``, which runs without it.
-    from ..detection.detector import DetectorSpec, detect_anomalies
-
     spec = DetectorSpec() if spec is None else spec
     rows = []
     for name in ESTIMATORS:

@@ -19,7 +19,8 @@ from .._validation import check_int
 from ..errors import ParameterError
 from ..experiments.config import ExperimentConfig
 from ..collaboration.relay import Exchange, Relay
-from ..privacy.attacks import (PhysicalPrior, SUCCESS_TOLERANCE, attack_model_reduction, attack_multiplicity, attack_physical_fit, attack_pole_intersection, attack_signals_prior, attack_signals_reduction, intersect_pole_sets, pole_errors)
+from ..privacy.attacks import (PhysicalPrior, SUCCESS_TOLERANCE, attack_model_reduction, attack_multiplicity, attack_pole_intersection, attack_signals_prior, attack_signals_reduction, intersect_pole_sets, pole_errors)
+from ..privacy.physical_fit import attack_physical_fit
 from ..lti.arx import arx_poles
 from ..lti.batch2x2 import receiver_z
 from ..models.simulation import add_sensor_noise, simulate_response

@@ -39,15 +39,13 @@ import scipy.linalg
 import scipy.optimize
 
 from ..errors import ParameterError
-from ..models.vehicle import HalfCarParameters, half_car_model
 from ..wire.message import ExchangeMessage
 from ..lti.arx import arx_poles, arx_state_space
-from ..lti.batch2x2 import inv2x2, matvec
 from ..lti.realisation import StateSpaceData, continuous_poles
 
 __all__ = ["PhysicalPrior", "pole_errors", "select_by_prior", "attack_model_reduction",
            "attack_pole_intersection", "attack_multiplicity", "attack_signals_reduction",
-           "attack_signals_prior", "attack_signals_intersection", "attack_physical_fit", "intersect_pole_sets",
+           "attack_signals_prior", "attack_signals_intersection", "intersect_pole_sets",
            "SUCCESS_TOLERANCE",
            "ATTACKS"]
 
@@ -384,70 +382,3 @@ def attack_signals_intersection(segments: list[tuple[np.ndarray, np.ndarray]], d
     p1 = arx_poles(*_signals(*segments[0]), dt, order, decimate)
     p2 = arx_poles(*_signals(*segments[1]), dt, order, decimate)
     return intersect_pole_sets(p1, p2, prior, rtol)
-
-
-def _ratio_model(log_ratios: np.ndarray):
-    """Half-car model from scale-free parameters ``log [k/m, c/m, I/m, L1, L2]`` (m = 1)."""
-    k, c, I, L1, L2 = np.exp(log_ratios)
-    return half_car_model(HalfCarParameters(sprung_mass=1.0, roll_inertia=I, left_arm=L1, right_arm=L2,
-                                            stiffness=k, damping=c))
-
-
-def _log_ratios(params) -> np.ndarray:
-    return np.log([params.stiffness / params.sprung_mass, params.damping / params.sprung_mass,
-                   params.roll_inertia / params.sprung_mass, params.left_arm, params.right_arm])
-
-
-def attack_physical_fit(z: np.ndarray, w_band: np.ndarray, grid, nominal, *, band_hz=(0.5, 20.0),
-                        max_bins: int = 300) -> np.ndarray:
-    """Hardened ``physical_fit``: knows the half-car structure and the fleet's nominal
-    parameters; fits ``Z = P(theta_hat)^-1 P(theta) W`` over both parameter sets by nonlinear
-    least squares on the spectra and returns the poles of ``P(theta_hat)`` (rad/s).
-
-    Only ratios to the mass are identifiable (scaling m, I, k and c together leaves ``P``
-    unchanged), so the fit is over ``log [k/m, c/m, I/m, L1, L2]`` for each model.
-
-    Parameters
-    ----------
-    z : (nfft, 2) ndarray
-        The hardened message's ``z`` (or ``z`` recovered from an exact message), m/s.
-    w_band : (nfft, 2) ndarray
-        Road velocity band-limited like ``z``, m/s: the true one, or a stand-in such as the
-        receiver's own inversion.
-    grid : SegmentGrid
-        The segment grid of ``z`` (signals of at most ``nfft`` samples).
-    nominal : HalfCarParameters
-        The fleet's nominal parameters: the starting point of both parameter sets.
-    band_hz : (float, float)
-        Active bins with frequency in this range (Hz, both ends included) are fitted.
-    max_bins : int
-        At most this many of those bins, evenly spread, are used.
-
-    Returns
-    -------
-    (4,) complex ndarray
-        Poles of the fitted ``P(theta_hat)``, rad/s, sorted by imaginary part; empty if the
-        fit fails.
-    """
-    Z = grid.rfft(z)
-    Wb = grid.rfft(w_band)
-    f = grid.freqs
-    sel = np.flatnonzero((f >= band_hz[0]) & (f <= band_hz[1]) & grid.active)
-    if sel.size > max_bins:
-        sel = sel[np.linspace(0, sel.size - 1, max_bins).astype(int)]
-    s = 2j * np.pi * f[sel]
-    Zs, Ws = Z[sel], Wb[sel]
-    norm = np.sqrt(np.mean(np.abs(Zs) ** 2))
-    x0 = np.concatenate([_log_ratios(nominal), _log_ratios(nominal)])
-
-    def resid(x):
-        Ph = _ratio_model(x[:5]).frequency_response(s)
-        P = _ratio_model(x[5:]).frequency_response(s)
-        r = (Zs - matvec(inv2x2(Ph) @ P, Ws)) / norm
-        return np.concatenate([r.real.ravel(), r.imag.ravel()])
-
-    try:
-        sol = scipy.optimize.least_squares(resid, x0, x_scale=0.1, max_nfev=400)
-    except (ValueError, np.linalg.LinAlgError, ParameterError):
-        return np.zeros(0, complex)
-    return _ratio_model(sol.x[:5]).poles()

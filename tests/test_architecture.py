@@ -1,0 +1,80 @@
+"""The package's shape: layers, module size, no hidden imports (README "Architecture")."""
+
+import ast
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1] / "src" / "roadcollab"
+
+#: What each package may import from the rest of roadcollab (errors and _validation are open to all).
+ALLOWED = {
+    "lti": set(),
+    "models": {"lti"},
+    "estimation": {"lti", "models"},
+    "detection": {"lti", "models"},
+    "wire": {"lti"},
+    "privacy": {"lti", "models", "estimation", "wire"},
+    "collaboration": {"lti", "models", "estimation", "wire", "privacy"},
+    "io": {"lti", "models"},
+    "experiments": {"lti", "models", "estimation", "detection", "wire", "privacy", "collaboration", "io"},
+    "reporting": {"lti", "models", "estimation", "detection", "wire", "privacy", "collaboration", "io", "experiments"},
+    "cli": {"lti", "models", "estimation", "detection", "wire", "privacy", "collaboration", "io", "experiments",
+            "reporting"},
+}
+BASE = {"errors", "_validation", "__version__"}
+#: Imports allowed inside functions: optional or heavy third-party modules only.
+LAZY_OK = {"control", "slycot", "dask", "matplotlib", "phe", "cryptography", "rich", "tomllib", "tomli"}
+MAX_MODULE_LINES = 450
+
+
+def _modules():
+    return sorted(p for p in ROOT.rglob("*.py"))
+
+
+def _package(path: Path) -> str:
+    parts = path.relative_to(ROOT).parts
+    return parts[0] if len(parts) > 1 else path.stem
+
+
+def _imported_packages(path: Path):
+    depth = len(path.relative_to(ROOT).parts) - 1
+    for node in ast.walk(ast.parse(path.read_text())):
+        if isinstance(node, ast.ImportFrom) and node.level:
+            if node.level == depth + 1:
+                head = (node.module or "").split(".")[0]
+                yield from ([head] if head else [a.name for a in node.names])
+            elif node.level > depth + 1:
+                raise AssertionError(f"{path}: relative import beyond the package")
+
+
+@pytest.mark.parametrize("path", _modules(), ids=lambda p: str(p.relative_to(ROOT)))
+def test_layers(path):
+    pkg = _package(path)
+    if pkg not in ALLOWED:
+        return
+    bad = {m for m in _imported_packages(path) if m not in ALLOWED[pkg] | BASE | {pkg}}
+    assert not bad, f"{path.relative_to(ROOT)} ({pkg}) imports {sorted(bad)}; allowed {sorted(ALLOWED[pkg])}"
+
+
+@pytest.mark.parametrize("path", _modules(), ids=lambda p: str(p.relative_to(ROOT)))
+def test_module_size(path):
+    n = len(path.read_text().splitlines())
+    assert n <= MAX_MODULE_LINES, f"{path.relative_to(ROOT)} has {n} lines"
+
+
+@pytest.mark.parametrize("path", _modules(), ids=lambda p: str(p.relative_to(ROOT)))
+def test_no_hidden_imports(path):
+    tree = ast.parse(path.read_text())
+    for fn in ast.walk(tree):
+        if not isinstance(fn, (ast.FunctionDef, ast.AsyncFunctionDef)):
+            continue
+        for node in ast.walk(fn):
+            if isinstance(node, ast.Import):
+                names = [a.name.split(".")[0] for a in node.names]
+            elif isinstance(node, ast.ImportFrom):
+                names = ["." if node.level else (node.module or "").split(".")[0]]
+            else:
+                continue
+            for n in names:
+                assert n in LAZY_OK, f"{path.relative_to(ROOT)}:{node.lineno} imports {n!r} inside {fn.name}()"
