@@ -203,7 +203,7 @@ def _cmd_reproduce(args, argv) -> int:
     from rich.table import Table
 
     from ..experiments.reproduction import run_reproduction
-    from ..reporting.report import write_reproduction
+    from ..reporting.reproduction_report import write_reproduction
 
     cfg = _config_from_args(args)
     prog, cb = _progress(cfg.n_runs, "reproduce")
@@ -225,7 +225,7 @@ def _cmd_reproduce(args, argv) -> int:
     command = "roadcollab " + " ".join(shlex.quote(a) for a in argv)
     summary = write_reproduction(result, args.out, command=command, elapsed=elapsed, measured=measured)
     table = Table(title=f"MSE per vehicle ((m/s)^2), {cfg.n_runs} runs, {elapsed:.1f} s")
-    from ..reporting.report import HEADLINE_COLUMNS
+    from ..reporting.reproduction_report import HEADLINE_COLUMNS
 
     for _, header in HEADLINE_COLUMNS:
         table.add_column(header, justify="right")
@@ -244,7 +244,7 @@ def _cmd_attack(args, argv) -> int:
     from rich.table import Table
 
     from ..experiments.reproduction import ExperimentConfig
-    from ..reporting.report import write_attack
+    from ..reporting.attack_report import write_attack
     from ..experiments.security_study import AttackStudyConfig, run_attack_study
 
     cfg = AttackStudyConfig(experiment=ExperimentConfig(n_vehicles=args.vehicles, n_runs=1), n_runs=args.runs,
@@ -270,7 +270,7 @@ def _cmd_anomalies(args, argv) -> int:
     import argparse as _ap
 
     from ..experiments.anomaly_study import AnomalyStudyConfig, run_anomaly_study
-    from ..reporting.report import write_anomalies
+    from ..reporting.anomaly_report import write_anomalies
 
     ns = _ap.Namespace(runs=1, vehicles=args.vehicles, speed=args.speed, oracle=False, road_profile=args.road_profile,
                        noise=args.noise, iso_class=args.iso_class, uncertainty=None)

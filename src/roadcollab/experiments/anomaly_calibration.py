@@ -367,7 +367,7 @@ def calibrate_anomalies(config: AnomalyCalibrationConfig, *, progress: Callable[
 
 
 def _flatness_lines(result: AnomalyCalibrationResult) -> list[str]:
-    from ..reporting.report import fmt
+    from ..reporting.records import fmt
 
     cfg, best, n = result.config, result.best, len(result.points)
     gaps = [result.gap(p) for p in result.points]
@@ -397,7 +397,7 @@ def _flatness_lines(result: AnomalyCalibrationResult) -> list[str]:
 
 def calibration_markdown(result: AnomalyCalibrationResult) -> str:
     """The body of the calibration report (best point, flatness, per-point table)."""
-    from ..reporting.report import fmt, markdown_table
+    from ..reporting.records import fmt, markdown_table
 
     cfg, best = result.config, result.best
     exp = cfg.experiment
@@ -456,7 +456,7 @@ def write_calibration(result: AnomalyCalibrationResult, out, *, command: str) ->
     Path
         ``out``.
     """
-    from ..reporting.report import write_config, write_csv
+    from ..reporting.records import write_config, write_csv
 
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)

@@ -696,7 +696,7 @@ def write_estimates(est: DriveEstimates, out, *, command: str, anomalies: list[d
         ``notes`` and ``files``.
     """
     from ..reporting import plotting_drives
-    from ..reporting.report import markdown_table, write_config, write_csv
+    from ..reporting.records import markdown_table, write_config, write_csv
 
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
