@@ -6,7 +6,7 @@ import argparse
 
 from ..experiments.anomaly_config import AnomalyStudyConfig
 from ..experiments.anomaly_study import run_anomaly_study
-from ..reporting.report import write_anomalies
+from ..reporting.anomaly_report import write_anomalies
 from ._common import (add_dask_options, add_out_option, add_road_options, config_from_args, dask_options, nonneg_int,
                       positive_int, print_table, run_with_progress)
 

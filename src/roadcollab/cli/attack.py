@@ -6,7 +6,7 @@ import argparse
 
 from ..experiments.config import ExperimentConfig
 from ..experiments.security_study import AttackStudyConfig, run_attack_study
-from ..reporting.report import write_attack
+from ..reporting.attack_report import write_attack
 from ._common import (add_dask_options, add_out_option, dask_options, nonneg_int, positive_int, print_table,
                       run_with_progress)
 

@@ -7,7 +7,7 @@ import argparse
 from rich.console import Console
 
 from ..experiments.reproduction import run_reproduction
-from ..reporting.report import HEADLINE_COLUMNS, write_reproduction
+from ..reporting.reproduction_report import HEADLINE_COLUMNS, write_reproduction
 from ._common import (add_dask_options, add_out_option, add_road_options, config_from_args, dask_options, nonneg_int,
                       positive_float, positive_int, print_table, run_with_progress)
 

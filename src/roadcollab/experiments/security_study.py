@@ -1,31 +1,35 @@
 """The security study behind ``roadcollab attack``: attacks, linkability, exactness and the
 conventional baselines measured side by side on the same segments.
 
-One run is one segment (a fresh road, fresh sensor noise, fresh obfuscators); the fleet is
-the same in every run, so messages of one vehicle on different runs are what a curious
-receiver could try to link.
+One run is one segment (a fresh road, fresh sensor noise, fresh obfuscators; see
+:mod:`roadcollab.experiments.security_segment`); the fleet is the same in every run, so messages of
+one vehicle on different runs are what a curious receiver could try to link. This module runs the
+segments and turns them into the study's tables.
 """
 
 from __future__ import annotations
 
-import time
+import dataclasses
 from dataclasses import dataclass, field
 from typing import Callable
 
 import numpy as np
 
-from ..wire import protocol
 from .._validation import check_int
 from ..errors import ParameterError
-from ..experiments.config import ExperimentConfig
-from ..collaboration.relay import Exchange, Relay
-from ..privacy.attacks import (PhysicalPrior, SUCCESS_TOLERANCE, attack_model_reduction, attack_multiplicity, attack_pole_intersection, attack_signals_prior, attack_signals_reduction, intersect_pole_sets, pole_errors)
-from ..privacy.physical_fit import attack_physical_fit
-from ..lti.arx import arx_poles
-from ..lti.batch2x2 import receiver_z
-from ..models.simulation import add_sensor_noise, simulate_response
+from ..privacy import baselines
+from ..privacy.attacks import PhysicalPrior, SUCCESS_TOLERANCE, intersect_pole_sets, pole_errors
+from .config import ExperimentConfig
+from .pipeline import pipeline_for
+from .runner import map_runs
+from .security_segment import EXACT_MECHANISMS, SegmentAttacks, attack_segment, dp_mse_key, target_poles
 
 __all__ = ["AttackStudyConfig", "AttackStudyResult", "run_attack_study"]
+
+#: Linkability rows: the mechanism and the feature a curious receiver compares across segments.
+_LINK_FEATURES = (("none", "poles of S"), ("paper", "multiplicity-attack poles"),
+                  ("hardened", "model-error spectrum (true road known)"),
+                  ("hardened_own_road", "model-error spectrum vs a fixed receiver's own inversion"))
 
 
 @dataclass(frozen=True)
@@ -70,14 +74,31 @@ class AttackStudyConfig:
             raise ParameterError(f"experiment.n_vehicles must be >= 3 for the study, got {self.experiment.n_vehicles}")
 
     def to_dict(self) -> dict:
-        import dataclasses
-
+        """The configuration as nested plain dicts (for ``config.json``)."""
         return dataclasses.asdict(self)
 
 
 @dataclass(eq=False)
 class AttackStudyResult:
-    """Everything ``roadcollab attack`` writes."""
+    """Everything ``roadcollab attack`` writes.
+
+    Parameters
+    ----------
+    config : AttackStudyConfig
+        The study.
+    seed : int
+        Root seed.
+    attack_rows : list of dict
+        Per (mechanism, attack): median relative pole error, success rate and number of messages.
+    exactness_rows : list of dict
+        Per mechanism: largest relative change of any estimate vs. no privacy.
+    linkability_rows : list of dict
+        Per (mechanism, feature): AUC, top-1 accuracy and its chance level.
+    baseline_rows : list of dict
+        Per mechanism: MSE of vehicles 1..3 ((m/s)^2), ms and bytes per message, and a note.
+    pole_examples : list of dict
+        First segment, vehicles 1..3: true poles and the attacks' estimates (rad/s).
+    """
 
     config: AttackStudyConfig
     seed: int
@@ -86,28 +107,6 @@ class AttackStudyResult:
     linkability_rows: list[dict]
     baseline_rows: list[dict]
     pole_examples: list[dict]
-
-
-def _feature_poles(poles: np.ndarray) -> np.ndarray:
-    """(f1, zeta1, f2, zeta2) of the two upper-half-plane poles sorted by frequency."""
-    up = sorted([p for p in poles if p.imag > 0], key=abs)[:2]
-    if len(up) < 2:
-        return np.full(4, np.nan)
-    return np.array([v for p in up for v in (np.log(abs(p) / (2 * np.pi)), -p.real / abs(p))])
-
-
-def _spectral_feature(z: np.ndarray, w_band: np.ndarray, grid, n_bands: int = 12) -> np.ndarray:
-    """Log band-averaged |W - Z|^2 / |Z|^2 per track: the vehicle's model-error signature."""
-    Z, W = grid.rfft(z), grid.rfft(w_band)
-    edges = np.geomspace(0.6, 50.0, n_bands + 1)
-    out = []
-    for c in range(2):
-        for lo, hi in zip(edges[:-1], edges[1:]):
-            sel = (grid.freqs >= lo) & (grid.freqs < hi)
-            num = np.sum(np.abs(W[sel, c] - Z[sel, c]) ** 2)
-            den = np.sum(np.abs(Z[sel, c]) ** 2)
-            out.append(np.log(max(num, 1e-300) / max(den, 1e-300)))
-    return np.array(out)
 
 
 def _linkability(features: dict[tuple[int, int], np.ndarray]) -> dict:
@@ -134,12 +133,12 @@ def _linkability(features: dict[tuple[int, int], np.ndarray]) -> dict:
 
 
 def _study_pipeline(config: AttackStudyConfig, seed: int):
-    from ..experiments.pipeline import pipeline_for
-
+    """The study's (per-process cached) fleet pipeline."""
     return pipeline_for(config.experiment, seed)
 
 
 def _run_seeds(config: AttackStudyConfig, seed: int):
+    """One seed per segment."""
     # Same split as the reproduction: child 0 draws the fleet, child 1 the runs.
     return np.random.SeedSequence(seed).spawn(2)[1].spawn(config.n_runs)
 
@@ -152,132 +151,81 @@ class _AttackTask:
     seed: int
     key: bytes
 
-    def __call__(self, indices) -> list[dict]:
+    def __call__(self, indices) -> list[SegmentAttacks]:
         pipe = _study_pipeline(self.config, self.seed)
         seeds = _run_seeds(self.config, self.seed)
-        return [_attack_run(pipe, self.config, r, seeds[r], self.key) for r in indices]
+        return [attack_segment(pipe, self.config, r, seeds[r], self.key) for r in indices]
 
 
-def _encoded(message) -> tuple:
-    """``(message, its encoding)``: what is timed per message."""
-    return message, protocol.encode(message)
+def _errors_by_attack(config: AttackStudyConfig, pipe, runs: list[SegmentAttacks]) -> dict:
+    """Relative pole errors ((4,) per message) per (mechanism, attack), in the order first made."""
+    errs: dict[tuple[str, str], list[np.ndarray]] = {}
+    for run in runs:
+        for mech, attack, e in run.pole_errors:
+            errs.setdefault((mech, attack), []).append(e)
+    # Hardened "multiplicity": ARX poles that recur over two consecutive segments of a vehicle.
+    targets = target_poles(pipe)
+    for r in range(1, len(runs)):
+        for j in range(config.experiment.n_vehicles):
+            est = intersect_pole_sets(runs[r - 1].arx_poles[j], runs[r].arx_poles[j], config.prior)
+            errs.setdefault(("hardened", "multiplicity"), []).append(pole_errors(est, targets[j]))
+    return errs
 
 
-def _attack_run(pipe, config: AttackStudyConfig, r: int, rs: np.random.SeedSequence, key: bytes) -> dict:
-    """Everything one segment contributes to the study."""
-    from ..privacy import baselines
+def _attack_rows(errs: dict) -> list[dict]:
+    """``attack.csv``: per (mechanism, attack) the median over messages of the median pole error, the
+    success rate (every pole within :data:`SUCCESS_TOLERANCE`) and the number of messages."""
+    rows = []
+    for (mech, attack), lst in errs.items():
+        E = np.array(lst)
+        per_msg = np.median(E, axis=1)
+        rows.append({"mechanism": mech, "attack": attack,
+                     "median_rel_pole_error": float(np.median(per_msg)),
+                     "success_rate": float(np.mean(np.all(E < SUCCESS_TOLERANCE, axis=1))),
+                     "n_messages": int(E.shape[0])})
+    return rows
 
-    cfg, grid = config.experiment, pipe.grid
-    V = cfg.n_vehicles
-    targets = [e.S_ss.continuous_poles() for e in pipe.estimators]
-    eps_list = tuple(config.dp_epsilons)
-    sens = baselines.l2_sensitivity(pipe.estimators[0], config.dp_rho)
-    sigmas = {e: baselines.gaussian_sigma(e, config.dp_delta, sens) for e in eps_list}
-    out = {"errs": [], "feats": {}, "exact": {"none": 0.0, "paper": 0.0, "hardened": 0.0},
-           "mse": {}, "timing": {m: [] for m in ("none", "paper", "hardened", "dp", "aead")},
-           "nbytes": {m: [] for m in ("none", "paper", "hardened", "dp", "aead")},
-           "arx": {}, "examples": [], "sigmas": sigmas, "last_z": None}
 
-    def add(mech, attack, est, j):
-        out["errs"].append((mech, attack, pole_errors(est, targets[j])))
+def _exactness_rows(runs: list[SegmentAttacks]) -> list[dict]:
+    """``exactness.csv``: the largest relative change of any estimate vs. no privacy, per mechanism."""
+    return [{"mechanism": m, "max_rel_diff": max(run.max_rel_diff[m] for run in runs)} for m in EXACT_MECHANISMS]
 
-    road_ss, noise_ss, priv_ss, dp_ss, own_ss = rs.spawn(5)
-    road = pipe.road(np.random.default_rng(road_ss))
-    noise_rng, priv_rng, dp_rng, own_rng = (np.random.default_rng(s) for s in (noise_ss, priv_ss, dp_ss, own_ss))
-    w = road.velocity
-    W_true = grid.rfft(w)
-    w_band = grid.irfft(grid.reg_weight[:, None] * W_true)      # nfft samples, band-limited like z
-    n, sl = grid.n_samples, cfg.scored
-    truth = grid.irfft(grid.weight[:, None] * W_true, n)[sl]
 
-    def seg_mse(X):
-        return float(np.mean((grid.irfft(grid.weight[:, None] * X, n)[sl] - truth) ** 2))
+def _linkability_rows(runs: list[SegmentAttacks], n_vehicles: int) -> list[dict]:
+    """``linkability.csv``: how well each feature links a vehicle's messages across segments."""
+    rows = []
+    for mech, feature in _LINK_FEATURES:
+        feats = {(j, r): run.features[(mech, j)] for r, run in enumerate(runs) for j in range(n_vehicles)}
+        rows.append({"mechanism": mech, "feature": feature, **_linkability(feats)})
+    return rows
 
-    def timed(name, fn):
-        t0 = time.perf_counter()
-        msg, data = fn()
-        out["timing"][name].append((time.perf_counter() - t0) * 1e3)
-        out["nbytes"][name].append(len(data))
-        return msg
 
-    ests = pipe.estimators
-    relays = {"none": Relay(ests, "none"), "paper": Relay(ests, Exchange("paper", cfg.obfuscation), rng=priv_rng),
-              "hardened": Relay(ests, "hardened")}
-    dp_relays = {e: Relay(ests, Exchange("dp", dp_sigma=sigmas[e]), rng=dp_rng) for e in eps_list}
-    mse = {m: np.zeros(3) for m in ["none", "paper", "hardened"] + [f"dp_eps_{e:g}" for e in eps_list]}
-    plain_in = paper_in = hard_in = None
-    own_proxy = None
-    dp_in = {e: None for e in eps_list}
-    for j, est in enumerate(pipe.estimators):
-        y = add_sensor_noise(simulate_response(est.true_plant, w), cfg.sensor_noise_std, rng=noise_rng)
-        res = est.estimate(y, plain_in)
-        scale = max(float(np.max(np.abs(res.estimate))), 1e-300)
-        plain = timed("none", lambda: _encoded(relays["none"].send(j, res).message))
-        rp = est.estimate(y, paper_in)
-        paper = timed("paper", lambda: _encoded(relays["paper"].send(j, rp).message))
-        if j == 0:
-            own_proxy = grid.irfft(est.invert(grid.rfft(y)))
-        rh = est.estimate(y, hard_in)
-        hard = timed("hardened", lambda: _encoded(relays["hardened"].send(j, rh).message))
-        timed("aead", lambda: (None, baselines.seal(key, protocol.encode(relays["hardened"].send(j, rh).message))))
-        out["exact"]["paper"] = max(out["exact"]["paper"], float(np.max(np.abs(rp.estimate - res.estimate))) / scale)
-        out["exact"]["hardened"] = max(out["exact"]["hardened"],
-                                       float(np.max(np.abs(rh.estimate - res.estimate))) / scale)
-        if j < 3:
-            mse["none"][j], mse["paper"][j], mse["hardened"][j] = seg_mse(res.W_hat), seg_mse(rp.W_hat), \
-                seg_mse(rh.W_hat)
-        # Differential privacy: the hardened chain with Gaussian noise on every z sent.
-        for e in eps_list:
-            rd = est.estimate(y, dp_in[e])
-            if e == eps_list[0]:
-                dp_in[e] = timed("dp", lambda: _encoded(dp_relays[e].send(j, rd).message))
-            else:
-                dp_in[e] = dp_relays[e].send(j, rd).message
-            if j < 3:
-                mse[f"dp_eps_{e:g}"][j] = seg_mse(rd.W_hat)
-            # The strongest signal attack on the noisy z: the privacy/accuracy trade-off.
-            if r < config.physical_fit_runs:
-                add(f"dp(eps={e:g})", "physical_fit",
-                    attack_physical_fit(dp_in[e].z, w_band, grid, cfg.fleet.nominal), j)
-        # Attacks on vehicle j's outgoing messages.
-        for mech, msg in (("none", plain), ("paper", paper)):
-            est_poles = {"model_reduction": attack_model_reduction(msg),
-                         "pole_intersection": attack_pole_intersection(msg, config.prior),
-                         "multiplicity": attack_multiplicity(msg, config.prior)}
-            for attack, poles in est_poles.items():
-                add(mech, attack, poles, j)
-        # est_poles now holds the attacks on the paper's message (the last in the loop).
-        mu = est_poles["multiplicity"]
-        if r == 0 and j < 3:
-            out["examples"].append({"vehicle": j + 1, "true": targets[j], **est_poles})
-        add("hardened", "model_reduction", attack_signals_reduction(hard.z, w_band, grid.dt), j)
-        add("hardened", "pole_intersection", attack_signals_prior(hard.z, w_band, grid.dt, config.prior), j)
-        out["arx"][j] = arx_poles(hard.z, w_band - hard.z, grid.dt, 8, 2)
-        if r < config.physical_fit_runs:
-            add("hardened", "physical_fit", attack_physical_fit(hard.z, w_band, grid, cfg.fleet.nominal), j)
-            # Without the true road: the next vehicle's own inversion stands in for it.
-            if j + 1 < V:
-                nxt = pipe.estimators[j + 1]
-                y_next = add_sensor_noise(simulate_response(nxt.true_plant, w), cfg.sensor_noise_std, rng=own_rng)
-                own = grid.irfft(nxt.invert(grid.rfft(y_next)))
-                add("hardened", "physical_fit_own_road", attack_physical_fit(hard.z, own, grid, cfg.fleet.nominal), j)
-            # Any exact mechanism hands the receiver z (Theorem 1): recover it from the
-            # obfuscated message and attack it the same way.
-            z_paper = grid.irfft(_recover_z(paper, grid))
-            add("paper", "physical_fit", attack_physical_fit(z_paper, w_band, grid, cfg.fleet.nominal), j)
-        # Reference: what the attacker knows with no message at all (the fleet's nominal).
-        add("no_message", "prior_guess", _nominal_poles(cfg.fleet.nominal), j)
-        out["feats"][("none", j)] = _feature_poles(plain.S.continuous_poles())
-        out["feats"][("paper", j)] = _feature_poles(mu)
-        out["feats"][("hardened", j)] = _spectral_feature(hard.z, w_band, grid)
-        # A receiver without the true road compares with its own inversion (vehicle 1's
-        # inversion stands in for a fixed receiver's here).
-        out["feats"][("hardened_own_road", j)] = _spectral_feature(hard.z, own_proxy, grid)
-        plain_in, paper_in, hard_in = plain, paper, hard
-        if r == 0 and j == V - 1:
-            out["last_z"] = hard.z
-    out["mse"] = mse
-    return out
+def _baseline_row(name: str, mse: np.ndarray, ms: float, nbytes: int, note: str = "") -> dict:
+    """One ``baselines.csv`` row: MSE of vehicles 1..3 ((m/s)^2) and the cost of one message."""
+    return {"mechanism": name, "mse_vehicle1": mse[0], "mse_vehicle2": mse[1], "mse_vehicle3": mse[2],
+            "ms_per_message": ms, "bytes_per_message": nbytes, "note": note}
+
+
+def _baseline_rows(config: AttackStudyConfig, runs: list[SegmentAttacks], he: dict) -> list[dict]:
+    """``baselines.csv``: accuracy and cost per message of every mechanism on the same segments
+    (``he``: :func:`roadcollab.privacy.baselines.paillier_cost` of a hardened message)."""
+    timing = {m: float(np.median([t for run in runs for t in run.timing_ms[m]])) for m in runs[0].timing_ms}
+    nbytes = {m: int(np.median([b for run in runs for b in run.nbytes[m]])) for m in runs[0].nbytes}
+    mse = {k: np.mean([run.mse[k] for run in runs], axis=0) for k in runs[0].mse}
+    sigmas = runs[0].dp_sigmas
+    rows = [_baseline_row(m, mse[m], timing[m], nbytes[m], note) for m, note in (
+        ("none", "Algorithm 1 in the clear"), ("paper", "Algorithm 2 (obfuscation + encode)"), ("hardened", "z only"))]
+    for e in config.dp_epsilons:
+        rows.append(_baseline_row(
+            f"dp(eps={e:g})", mse[dp_mse_key(e)], timing["dp"], nbytes["dp"],
+            f"Gaussian mechanism on z, delta={config.dp_delta:g}, rho={config.dp_rho:g}, sigma={sigmas[e]:.3g}"))
+    rows.append(_baseline_row(
+        "he", mse["hardened"], he["ms_per_message"], int(he["bytes_per_message"]),
+        f"Paillier {config.paillier_bits}-bit on z, extrapolated from {he.get('extrapolated_from', '')} values; "
+        f"keygen {he['keygen_ms']:.0f} ms"))
+    rows.append(_baseline_row("aead", mse["hardened"], timing["aead"], nbytes["aead"],
+                              "ChaCha20-Poly1305 on the encoded hardened message"))
+    return rows
 
 
 def run_attack_study(config: AttackStudyConfig, seed: int, *, progress: Callable[[int], None] | None = None,
@@ -309,83 +257,18 @@ def run_attack_study(config: AttackStudyConfig, seed: int, *, progress: Callable
         If ``config`` is not an AttackStudyConfig, ``seed`` is negative, or both ``workers``
         and ``scheduler`` are given.
     """
-    from ..privacy import baselines
-    from ..experiments.runner import map_runs
-
     if not isinstance(config, AttackStudyConfig):
         raise ParameterError(f"config must be an AttackStudyConfig, got {type(config).__name__}")
     seed = check_int("seed", seed, low=0)
-    cfg = config.experiment
     pipe = _study_pipeline(config, seed)
-    V = cfg.n_vehicles
-    targets = [e.S_ss.continuous_poles() for e in pipe.estimators]
     runs = map_runs(_AttackTask(config, seed, baselines.new_key()), config.n_runs, workers=workers,
                     scheduler=scheduler, progress=progress)
-    errs: dict[tuple[str, str], list[np.ndarray]] = {}
-    for run in runs:
-        for mech, attack, e in run["errs"]:
-            errs.setdefault((mech, attack), []).append(e)
-    # Hardened "multiplicity": ARX poles that recur over two consecutive segments of a vehicle.
-    for r in range(1, len(runs)):
-        for j in range(V):
-            est = intersect_pole_sets(runs[r - 1]["arx"][j], runs[r]["arx"][j], config.prior)
-            errs.setdefault(("hardened", "multiplicity"), []).append(pole_errors(est, targets[j]))
-    attack_rows = []
-    for (mech, attack), lst in errs.items():
-        E = np.array(lst)
-        per_msg = np.median(E, axis=1)
-        attack_rows.append({"mechanism": mech, "attack": attack,
-                            "median_rel_pole_error": float(np.median(per_msg)),
-                            "success_rate": float(np.mean(np.all(E < SUCCESS_TOLERANCE, axis=1))),
-                            "n_messages": int(E.shape[0])})
-    exact = {m: max(run["exact"][m] for run in runs) for m in ("none", "paper", "hardened")}
-    exactness_rows = [{"mechanism": m, "max_rel_diff": v} for m, v in exact.items()]
-    link_rows = []
-    for mech, feature in (("none", "poles of S"), ("paper", "multiplicity-attack poles"),
-                          ("hardened", "model-error spectrum (true road known)"),
-                          ("hardened_own_road", "model-error spectrum vs a fixed receiver's own inversion")):
-        feats = {(j, r): run["feats"][(mech, j)] for r, run in enumerate(runs) for j in range(V)}
-        link_rows.append({"mechanism": mech, "feature": feature, **_linkability(feats)})
+    attack_rows = _attack_rows(_errors_by_attack(config, pipe, runs))
+    exactness_rows = _exactness_rows(runs)
+    link_rows = _linkability_rows(runs, config.experiment.n_vehicles)
     # Paillier: one ciphertext per fixed-point number of a hardened message's z.
-    he = baselines.paillier_cost(runs[0]["last_z"].ravel(), key_bits=config.paillier_bits,
+    he = baselines.paillier_cost(runs[0].last_z.ravel(), key_bits=config.paillier_bits,
                                  sample=config.paillier_sample, rng=np.random.default_rng(seed))
-    timing = {m: float(np.median([t for run in runs for t in run["timing"][m]])) for m in runs[0]["timing"]}
-    nbytes = {m: int(np.median([b for run in runs for b in run["nbytes"][m]])) for m in runs[0]["nbytes"]}
-    mse = {k: np.mean([run["mse"][k] for run in runs], axis=0) for k in runs[0]["mse"]}
-    sigmas = runs[0]["sigmas"]
-    base_rows = []
-
-    def brow(name, key_mse, ms, b, note=""):
-        m = mse[key_mse]
-        base_rows.append({"mechanism": name, "mse_vehicle1": m[0], "mse_vehicle2": m[1], "mse_vehicle3": m[2],
-                          "ms_per_message": ms, "bytes_per_message": b, "note": note})
-
-    brow("none", "none", timing["none"], nbytes["none"], "Algorithm 1 in the clear")
-    brow("paper", "paper", timing["paper"], nbytes["paper"], "Algorithm 2 (obfuscation + encode)")
-    brow("hardened", "hardened", timing["hardened"], nbytes["hardened"], "z only")
-    for e in config.dp_epsilons:
-        brow(f"dp(eps={e:g})", f"dp_eps_{e:g}", timing["dp"], nbytes["dp"],
-             f"Gaussian mechanism on z, delta={config.dp_delta:g}, rho={config.dp_rho:g}, sigma={sigmas[e]:.3g}")
-    brow("he", "hardened", he["ms_per_message"], int(he["bytes_per_message"]),
-         f"Paillier {config.paillier_bits}-bit on z, extrapolated from {he.get('extrapolated_from', '')} values; "
-         f"keygen {he['keygen_ms']:.0f} ms")
-    brow("aead", "hardened", timing["aead"], nbytes["aead"], "ChaCha20-Poly1305 on the encoded hardened message")
     return AttackStudyResult(config=config, seed=seed, attack_rows=attack_rows, exactness_rows=exactness_rows,
-                             linkability_rows=link_rows, baseline_rows=base_rows, pole_examples=runs[0]["examples"])
-
-
-def _recover_z(message, grid) -> np.ndarray:
-    """What a receiver computes from an (obfuscated) exchange message: W T^-1 (e - S w^f)."""
-    act = grid.active
-    om = grid.omega_dt[act]
-    T, S = message.T.frequency_response(om), message.S.frequency_response(om)
-    Z = np.zeros((grid.n_bins, 2), complex)
-    E, Wf = grid.rfft(message.e)[act], grid.rfft(message.wf)[act]
-    Z[act] = receiver_z(T, S, E, Wf, grid.reg_weight[act])
-    return Z
-
-
-def _nominal_poles(nominal) -> np.ndarray:
-    from ..models.vehicle import half_car_model
-
-    return half_car_model(nominal).poles()
+                             linkability_rows=link_rows, baseline_rows=_baseline_rows(config, runs, he),
+                             pole_examples=list(runs[0].pole_examples))

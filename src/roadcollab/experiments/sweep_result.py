@@ -159,20 +159,3 @@ class SweepResult:
         """
         threshold = check_real("threshold", threshold, low=1.0)
         return panel_findings(self.table(), self.mse, len(self.config.gammas), threshold)
-
-    def plot(self, path):
-        """Draw ``sweep.png`` (hands off to :func:`roadcollab.reporting.plotting_sweep.plot_sweep`).
-
-        Parameters
-        ----------
-        path : str or Path
-            Output image.
-
-        Returns
-        -------
-        Path
-            ``path``.
-        """
-        from ..reporting.plotting_sweep import plot_sweep
-
-        return plot_sweep(self.table(), path)

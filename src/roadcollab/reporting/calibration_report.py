@@ -7,7 +7,7 @@ from pathlib import Path
 from ..experiments.anomaly_config import ESTIMATORS
 from ..experiments.calibration_config import EVALUATION_SEEDS, OBJECTIVE_ESTIMATORS
 from ..experiments.calibration_result import AnomalyCalibrationResult
-from .report import fmt, markdown_table, write_config, write_csv
+from .records import fmt, markdown_table, write_config, write_csv
 
 __all__ = ["calibration_markdown", "write_calibration"]
 

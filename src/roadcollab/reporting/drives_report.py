@@ -11,7 +11,8 @@ import numpy as np
 
 from ..experiments.drive_estimation import ANOMALY_COLUMNS, ESTIMATORS, DriveEstimates
 from ..experiments.config import ExperimentConfig
-from .report import markdown_table, write_config, write_csv
+from . import plotting_drives
+from .records import markdown_table, write_config, write_csv
 
 __all__ = ["ESTIMATE_FILES", "write_estimates"]
 
@@ -86,9 +87,6 @@ def _zoom_window(est: DriveEstimates, width_m: float = 20.0) -> tuple[float, flo
 
 def _write_figures(est: DriveEstimates, out: Path) -> tuple[float, float] | None:
     """``road_velocity.png`` and ``elevation.png`` of the last drive; returns the zoom window (m) or None."""
-    # Imported here: matplotlib is loaded only when figures are drawn.
-    from . import plotting_drives
-
     V = len(est.drives)
     last = {name: est.velocity[name][-1] for name in ESTIMATORS}
     labels = {"single": f"single vehicle (drive {V})", "collaborative": f"collaborative, Algorithm 1 (drive {V})",

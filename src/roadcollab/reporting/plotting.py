@@ -1,4 +1,8 @@
-"""All figures. The only module that imports matplotlib (Agg backend, files only)."""
+"""Figures of ``roadcollab reproduce``, ``attack`` and ``anomalies`` (Agg backend, files only).
+
+With :mod:`~roadcollab.reporting.plotting_sweep` and :mod:`~roadcollab.reporting.plotting_drives`, the only
+modules that import matplotlib.
+"""
 
 from __future__ import annotations
 
@@ -10,13 +14,27 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-__all__ = ["plot_mse", "plot_fusion", "plot_estimates", "plot_poles", "plot_attack_success",
+__all__ = ["save_figure", "plot_mse", "plot_fusion", "plot_estimates", "plot_poles", "plot_attack_success",
            "plot_anomaly_map", "plot_f1_vs_depth", "plot_f1_vs_noise"]
 
 _TRACKS = ("left track", "right track")
 
 
-def _save(fig, path) -> Path:
+def save_figure(fig, path) -> Path:
+    """Lay out ``fig``, write it to ``path`` at 120 dpi and close it.
+
+    Parameters
+    ----------
+    fig : matplotlib.figure.Figure
+        The finished figure.
+    path : str or Path
+        Output image (format from the suffix).
+
+    Returns
+    -------
+    Path
+        ``path``.
+    """
     path = Path(path)
     fig.tight_layout()
     fig.savefig(path, dpi=120)
@@ -65,7 +83,7 @@ def plot_mse(rows: list[dict], path) -> Path:
     _mse_axes(ax, v)
     ax.legend(fontsize=7, loc="best")
     ax.set_title("MSE per vehicle (mean over runs; bars: std)")
-    return _save(fig, path)
+    return save_figure(fig, path)
 
 
 def plot_fusion(rows: list[dict], path) -> Path:
@@ -93,7 +111,7 @@ def plot_fusion(rows: list[dict], path) -> Path:
                               ("oracle_bound_mse_mean", "oracle bound", "k:")):
         ax.plot(v, [r[key] for r in rows], style, label=label)
     _mse_axes(ax, v)
-    return _save(fig, path)
+    return save_figure(fig, path)
 
 
 def plot_estimates(time, truth, plain, private, vehicle: int, path, *, window: tuple[float, float] | None = None
@@ -132,11 +150,25 @@ def plot_estimates(time, truth, plain, private, vehicle: int, path, *, window: t
     axes[0].legend(loc="upper right", fontsize=8)
     axes[0].set_title(f"Vehicle {vehicle}: road-velocity input and its estimates")
     axes[-1].set_xlabel("time (s)")
-    return _save(fig, path)
+    return save_figure(fig, path)
 
 
 def plot_poles(example: dict, path) -> Path:
-    """Figs. 8-10: actual vs estimated poles of S_j in the complex plane (rad/s)."""
+    """Figs. 8-10: actual vs estimated poles of S_j in the complex plane (rad/s).
+
+    Parameters
+    ----------
+    example : dict
+        ``"vehicle"`` (1-based), ``"true"`` poles and, when present, the poles estimated by the
+        ``"model_reduction"``, ``"pole_intersection"`` and ``"multiplicity"`` attacks (complex, rad/s).
+    path : str or Path
+        Output image (format from the suffix, 120 dpi).
+
+    Returns
+    -------
+    Path
+        ``path``.
+    """
     fig, ax = plt.subplots(figsize=(6, 5))
     t = np.asarray(example["true"])
     ax.plot(t.real, t.imag, "ko", ms=10, mfc="none", mew=2, label="actual poles of $S_j$")
@@ -153,11 +185,24 @@ def plot_poles(example: dict, path) -> Path:
     lim = 2.5 * float(np.max(np.abs(t)))
     ax.set_xlim(-lim, 0.2 * lim)
     ax.set_ylim(-lim, lim)
-    return _save(fig, path)
+    return save_figure(fig, path)
 
 
 def plot_attack_success(rows: list[dict], path) -> Path:
-    """Success rate and median relative pole error per mechanism and attack."""
+    """Success rate and median relative pole error per mechanism and attack.
+
+    Parameters
+    ----------
+    rows : list of dict
+        ``attack.csv`` rows (``mechanism``, ``attack``, ``success_rate``, ``median_rel_pole_error``).
+    path : str or Path
+        Output image (format from the suffix, 120 dpi).
+
+    Returns
+    -------
+    Path
+        ``path``.
+    """
     labels = [f"{r['mechanism']}\n{r['attack']}" for r in rows]
     x = np.arange(len(rows))
     fig, (a1, a2) = plt.subplots(2, 1, figsize=(max(7, 0.8 * len(rows)), 6), sharex=True)
@@ -174,7 +219,7 @@ def plot_attack_success(rows: list[dict], path) -> Path:
     a2.set_xticklabels(labels, rotation=60, ha="right", fontsize=8)
     a2.legend()
     a2.grid(True, axis="y", alpha=0.3)
-    return _save(fig, path)
+    return save_figure(fig, path)
 
 
 # --- road anomaly detection (roadcollab.experiments.anomaly_study) ----------------------------------------
@@ -185,28 +230,31 @@ _ESTIMATOR_STYLE = {"observer_only": ("tab:gray", "s", "observer only"),
 _KIND_COLOR = {"pothole": "tab:red", "bump": "tab:orange"}
 
 
-def plot_anomaly_map(map_example: dict, path) -> Path:
-    """Road map of true vs detected anomalies for one run and vehicle.
+#: Rows of the road map per side (left track at 1, right at 0; "both" spans the two).
+_MAP_ROWS = {"left": (1.0,), "right": (0.0,), "both": (1.0, 0.0)}
 
-    Top: position along the road (x) against the two wheel tracks (rows); true anomalies are
-    shaded spans coloured by kind (a ``"both"`` anomaly spans both rows), detections of each
-    estimator are markers (triangle down = pothole, up = bump) whose size grows with the
-    estimated depth. Bottom: signed depth in cm (potholes negative, bumps positive), true vs
-    estimated, so depth errors can be read off.
-    """
-    truth = map_example["truth"]
-    dets = map_example["detections"]
-    rows = {"left": (1.0,), "right": (0.0,), "both": (1.0, 0.0)}
-    fig, (ax, ax2) = plt.subplots(2, 1, figsize=(11, 5.5), sharex=True, gridspec_kw={"height_ratios": [1.2, 1]})
+
+def _signed_depth_cm(anomaly: dict) -> float:
+    """Depth in cm, negative for potholes and positive for bumps."""
+    sign = -1.0 if anomaly["kind"] == "pothole" else 1.0
+    return sign * 100 * anomaly["depth"]
+
+
+def _draw_true_anomalies(ax, ax2, truth: list[dict]) -> None:
+    """True anomalies: shaded spans on their tracks (``ax``) and signed-depth bars (``ax2``)."""
     for a in truth:
-        for y in rows[a["side"]]:
+        for y in _MAP_ROWS[a["side"]]:
             ax.add_patch(plt.Rectangle((a["start"], y - 0.42), max(a["end"] - a["start"], 0.3), 0.84,
                                        color=_KIND_COLOR[a["kind"]], alpha=0.35, lw=0))
         ax.annotate(f"{100 * a['depth']:.1f}", (a["center"], 1.5), ha="center", fontsize=7,
                     color=_KIND_COLOR[a["kind"]])
-        sign = -1.0 if a["kind"] == "pothole" else 1.0
-        ax2.bar(a["center"], sign * 100 * a["depth"], width=max(a["end"] - a["start"], 0.6),
+        ax2.bar(a["center"], _signed_depth_cm(a), width=max(a["end"] - a["start"], 0.6),
                 color=_KIND_COLOR[a["kind"]], alpha=0.35)
+
+
+def _draw_detections(ax, ax2, dets: dict[str, list[dict]]) -> None:
+    """Each estimator's detections: markers sized by depth on their tracks (offset per estimator, ``ax``) and
+    signed depths (``ax2``)."""
     names = [n for n in _ESTIMATOR_STYLE if n in dets] + [n for n in dets if n not in _ESTIMATOR_STYLE]
     for i, name in enumerate(names):
         color, _, label = _ESTIMATOR_STYLE.get(name, ("k", "x", name))
@@ -214,12 +262,15 @@ def plot_anomaly_map(map_example: dict, path) -> Path:
         for d in dets[name]:
             marker = "v" if d["kind"] == "pothole" else "^"
             size = 20 + 1500 * d["depth"]
-            for y in rows[d["side"]]:
+            for y in _MAP_ROWS[d["side"]]:
                 ax.scatter(d["position"], y + off, s=size, marker=marker, color=color, edgecolor="k", lw=0.4,
                            zorder=3)
-            sign = -1.0 if d["kind"] == "pothole" else 1.0
-            ax2.plot(d["position"], sign * 100 * d["depth"], marker, color=color, mec="k", mew=0.4, ms=6)
+            ax2.plot(d["position"], _signed_depth_cm(d), marker, color=color, mec="k", mew=0.4, ms=6)
         ax.scatter([], [], marker="o", color=color, label=label)
+
+
+def _label_map(ax, ax2, map_example: dict) -> None:
+    """Legend, limits, ticks and titles of the road map."""
     for kind, color in _KIND_COLOR.items():
         ax.add_patch(plt.Rectangle((0, 0), 0, 0, color=color, alpha=0.35, label=f"true {kind} (depth in cm)"))
     lo, hi = map_example.get("region", (None, None))
@@ -235,7 +286,36 @@ def plot_anomaly_map(map_example: dict, path) -> Path:
     ax2.set_ylabel("depth (cm)\npothole < 0 < bump")
     ax2.set_xlabel("position along the road (m)")
     ax2.grid(True, alpha=0.3)
-    return _save(fig, path)
+
+
+def plot_anomaly_map(map_example: dict, path) -> Path:
+    """Road map of true vs detected anomalies for one run and vehicle.
+
+    Top: position along the road (x) against the two wheel tracks (rows); true anomalies are
+    shaded spans coloured by kind (a ``"both"`` anomaly spans both rows), detections of each
+    estimator are markers (triangle down = pothole, up = bump) whose size grows with the
+    estimated depth. Bottom: signed depth in cm (potholes negative, bumps positive), true vs
+    estimated, so depth errors can be read off.
+
+    Parameters
+    ----------
+    map_example : dict
+        ``"truth"``: true anomalies (``start``, ``end``, ``center`` in m, ``side``, ``kind``, ``depth`` in m);
+        ``"detections"``: per estimator, its detections (``position`` in m, ``side``, ``kind``, ``depth`` in m);
+        optional ``"region"`` (m, the x range shown), ``"run"`` and ``"vehicle"`` (for the title).
+    path : str or Path
+        Output image (format from the suffix, 120 dpi).
+
+    Returns
+    -------
+    Path
+        ``path``.
+    """
+    fig, (ax, ax2) = plt.subplots(2, 1, figsize=(11, 5.5), sharex=True, gridspec_kw={"height_ratios": [1.2, 1]})
+    _draw_true_anomalies(ax, ax2, map_example["truth"])
+    _draw_detections(ax, ax2, map_example["detections"])
+    _label_map(ax, ax2, map_example)
+    return save_figure(fig, path)
 
 
 def _plot_f1_vs(rows: list[dict], key: str, path, xlabel: str, *, scale: float = 1.0, logx: bool = False,
@@ -258,7 +338,7 @@ def _plot_f1_vs(rows: list[dict], key: str, path, xlabel: str, *, scale: float =
     ax.grid(True, which="both", alpha=0.3)
     ax.legend(fontsize=7)
     ax.set_title(title, fontsize=9)
-    return _save(fig, path)
+    return save_figure(fig, path)
 
 
 def plot_f1_vs_depth(rows: list[dict], path) -> Path:

@@ -11,7 +11,40 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
+from .plotting import save_figure  # noqa: E402
+
 __all__ = ["plot_sweep"]
+
+
+def _draw_panel(ax, panel: list, n_vehicles: int) -> list:
+    """The lines of one (noise, uncertainty) panel, ``panel`` sorted by gamma; returns their legend handles."""
+    V = n_vehicles
+    g = np.array([r.gamma for r in panel])
+    handles = [
+        ax.errorbar(g, [r.vehicle1_observer_mse for r in panel],
+                    yerr=np.nan_to_num([r.vehicle1_observer_mse_se for r in panel]), fmt="s--", capsize=3,
+                    color="tab:gray", label="vehicle 1: own observer"),
+        ax.errorbar(g, [r.algorithm1_mse for r in panel],
+                    yerr=np.nan_to_num([r.algorithm1_mse_se for r in panel]), fmt="o-", capsize=3,
+                    color="tab:blue", label=f"Algorithm 1 (vehicles 2..{V})"),
+    ]
+    handles += ax.plot(g, [r.own_inversion_mse for r in panel], "v:", color="tab:green",
+                       label="own offline inversion")
+    handles += ax.plot(g, [r.fused_mse for r in panel], "^-", color="tab:orange", label=f"fused, vehicle {V}")
+    handles += ax.plot(g, [r.oracle_bound_mse for r in panel], "k-.", label=f"oracle bound, vehicle {V}")
+    return handles
+
+
+def _label_panel(ax, noise: float, uncertainty: float, *, bottom: bool, left: bool) -> None:
+    """Log axes, grid and title of a panel; axis labels on the bottom row and left column only."""
+    ax.set_xscale("log")
+    ax.set_yscale("log")
+    ax.grid(True, which="both", alpha=0.3)
+    ax.set_title(f"noise {noise:g} m/s$^2$, uncertainty {100 * uncertainty:g} %", fontsize=10)
+    if bottom:
+        ax.set_xlabel(r"observer parameter $\gamma$")
+    if left:
+        ax.set_ylabel("road-velocity MSE ((m/s)$^2$)")
 
 
 def plot_sweep(rows: Sequence, path) -> Path:
@@ -36,7 +69,6 @@ def plot_sweep(rows: Sequence, path) -> Path:
     rows = list(rows)
     noises = sorted({r.sensor_noise_std for r in rows})
     uncerts = sorted({r.parameter_uncertainty for r in rows})
-    V = rows[0].n_vehicles
     fig, axes = plt.subplots(len(noises), len(uncerts), figsize=(4.6 * len(uncerts), 3.6 * len(noises)),
                              sharex=True, sharey=True, squeeze=False)
     for i, s in enumerate(noises):
@@ -44,31 +76,8 @@ def plot_sweep(rows: Sequence, path) -> Path:
             ax = axes[i, k]
             panel = sorted((r for r in rows if r.sensor_noise_std == s and r.parameter_uncertainty == u),
                            key=lambda r: r.gamma)
-            g = np.array([r.gamma for r in panel])
-            handles = [
-                ax.errorbar(g, [r.vehicle1_observer_mse for r in panel],
-                            yerr=np.nan_to_num([r.vehicle1_observer_mse_se for r in panel]), fmt="s--", capsize=3,
-                            color="tab:gray", label="vehicle 1: own observer"),
-                ax.errorbar(g, [r.algorithm1_mse for r in panel],
-                            yerr=np.nan_to_num([r.algorithm1_mse_se for r in panel]), fmt="o-", capsize=3,
-                            color="tab:blue", label=f"Algorithm 1 (vehicles 2..{V})"),
-            ]
-            handles += ax.plot(g, [r.own_inversion_mse for r in panel], "v:", color="tab:green",
-                               label="own offline inversion")
-            handles += ax.plot(g, [r.fused_mse for r in panel], "^-", color="tab:orange", label=f"fused, vehicle {V}")
-            handles += ax.plot(g, [r.oracle_bound_mse for r in panel], "k-.", label=f"oracle bound, vehicle {V}")
+            handles = _draw_panel(ax, panel, rows[0].n_vehicles)
             if i == 0 and k == 0:
                 ax.legend(handles=handles, fontsize=7, loc="best")
-            ax.set_xscale("log")
-            ax.set_yscale("log")
-            ax.grid(True, which="both", alpha=0.3)
-            ax.set_title(f"noise {s:g} m/s$^2$, uncertainty {100 * u:g} %", fontsize=10)
-            if i == len(noises) - 1:
-                ax.set_xlabel(r"observer parameter $\gamma$")
-            if k == 0:
-                ax.set_ylabel("road-velocity MSE ((m/s)$^2$)")
-    path = Path(path)
-    fig.tight_layout()
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
-    return path
+            _label_panel(ax, s, u, bottom=i == len(noises) - 1, left=k == 0)
+    return save_figure(fig, path)

@@ -7,11 +7,11 @@ Every statement of the report is generated from the sweep's numbers
 from __future__ import annotations
 
 import dataclasses
-from pathlib import Path
 
-from ..reporting.report import markdown_table, write_config, write_csv
 from ..experiments.sweep_findings import SweepFinding
 from ..experiments.sweep_result import SweepResult
+from .plotting_sweep import plot_sweep
+from .records import markdown_table, output_dir, write_config, write_csv
 
 __all__ = ["write_sweep", "findings_markdown"]
 
@@ -20,6 +20,7 @@ THRESHOLD = 1.25
 
 
 def _gammas(values) -> str:
+    """Comma-separated values in ``%g`` format."""
     return ", ".join(f"{g:g}" for g in values)
 
 
@@ -113,47 +114,29 @@ def findings_markdown(findings: list[SweepFinding]) -> str:
     return "\n".join([_overall(findings), "", table, "", *(_sentence(f) for f in findings)])
 
 
-def write_sweep(result: SweepResult, out, *, command: str, elapsed: float) -> list[SweepFinding]:
-    """Write every output of ``roadcollab sweep`` to the folder ``out``.
+#: ``sweep.csv`` columns shown in the report's table, with their headers (``{V}``: the fleet size).
+_TABLE_COLUMNS = [("gamma", "gamma"), ("sensor_noise_std", "noise (m/s^2)"),
+                  ("parameter_uncertainty", "uncertainty"), ("vehicle1_observer_mse", "vehicle 1 observer"),
+                  ("algorithm1_mse", "Algorithm 1 (2..V)"), ("algorithm1_mse_se", "SE"),
+                  ("algorithm1_gain", "gain"), ("algorithm1_gain_se", "gain SE"),
+                  ("observer_only_mse", "own observer (all)"), ("own_inversion_mse", "own inversion"),
+                  ("own_posterior_inversion_mse", "own posterior inv."), ("fused_mse", "fused (vehicle {V})"),
+                  ("fused_posterior_mse", "fused posterior (vehicle {V})"),
+                  ("centralized_mse", "centralized (vehicle {V})"), ("oracle_bound_mse", "oracle bound (vehicle {V})")]
 
-    Files: ``sweep.csv`` (one row per grid point, :class:`~roadcollab.experiments.sweep.SweepRow` columns),
-    ``sweep.png`` (the figure of that CSV), ``config.json`` and ``report.md``.
 
-    Parameters
-    ----------
-    result : SweepResult
-    out : str or Path
-        Output folder (created if missing; files overwritten).
-    command : str
-        The command line, recorded in ``config.json`` and the report.
-    elapsed : float
-        Wall-clock time of the sweep, s.
-
-    Returns
-    -------
-    list of SweepFinding
-        The findings the report states (threshold :data:`THRESHOLD`).
-    """
-    out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
+def _intro_lines(result: SweepResult, n_rows: int, command: str, elapsed: float) -> list[str]:
+    """Title, the grid, the run description and how grid points are paired."""
     cfg, exp = result.config, result.config.experiment
-    rows = result.to_rows()
-    write_csv(out / "sweep.csv", rows)
-    result.plot(out / "sweep.png")
-    findings = result.findings(threshold=THRESHOLD)
-    write_config(out / "config.json", command=command, seed=result.seed, config=cfg.to_dict(),
-                 extra={"elapsed_s": elapsed, "n_grid_points": len(rows),
-                        "findings": [dataclasses.asdict(f) for f in findings]})
     road = exp.road_profile or f"synthetic ISO 8608 class {exp.iso_class}"
-    V, R = cfg.n_vehicles, cfg.n_runs
-    lines = [
+    return [
         "# roadcollab sweep: where Algorithm 1 beats a single vehicle",
         "",
         f"Command: `{command}`  ",
-        f"Seed {result.seed}; {len(rows)} grid points (gamma {_gammas(cfg.gammas)} x sensor noise "
+        f"Seed {result.seed}; {n_rows} grid points (gamma {_gammas(cfg.gammas)} x sensor noise "
         f"{_gammas(cfg.sensor_noise_stds)} m/s^2 x parameter uncertainty "
-        f"{', '.join(f'{100 * u:g} %' for u in cfg.parameter_uncertainties)}); {R} runs per grid point, each with a "
-        f"new fleet of {V} vehicles and its own road; {elapsed:.1f} s.  ",
+        f"{', '.join(f'{100 * u:g} %' for u in cfg.parameter_uncertainties)}); {cfg.n_runs} runs per grid point, "
+        f"each with a new fleet of {cfg.n_vehicles} vehicles and its own road; {elapsed:.1f} s.  ",
         f"Road: {road}; speed {exp.speed:g} m/s; {exp.sample_rate:g} Hz; scored segment {exp.segment_length:g} m "
         f"(+{exp.margin:g} m lead-in/out); fleet spread +-{100 * exp.fleet.spread:g} %; band from "
         f"{exp.band_low_hz:g} Hz.",
@@ -162,27 +145,39 @@ def write_sweep(result: SweepResult, out, *, command: str, elapsed: float) -> li
         "fleet draw (parameter-estimate errors scaled by the uncertainty) at every grid point, so grid points are "
         "paired comparisons (common random numbers).",
         "",
+    ]
+
+
+def _answer_lines(findings: list[SweepFinding], n_vehicles: int) -> list[str]:
+    """What "within" and "beats" mean, then the findings and the figure."""
+    return [
         "## Answer",
         "",
         f"The single vehicle is vehicle 1 with its own online observer (eq. 4). \"Within {THRESHOLD:g}x\" means its "
-        f"MSE is at most {THRESHOLD:g} times Algorithm 1's (averaged over vehicles 2..{V}); \"beats by more than "
-        f"{THRESHOLD:g}x\" is the opposite. Ratios below 1 favour Algorithm 1.",
+        f"MSE is at most {THRESHOLD:g} times Algorithm 1's (averaged over vehicles 2..{n_vehicles}); \"beats by more "
+        f"than {THRESHOLD:g}x\" is the opposite. Ratios below 1 favour Algorithm 1.",
         "",
         findings_markdown(findings),
         "",
         "![MSE vs gamma](sweep.png)",
         "",
+    ]
+
+
+def _table_lines(rows: list[dict], n_vehicles: int) -> list[str]:
+    """The report's copy of ``sweep.csv`` (the columns of :data:`_TABLE_COLUMNS`)."""
+    return [
         "## Table (`sweep.csv`)",
         "",
-        markdown_table(rows, ["gamma", "sensor_noise_std", "parameter_uncertainty", "vehicle1_observer_mse",
-                              "algorithm1_mse", "algorithm1_mse_se", "algorithm1_gain", "algorithm1_gain_se",
-                              "observer_only_mse", "own_inversion_mse", "own_posterior_inversion_mse", "fused_mse",
-                              "fused_posterior_mse", "centralized_mse", "oracle_bound_mse"],
-                       ["gamma", "noise (m/s^2)", "uncertainty", "vehicle 1 observer", "Algorithm 1 (2..V)", "SE",
-                        "gain", "gain SE", "own observer (all)", "own inversion", "own posterior inv.",
-                        f"fused (vehicle {V})", f"fused posterior (vehicle {V})", f"centralized (vehicle {V})",
-                        f"oracle bound (vehicle {V})"]),
+        markdown_table(rows, [c for c, _ in _TABLE_COLUMNS], [h.format(V=n_vehicles) for _, h in _TABLE_COLUMNS]),
         "",
+    ]
+
+
+def _definition_lines(n_vehicles: int, n_runs: int) -> list[str]:
+    """What every column means and how its standard error is computed."""
+    V, R = n_vehicles, n_runs
+    return [
         "## Definitions",
         "",
         "MSE: mean square of the band-limited road-velocity error over the scored segment and both tracks, "
@@ -200,5 +195,40 @@ def write_sweep(result: SweepResult, out, *, command: str, elapsed: float) -> li
         f"(first order; with {R} runs an approximation).",
         "",
     ]
+
+
+def write_sweep(result: SweepResult, out, *, command: str, elapsed: float) -> list[SweepFinding]:
+    """Write every output of ``roadcollab sweep`` to the folder ``out``.
+
+    Files: ``sweep.csv`` (one row per grid point, :class:`~roadcollab.experiments.sweep.SweepRow` columns),
+    ``sweep.png`` (the figure of that CSV), ``config.json`` and ``report.md``.
+
+    Parameters
+    ----------
+    result : SweepResult
+        The sweep to report.
+    out : str or Path
+        Output folder (created if missing; files overwritten).
+    command : str
+        The command line, recorded in ``config.json`` and the report.
+    elapsed : float
+        Wall-clock time of the sweep, s.
+
+    Returns
+    -------
+    list of SweepFinding
+        The findings the report states (threshold :data:`THRESHOLD`).
+    """
+    out = output_dir(out)
+    cfg = result.config
+    rows = result.to_rows()
+    write_csv(out / "sweep.csv", rows)
+    plot_sweep(result.table(), out / "sweep.png")
+    findings = result.findings(threshold=THRESHOLD)
+    write_config(out / "config.json", command=command, seed=result.seed, config=cfg.to_dict(),
+                 extra={"elapsed_s": elapsed, "n_grid_points": len(rows),
+                        "findings": [dataclasses.asdict(f) for f in findings]})
+    lines = (_intro_lines(result, len(rows), command, elapsed) + _answer_lines(findings, cfg.n_vehicles)
+             + _table_lines(rows, cfg.n_vehicles) + _definition_lines(cfg.n_vehicles, cfg.n_runs))
     (out / "report.md").write_text("\n".join(lines))
     return findings
