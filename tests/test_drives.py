@@ -13,13 +13,8 @@ import pytest
 from roadcollab import ParameterError
 from roadcollab.cli.estimate import add_estimate_arguments, estimate_command
 from roadcollab.experiments.drive_estimation import ESTIMATORS, estimate_drives, integrate_elevation
-from roadcollab.io.drives import (
-    load_drive,
-    load_drives,
-    read_drive_csv,
-    write_drive_csv,
-    write_drive_params,
-)
+from roadcollab.io.drives import load_drive, load_drives, read_drive_csv, write_drive_csv
+from roadcollab.io.drive_params import write_drive_params
 from roadcollab.experiments.config import ExperimentConfig
 from roadcollab.experiments.estimates import run_estimates
 from roadcollab.experiments.pipeline import FleetPipeline

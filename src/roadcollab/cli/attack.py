@@ -16,7 +16,18 @@ NAME = "attack"
 
 
 def add_parser(subparsers) -> argparse.ArgumentParser:
-    """Add the ``attack`` subcommand and its options to ``subparsers``; returns its parser."""
+    """Add the ``attack`` subcommand and its options.
+
+    Parameters
+    ----------
+    subparsers : argparse._SubParsersAction
+        From ``ArgumentParser.add_subparsers``.
+
+    Returns
+    -------
+    argparse.ArgumentParser
+        The subcommand's parser.
+    """
     p = subparsers.add_parser(NAME, help="security study: attacks, linkability, exactness, baselines")
     p.add_argument("--runs", type=positive_int, default=20, help="segments (default 20, at least 2)")
     p.add_argument("--vehicles", type=positive_int, default=10, help="fleet size (default 10, at least 3)")

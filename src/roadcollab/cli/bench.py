@@ -16,7 +16,18 @@ _SIZES = (1000, 2000, 4000, 8000, 16000, 32000, 64000)
 
 
 def add_parser(subparsers) -> argparse.ArgumentParser:
-    """Add the ``bench`` subcommand and its options to ``subparsers``; returns its parser."""
+    """Add the ``bench`` subcommand and its options.
+
+    Parameters
+    ----------
+    subparsers : argparse._SubParsersAction
+        From ``ArgumentParser.add_subparsers``.
+
+    Returns
+    -------
+    argparse.ArgumentParser
+        The subcommand's parser.
+    """
     p = subparsers.add_parser(NAME, help="per-segment cost of one vehicle, and its scaling with segment length")
     p.add_argument("--json", action="store_true", help="print one JSON line")
     p.add_argument("--repeats", type=positive_int, default=30, help="timed segments per point (default 30)")

@@ -16,7 +16,18 @@ NAME = "calibrate-anomalies"
 
 
 def add_parser(subparsers) -> argparse.ArgumentParser:
-    """Add the ``calibrate-anomalies`` subcommand and its options to ``subparsers``; returns its parser."""
+    """Add the ``calibrate-anomalies`` subcommand and its options.
+
+    Parameters
+    ----------
+    subparsers : argparse._SubParsersAction
+        From ``ArgumentParser.add_subparsers``.
+
+    Returns
+    -------
+    argparse.ArgumentParser
+        The subcommand's parser.
+    """
     p = subparsers.add_parser(NAME,
                               help="grid search of the anomaly detector's threshold and depth floor on training seeds")
     add_out_option(p)

@@ -65,7 +65,13 @@ def estimate_command(drive_paths: list[str], out_dir, *, command: str) -> dict:
 
 
 def add_estimate_arguments(parser: argparse.ArgumentParser) -> None:
-    """Options of ``roadcollab estimate``: ``--drive FILE`` (repeatable, in driving order) and ``--out DIR``."""
+    """Options of ``roadcollab estimate``: ``--drive FILE`` (repeatable, in driving order) and ``--out DIR``.
+
+    Parameters
+    ----------
+    parser : argparse.ArgumentParser
+        The parser the options are added to.
+    """
     parser.add_argument("--drive", action="append", required=True, metavar="FILE",
                         help="drive CSV 'time_s,accel_left,accel_right' (m/s^2) with FILE's stem + .toml or .json "
                              "beside it (speed_mps, [vehicle] estimated parameters); repeat in driving order")
@@ -73,7 +79,18 @@ def add_estimate_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def add_parser(subparsers) -> argparse.ArgumentParser:
-    """Add the ``estimate`` subcommand and its options to ``subparsers``; returns its parser."""
+    """Add the ``estimate`` subcommand and its options.
+
+    Parameters
+    ----------
+    subparsers : argparse._SubParsersAction
+        From ``ArgumentParser.add_subparsers``.
+
+    Returns
+    -------
+    argparse.ArgumentParser
+        The subcommand's parser.
+    """
     p = subparsers.add_parser(NAME, help="estimate the road from recorded drives (CSV + parameters)")
     add_estimate_arguments(p)
     return p

@@ -14,7 +14,18 @@ NAME = "message"
 
 
 def add_parser(subparsers) -> argparse.ArgumentParser:
-    """Add the ``message`` subcommand and its ``example`` subcommand to ``subparsers``; returns its parser."""
+    """Add the ``message`` subcommand and its ``example`` subcommand.
+
+    Parameters
+    ----------
+    subparsers : argparse._SubParsersAction
+        From ``ArgumentParser.add_subparsers``.
+
+    Returns
+    -------
+    argparse.ArgumentParser
+        The subcommand's parser.
+    """
     p = subparsers.add_parser(NAME, help="message utilities")
     msub = p.add_subparsers(dest="message_command", required=True)
     q = msub.add_parser("example", help="write a valid example message")

@@ -17,7 +17,18 @@ NAME = "reproduce"
 
 
 def add_parser(subparsers) -> argparse.ArgumentParser:
-    """Add the ``reproduce`` subcommand and its options to ``subparsers``; returns its parser."""
+    """Add the ``reproduce`` subcommand and its options.
+
+    Parameters
+    ----------
+    subparsers : argparse._SubParsersAction
+        From ``ArgumentParser.add_subparsers``.
+
+    Returns
+    -------
+    argparse.ArgumentParser
+        The subcommand's parser.
+    """
     p = subparsers.add_parser(NAME, help="Monte Carlo reproduction of the paper's Figs. 4-7")
     p.add_argument("--runs", type=positive_int, default=100, help="Monte Carlo runs (default 100)")
     p.add_argument("--vehicles", type=positive_int, default=10, help="fleet size (default 10)")

@@ -17,7 +17,18 @@ NAME = "sweep"
 
 
 def add_parser(subparsers) -> argparse.ArgumentParser:
-    """Add the ``sweep`` subcommand and its options to ``subparsers``; returns its parser."""
+    """Add the ``sweep`` subcommand and its options.
+
+    Parameters
+    ----------
+    subparsers : argparse._SubParsersAction
+        From ``ArgumentParser.add_subparsers``.
+
+    Returns
+    -------
+    argparse.ArgumentParser
+        The subcommand's parser.
+    """
     p = subparsers.add_parser(NAME, help="where Algorithm 1 beats a single vehicle: gamma x noise x uncertainty grid")
     add_out_option(p)
     p.add_argument("--runs", type=positive_int, default=8,

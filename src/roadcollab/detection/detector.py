@@ -206,7 +206,17 @@ class DetectorSpec:
         return max(self.pothole_lengths + self.bump_lengths) + self.enveloping_length
 
     def confidence(self, snr) -> np.ndarray:
-        """Logistic confidence of an SNR (array-like), in [0, 1]."""
+        """Logistic confidence of an SNR, in [0, 1].
+
+        Parameters
+        ----------
+        snr : array_like
+            Template-fit signal-to-noise ratios.
+
+        Returns
+        -------
+        ndarray
+        """
         z = (np.asarray(snr, dtype=float) - self.confidence_mid) / self.confidence_scale
         return 1.0 / (1.0 + np.exp(-np.clip(z, -500.0, 500.0)))
 

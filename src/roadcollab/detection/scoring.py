@@ -224,7 +224,12 @@ class MatchTally:
         self.depth_err: list[float] = []
 
     def add(self, m: MatchResult) -> None:
-        """Add the counts and pairs of one match result."""
+        """Add the counts and pairs of one match result.
+
+        Parameters
+        ----------
+        m : MatchResult
+        """
         self.n_true += m.n_true
         self.n_detected += m.n_detected
         self.n_matched += m.n_matched
@@ -234,7 +239,12 @@ class MatchTally:
         self.depth_err += m.depth_rel_errors
 
     def merge(self, other: "MatchTally") -> None:
-        """Add the counts and pairs of another tally (e.g. one pooled on a worker)."""
+        """Add the counts and pairs of another tally (e.g. one pooled on a worker).
+
+        Parameters
+        ----------
+        other : MatchTally
+        """
         self.n_true += other.n_true
         self.n_detected += other.n_detected
         self.n_matched += other.n_matched

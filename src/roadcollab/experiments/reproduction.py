@@ -162,7 +162,18 @@ class ReproductionResult:
     runs: list[RunResult]
 
     def mse(self, estimator: str) -> np.ndarray:
-        """(n_runs, n_vehicles) MSE of one estimator of :data:`ESTIMATORS`, (m/s)^2."""
+        """MSE of one estimator in every run and vehicle.
+
+        Parameters
+        ----------
+        estimator : str
+            One of :data:`ESTIMATORS`.
+
+        Returns
+        -------
+        (n_runs, n_vehicles) ndarray
+            (m/s)^2.
+        """
         return np.vstack([r.mse[estimator] for r in self.runs])
 
     def _stack(self, name: str) -> np.ndarray:

@@ -45,9 +45,8 @@ and what was found.
 
 from __future__ import annotations
 
-import json
 import math
-from dataclasses import dataclass, fields
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -55,20 +54,14 @@ import numpy as np
 from .._validation import check_signal
 from ..errors import ParameterError
 from ..models.vehicle import HalfCarParameters
+from .drive_params import params_path_for, read_drive_params, read_text
 
-__all__ = [
-    "CSV_COLUMNS", "MIN_ROWS", "UNIFORM_RTOL", "DEFAULT_SENSOR_NOISE_STD", "Drive", "read_drive_csv",
-    "read_drive_params", "params_path_for", "load_drive", "load_drives", "write_drive_csv", "write_drive_params",
-]
+__all__ = ["CSV_COLUMNS", "MIN_ROWS", "UNIFORM_RTOL", "Drive", "read_drive_csv", "load_drive", "load_drives",
+           "write_drive_csv"]
 
 CSV_COLUMNS = ("time_s", "accel_left", "accel_right")
 MIN_ROWS = 64
 UNIFORM_RTOL = 1e-6
-DEFAULT_SENSOR_NOISE_STD = 0.05
-_VEHICLE_KEYS = tuple(f.name for f in fields(HalfCarParameters))
-_VEHICLE_UNITS = {"sprung_mass": "kg", "roll_inertia": "kg m^2", "left_arm": "m", "right_arm": "m",
-                  "stiffness": "N/m", "damping": "N s/m"}
-_TOP_KEYS = ("speed_mps", "vehicle", "sensor_noise_std", "start_m")
 _HEADER_TEXT = ",".join(CSV_COLUMNS)
 
 
@@ -119,18 +112,6 @@ class Drive:
                 "sensor_noise_std": self.sensor_noise_std, "vehicle": self.params.as_dict()}
 
 
-def _read_text(path: Path, what: str) -> str:
-    if not path.is_file():
-        raise ParameterError(f"{path}: {what} not found (expected an existing file)")
-    try:
-        return path.read_text(encoding="utf-8-sig")
-    except UnicodeDecodeError as err:
-        raise ParameterError(f"{path}: expected a UTF-8 text file, got undecodable bytes ({err.reason} at byte "
-                             f"{err.start})") from None
-    except OSError as err:
-        raise ParameterError(f"{path}: cannot read {what}: {err.strerror or err}") from None
-
-
 def _parse_number(path: Path, lineno: int, col: int, text: str) -> float:
     name = CSV_COLUMNS[col]
     s = text.strip()
@@ -175,7 +156,7 @@ def read_drive_csv(path) -> tuple[np.ndarray, np.ndarray, float]:
         ``"<path> line N: ..."`` for bad content, ``"<path>: ..."`` otherwise.
     """
     path = Path(path)
-    lines = _read_text(path, "drive CSV").splitlines()
+    lines = read_text(path, "drive CSV").splitlines()
     numbered = [(i + 1, ln) for i, ln in enumerate(lines) if ln.strip()]
     if not numbered:
         raise ParameterError(f"{path} line 1: expected the header '{_HEADER_TEXT}', got an empty file")
@@ -230,98 +211,19 @@ def _uniform_step(path: Path, linenos: list[int], t: np.ndarray) -> float:
     return step
 
 
-def params_path_for(csv_path) -> Path:
-    """The parameters file beside ``csv_path``: same stem, ``.toml`` or ``.json`` (exactly one)."""
-    csv_path = Path(csv_path)
-    candidates = [csv_path.with_suffix(s) for s in (".toml", ".json")]
-    found = [p for p in candidates if p.is_file()]
-    if not found:
-        raise ParameterError(f"{csv_path}: parameters file not found: expected {candidates[0]} or {candidates[1]} "
-                             "beside the CSV (speed_mps and the [vehicle] parameters)")
-    if len(found) > 1:
-        raise ParameterError(f"{csv_path}: ambiguous parameters: both {found[0]} and {found[1]} exist; keep one")
-    return found[0]
+def load_drive(csv_path, params_path=None) -> Drive:
+    """Read one drive: the CSV and its parameters file.
 
-
-def _load_mapping(path: Path) -> dict:
-    text = _read_text(path, "parameters file")
-    suffix = path.suffix.lower()
-    if suffix == ".toml":
-        try:  # tomllib is in the standard library only from Python 3.11: import it where TOML is read
-            import tomllib
-        except ModuleNotFoundError:  # Python 3.10
-            raise ParameterError(f"{path}: reading TOML needs Python >= 3.11 (tomllib); write the parameters as "
-                                 f"JSON in {path.with_suffix('.json')} instead") from None
-        try:
-            data = tomllib.loads(text)
-        except tomllib.TOMLDecodeError as err:
-            raise ParameterError(f"{path}: expected valid TOML, got a syntax error: {err}") from None
-    elif suffix == ".json":
-        try:
-            data = json.loads(text)
-        except json.JSONDecodeError as err:
-            raise ParameterError(f"{path} line {err.lineno}: expected valid JSON, got a syntax error: {err.msg} "
-                                 f"(column {err.colno})") from None
-        if not isinstance(data, dict):
-            raise ParameterError(f"{path}: expected a JSON object {{\"speed_mps\": ..., \"vehicle\": {{...}}}}, "
-                                 f"got a {type(data).__name__}")
-    else:
-        raise ParameterError(f"{path}: expected a .toml or .json parameters file, got suffix {path.suffix!r}")
-    return data
-
-
-def _number(path: Path, key: str, value, *, low: float | None = None, low_open: bool = False,
-            unit: str = "") -> float:
-    unit_s = f" ({unit})" if unit else ""
-    if isinstance(value, bool) or not isinstance(value, (int, float)):
-        raise ParameterError(f"{path}: key '{key}' must be a number{unit_s}, got {value!r} ({type(value).__name__})")
-    v = float(value)
-    if not math.isfinite(v):
-        raise ParameterError(f"{path}: key '{key}' must be a finite number{unit_s}, got {v!r}")
-    if low is not None and (v < low or (low_open and v == low)):
-        op = ">" if low_open else ">="
-        raise ParameterError(f"{path}: key '{key}' must be {op} {low:g}{unit_s}, got {v:g}")
-    return v
-
-
-def _check_keys(path: Path, mapping: dict, allowed: tuple[str, ...], required: tuple[str, ...], where: str) -> None:
-    unknown = [k for k in mapping if k not in allowed]
-    if unknown:
-        raise ParameterError(f"{path}: unknown key(s) {', '.join(repr(where + k) for k in unknown)}; expected only "
-                             f"{', '.join(where + k for k in allowed)}")
-    missing = [k for k in required if k not in mapping]
-    if missing:
-        raise ParameterError(f"{path}: missing required key(s) {', '.join(repr(where + k) for k in missing)}")
-
-
-def read_drive_params(path) -> dict:
-    """Read and validate a drive's parameters file (TOML or JSON, keys in the module docstring).
+    Parameters
+    ----------
+    csv_path : str or Path
+    params_path : str or Path, optional
+        Default: :func:`params_path_for` ``(csv_path)``.
 
     Returns
     -------
-    dict
-        ``speed`` (m/s), ``sensor_noise_std`` (m/s^2), ``start_m`` (m), ``params``
-        (:class:`~roadcollab.models.vehicle.HalfCarParameters`).
+    Drive
     """
-    path = Path(path)
-    data = _load_mapping(path)
-    _check_keys(path, data, _TOP_KEYS, ("speed_mps", "vehicle"), "")
-    speed = _number(path, "speed_mps", data["speed_mps"], low=0.0, low_open=True, unit="m/s")
-    noise = _number(path, "sensor_noise_std", data.get("sensor_noise_std", DEFAULT_SENSOR_NOISE_STD), low=0.0,
-                    unit="m/s^2")
-    start = _number(path, "start_m", data.get("start_m", 0.0), unit="m")
-    veh = data["vehicle"]
-    if not isinstance(veh, dict):
-        raise ParameterError(f"{path}: key 'vehicle' must be a table ([vehicle] in TOML, an object in JSON) of "
-                             f"{', '.join(_VEHICLE_KEYS)}, got {veh!r} ({type(veh).__name__})")
-    _check_keys(path, veh, _VEHICLE_KEYS, _VEHICLE_KEYS, "vehicle.")
-    values = {k: _number(path, f"vehicle.{k}", veh[k], low=0.0, low_open=True, unit=_VEHICLE_UNITS[k])
-              for k in _VEHICLE_KEYS}
-    return {"speed": speed, "sensor_noise_std": noise, "start_m": start, "params": HalfCarParameters(**values)}
-
-
-def load_drive(csv_path, params_path=None) -> Drive:
-    """Read one drive: the CSV and its parameters file (default: :func:`params_path_for`)."""
     csv_path = Path(csv_path)
     if csv_path.suffix.lower() in (".toml", ".json"):
         raise ParameterError(f"{csv_path}: expected the drive's acceleration CSV here (its parameters file is "
@@ -338,6 +240,15 @@ def load_drives(paths) -> list[Drive]:
 
     Sample rates must agree to 1e-6 relative, ``speed_mps`` and ``start_m`` to 1e-9 relative;
     the error names the drive that differs from the first.
+
+    Parameters
+    ----------
+    paths : str, Path or sequence of them
+        Drive CSVs in driving order.
+
+    Returns
+    -------
+    list of Drive
     """
     if isinstance(paths, (str, Path)):
         paths = [paths]
@@ -392,50 +303,4 @@ def write_drive_csv(path, time, accel) -> Path:
     lines = [_HEADER_TEXT] + [f"{float(t)!r},{float(a)!r},{float(b)!r}" for t, (a, b) in zip(time, accel)]
     path = Path(path)
     path.write_text("\n".join(lines) + "\n")
-    return path
-
-
-def write_drive_params(path, *, speed: float, params: HalfCarParameters, sensor_noise_std: float | None = None,
-                       start_m: float | None = None) -> Path:
-    """Write a parameters file (``.toml`` or ``.json`` by suffix), full precision.
-
-    Values are not validated here; :func:`read_drive_params` checks them.
-
-    Parameters
-    ----------
-    path : str or Path
-        Output file (overwritten); the suffix ``.toml`` or ``.json`` (any case) picks the format.
-    speed : float
-        ``speed_mps``, m/s.
-    params : HalfCarParameters
-        The vehicle's estimated parameters, written as the ``vehicle`` table (SI units).
-    sensor_noise_std : float, optional
-        m/s^2; the key is omitted if None (readers then use 0.05).
-    start_m : float, optional
-        Road distance of the first sample, m; the key is omitted if None (readers then use 0).
-
-    Returns
-    -------
-    Path
-        ``path``.
-
-    Raises
-    ------
-    ParameterError
-        If the suffix is neither ``.toml`` nor ``.json`` (nothing is written).
-    """
-    path = Path(path)
-    top = {"speed_mps": float(speed)}
-    if sensor_noise_std is not None:
-        top["sensor_noise_std"] = float(sensor_noise_std)
-    if start_m is not None:
-        top["start_m"] = float(start_m)
-    veh = {k: float(v) for k, v in params.as_dict().items()}
-    if path.suffix.lower() == ".json":
-        path.write_text(json.dumps({**top, "vehicle": veh}, indent=2) + "\n")
-    elif path.suffix.lower() == ".toml":
-        lines = [f"{k} = {v!r}" for k, v in top.items()] + ["", "[vehicle]"] + [f"{k} = {v!r}" for k, v in veh.items()]
-        path.write_text("\n".join(lines) + "\n")
-    else:
-        raise ParameterError(f"{path}: expected a .toml or .json suffix, got {path.suffix!r}")
     return path

@@ -60,7 +60,18 @@ class Anomaly:
         return {"left": (0,), "right": (1,), "both": (0, 1)}[self.side]
 
     def elevation(self, distance) -> np.ndarray:
-        """Elevation added by this anomaly at ``distance`` (m, shape (n,)); returns (n,) m."""
+        """Elevation added by this anomaly.
+
+        Parameters
+        ----------
+        distance : (n,) array_like
+            Road distance, m.
+
+        Returns
+        -------
+        (n,) ndarray
+            m.
+        """
         x = np.asarray(distance, dtype=float)
         u = (x - self.position) / self.length
         if self.kind == "pothole":

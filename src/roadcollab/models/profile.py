@@ -69,7 +69,18 @@ class TimeRoad:
         return self.start + self.speed * np.arange(self.time.shape[0] + 1) / self.sample_rate
 
     def position(self, k) -> float:
-        """Road distance (m) of elevation sample ``k`` (may be fractional)."""
+        """Road distance of an elevation sample.
+
+        Parameters
+        ----------
+        k : float
+            Sample index (may be fractional).
+
+        Returns
+        -------
+        float
+            m.
+        """
         return self.start + self.speed * check_real("k", k) / self.sample_rate
 
 

@@ -342,14 +342,36 @@ def _plot_f1_vs(rows: list[dict], key: str, path, xlabel: str, *, scale: float =
 
 
 def plot_f1_vs_depth(rows: list[dict], path) -> Path:
-    """F1 (solid) and recall (dotted) of anomaly detection per estimator vs anomaly depth;
-    ``rows`` as ``AnomalyStudyResult.depth_rows`` (``depth_m``, ``estimator``, ``f1``, ``recall``)."""
+    """F1 (solid) and recall (dotted) of anomaly detection per estimator vs anomaly depth.
+
+    Parameters
+    ----------
+    rows : list of dict
+        ``AnomalyStudyResult.depth_rows`` (``depth_m``, ``estimator``, ``f1``, ``recall``).
+    path : str or Path
+        Output image.
+
+    Returns
+    -------
+    Path
+    """
     return _plot_f1_vs(rows, "depth_m", path, "anomaly depth / height (cm)", scale=100.0,
                        title="Anomaly detection vs depth (dashed: F1 = 0.9)")
 
 
 def plot_f1_vs_noise(rows: list[dict], path) -> Path:
-    """F1 (solid) and recall (dotted) per estimator vs accelerometer noise std; ``rows`` as
-    ``AnomalyStudyResult.noise_rows`` (``sensor_noise_std``, ``estimator``, ``f1``, ``recall``)."""
+    """F1 (solid) and recall (dotted) per estimator vs accelerometer noise std.
+
+    Parameters
+    ----------
+    rows : list of dict
+        ``AnomalyStudyResult.noise_rows`` (``sensor_noise_std``, ``estimator``, ``f1``, ``recall``).
+    path : str or Path
+        Output image.
+
+    Returns
+    -------
+    Path
+    """
     return _plot_f1_vs(rows, "sensor_noise_std", path, "accelerometer noise std (m/s$^2$)", logx=True,
                        title="Anomaly detection vs sensor noise (estimators designed for the default)")
