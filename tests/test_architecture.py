@@ -78,3 +78,64 @@ def test_no_hidden_imports(path):
                 continue
             for n in names:
                 assert n in LAZY_OK, f"{path.relative_to(ROOT)}:{node.lineno} imports {n!r} inside {fn.name}()"
+
+
+MAX_FUNCTION_LINES = 80
+
+
+@pytest.mark.parametrize("path", _modules(), ids=lambda p: str(p.relative_to(ROOT)))
+def test_function_length(path):
+    """Functions (docstring included) stay under 80 lines unless a ``# Long:`` comment says why."""
+    lines = path.read_text().splitlines()
+    for fn in ast.walk(ast.parse("\n".join(lines))):
+        if isinstance(fn, (ast.FunctionDef, ast.AsyncFunctionDef)):
+            n = fn.end_lineno - fn.lineno + 1
+            body = lines[fn.lineno - 1:fn.end_lineno]
+            assert n <= MAX_FUNCTION_LINES or any("# Long:" in b for b in body), \
+                f"{path.relative_to(ROOT)}:{fn.lineno} {fn.name}() has {n} lines"
+
+
+def _module_name(path: Path) -> str:
+    rel = path.relative_to(ROOT).with_suffix("")
+    parts = [p for p in rel.parts if p != "__init__"]
+    return ".".join(["roadcollab", *parts])
+
+
+def _module_level_imports(path: Path) -> set[str]:
+    """Modules of roadcollab imported at module level (not under ``if TYPE_CHECKING``)."""
+    name = _module_name(path)
+    pkg = name if path.name == "__init__.py" else name.rsplit(".", 1)[0]
+    out = set()
+    for node in ast.parse(path.read_text()).body:
+        if isinstance(node, ast.ImportFrom) and node.level:
+            base = pkg.split(".")
+            base = base[:len(base) - (node.level - 1)]
+            mod = ".".join(base + ([node.module] if node.module else []))
+            if node.module:
+                out.add(mod)
+            for a in node.names:  # ``from . import x`` may name a submodule
+                out.add(f"{mod}.{a.name}")
+    return out
+
+
+def test_no_import_cycles():
+    modules = {_module_name(p): p for p in _modules()}
+    graph = {m: {d for d in _module_level_imports(p) if d in modules and d != m} for m, p in modules.items()}
+    # A package's __init__ re-exporting its modules is not a cycle of its modules.
+    graph = {m: {d for d in deps if not m.startswith(d + ".")} for m, deps in graph.items()}
+    state, stack = {}, []
+
+    def visit(m):
+        state[m] = 1
+        stack.append(m)
+        for d in graph[m]:
+            if state.get(d) == 1:
+                raise AssertionError("import cycle: " + " -> ".join(stack[stack.index(d):] + [d]))
+            if d not in state:
+                visit(d)
+        stack.pop()
+        state[m] = 2
+
+    for m in sorted(graph):
+        if m not in state:
+            visit(m)
