@@ -2,6 +2,7 @@
 
 import dataclasses
 
+import numpy as np
 import pytest
 
 from roadcollab import ExperimentConfig, ParameterError, run_reproduction
@@ -40,3 +41,21 @@ def test_attack_study_on_dask_matches_serial():
     assert a.attack_rows == b.attack_rows
     assert a.linkability_rows == b.linkability_rows
     assert [r["mse_vehicle2"] for r in a.baseline_rows] == [r["mse_vehicle2"] for r in b.baseline_rows]
+
+
+def test_seed_plan_streams_are_stateless_and_match_spawn():
+    """Named streams equal numpy's spawn tree of a fresh parent, however often they are asked for."""
+    from roadcollab.experiments.seeds import RUN_STREAMS, SeedPlan, descendant, run_stream
+
+    plan = SeedPlan(7)
+    fleet, runs = np.random.SeedSequence(7).spawn(2)
+    assert plan.fleet().spawn_key == fleet.spawn_key
+    run3 = runs.spawn(5)[3]
+    assert plan.run(3).generate_state(4).tolist() == run3.generate_state(4).tolist()
+    children = np.random.SeedSequence(7).spawn(2)[1].spawn(5)[3].spawn(len(RUN_STREAMS))
+    for k, name in enumerate(RUN_STREAMS):
+        a, b = run_stream(plan.run(3), name), run_stream(plan.run(3), name)   # asked twice
+        assert a.generate_state(4).tolist() == b.generate_state(4).tolist() == children[k].generate_state(4).tolist()
+    assert descendant(plan.root, 1, 3).spawn_key == (1, 3)
+    with pytest.raises(ValueError, match="name must be one of"):
+        run_stream(plan.run(0), "weather")

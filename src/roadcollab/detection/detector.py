@@ -41,7 +41,7 @@ Template grids, ``enveloping_length``, ``merge_tolerance``, ``crosstalk_ratio`` 
 ``noise_floor`` follow from the road model and the estimators (typical sizes: potholes 0.1-1 m,
 bumps 0.5-3 m, 0.25 m enveloping; 10 % parameter errors leak well under 30 % between tracks).
 ``snr_threshold``, ``min_depth``, ``nms_guard`` and the confidence logistic were chosen on
-*training* runs only: root seeds 1000..1004 (``np.random.SeedSequence(s).spawn(2)`` -> fleet and
+*training* runs only: root seeds 1000..1004 (``SeedPlan(s)`` -> fleet and
 8 runs each, exactly as in :func:`roadcollab.experiments.anomaly_study.run_anomaly_study`), 10 vehicles,
 ISO class C, 0.05 m/s^2 noise, three road conditions (default anomalies 2.5-10 cm, all anomalies
 2 cm, all 3 cm), scored on vehicles 2..10. Evaluation uses other seeds (the study's default

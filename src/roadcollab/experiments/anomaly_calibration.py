@@ -6,8 +6,8 @@ seed 0) never sees; this module ships that procedure as ``roadcollab calibrate-a
 
 Procedure
 ---------
-For every training root seed ``s`` (default 1000..1004), ``np.random.SeedSequence(s).spawn(2)``
-gives the fleet and the runs' parent, exactly as in
+For every training root seed ``s`` (default 1000..1004), ``SeedPlan(s)`` gives the fleet and the
+runs, exactly as in
 :func:`roadcollab.experiments.anomaly_study.run_anomaly_study` (the same helpers,
 :mod:`roadcollab.experiments.anomaly_runs`, build the pipelines and the per-run seeds, so
 training seed ``s`` with ``runs_per_seed`` runs is the study with root seed ``s`` and
@@ -50,7 +50,7 @@ import numpy as np
 from ..detection.scoring import MatchTally
 from ..errors import ParameterError
 from .anomaly_config import ESTIMATORS
-from .anomaly_runs import condition_pipelines, fresh_seed_sequence, run_seed_sequences, score_estimates
+from .anomaly_runs import condition_pipelines, run_seed_sequences, score_estimates
 from .calibration_config import OBJECTIVE_ESTIMATORS, AnomalyCalibrationConfig
 from .calibration_result import AnomalyCalibrationResult, CalibrationPoint
 from .estimates import run_estimates
@@ -77,7 +77,7 @@ class _CalibrationTask:
             pipe, depth_pipes = condition_pipelines(study, seed)
             rs = run_seed_sequences(seed, config.runs_per_seed)[k % config.runs_per_seed]
             # Estimates once per condition; only detection and scoring per grid point.
-            ests = [run_estimates(p, fresh_seed_sequence(rs)) for p in (pipe, *depth_pipes)]
+            ests = [run_estimates(p, rs) for p in (pipe, *depth_pipes)]
             rec: dict = {}
             for g, cfg in enumerate(grid):   # grid-major: the detector's template cache stays warm
                 for c, est in enumerate(ests):

@@ -1,8 +1,9 @@
 """Per-run machinery of the anomaly study, shared with the detector calibration.
 
 The conditions of a study (default road, every anomaly of one depth) share one fleet and its
-estimators; only the road changes (:class:`RoadOverride`). Each run's seed is reused, unspawned,
-for every condition (:func:`fresh_seed_sequence`), so the conditions see common random numbers.
+estimators; only the road changes (:class:`RoadOverride`). Each run's seed is reused for every
+condition (its streams are stateless, :mod:`roadcollab.experiments.seeds`), so the conditions see
+common random numbers.
 :func:`score_estimates` detects anomalies in one run's estimates and scores them on the scored
 segment.
 """
@@ -18,8 +19,9 @@ from ..io.profiles import measured_road
 from .anomaly_config import ESTIMATORS, AnomalyStudyConfig
 from .estimates import RunEstimates
 from .pipeline import FleetPipeline, pipeline_for
+from .seeds import SeedPlan
 
-__all__ = ["RoadOverride", "condition_pipelines", "fresh_seed_sequence", "run_seed_sequences", "score_estimates",
+__all__ = ["RoadOverride", "condition_pipelines", "run_seed_sequences", "score_estimates",
            "scored_region"]
 
 
@@ -111,24 +113,9 @@ def score_estimates(est: RunEstimates, config: AnomalyStudyConfig, vehicles) -> 
     return dets, matches
 
 
-def fresh_seed_sequence(ss: np.random.SeedSequence) -> np.random.SeedSequence:
-    """An unspawned copy: run_estimates spawns children, and each condition needs the same ones.
-
-    Parameters
-    ----------
-    ss : numpy.random.SeedSequence
-
-    Returns
-    -------
-    numpy.random.SeedSequence
-        Same entropy, spawn key and pool size, no children spawned yet.
-    """
-    return np.random.SeedSequence(ss.entropy, spawn_key=ss.spawn_key, pool_size=ss.pool_size)
-
-
 def run_seed_sequences(seed: int, n_runs: int) -> list[np.random.SeedSequence]:
-    """One SeedSequence per run: the children of ``SeedSequence(seed).spawn(2)[1]`` (the first
-    child draws the fleet, see :func:`roadcollab.experiments.pipeline.pipeline_for`).
+    """One SeedSequence per run (:meth:`roadcollab.experiments.seeds.SeedPlan.runs`; the plan's
+    fleet stream draws the fleet).
 
     Parameters
     ----------
@@ -141,7 +128,7 @@ def run_seed_sequences(seed: int, n_runs: int) -> list[np.random.SeedSequence]:
     list of numpy.random.SeedSequence
         ``n_runs`` children.
     """
-    return np.random.SeedSequence(seed).spawn(2)[1].spawn(n_runs)
+    return SeedPlan(seed).runs(n_runs)
 
 
 def condition_pipelines(config: AnomalyStudyConfig, seed: int) -> tuple[RoadOverride, list[RoadOverride]]:

@@ -13,8 +13,8 @@ kind and side agreement are pooled over all matched pairs. Vehicle 1 is left out
 rows because it has no predecessor: its "collaborative" estimate is its own observer
 (``vehicle_rows`` lists every vehicle, vehicle 1 included).
 
-Reproducibility: ``SeedSequence(seed).spawn(2)`` gives the fleet (drawn once per study) and the
-runs' parent; run ``i`` uses the ``i``-th child for *every* condition (default, each depth and
+Reproducibility: ``SeedPlan(seed)`` (:mod:`roadcollab.experiments.seeds`) gives the fleet (drawn
+once per study) and the runs; run ``i`` uses its seed for *every* condition (default, each depth and
 each noise level), so the sweeps use common random numbers (same roughness, anomaly positions
 and noise draws; only the swept quantity changes) and results do not depend on scheduling.
 The sweep point equal to the configured sensor noise is the default condition itself.
@@ -41,9 +41,10 @@ from ..detection.scoring import MatchTally
 from ..errors import ParameterError
 from ..models.vehicle import Vehicle, sample_fleet
 from .anomaly_config import ESTIMATORS, AnomalyStudyConfig
-from .anomaly_runs import condition_pipelines, fresh_seed_sequence, run_seed_sequences, score_estimates, scored_region
+from .anomaly_runs import condition_pipelines, run_seed_sequences, score_estimates, scored_region
 from .estimates import RunEstimates, run_estimates
 from .runner import map_runs
+from .seeds import SeedPlan
 
 __all__ = ["AnomalyStudyResult", "run_anomaly_study"]
 
@@ -105,18 +106,18 @@ class _AnomalyTask:
         out = []
         for i in indices:
             rs = runs_ss[i]
-            est = run_estimates(pipe, fresh_seed_sequence(rs))
+            est = run_estimates(pipe, rs)
             dets, matches = score_estimates(est, config, range(V))
             rec = {"main": matches, "noise": {}, "depth": {},
                    "map": _map_example(est, dets, config) if i == 0 else None}
             for k, level in enumerate(config.noise_levels):
                 nm = matches   # the default condition itself (same seeds) ...
                 if level != exp.sensor_noise_std:   # ... unless the level differs
-                    noisy = run_estimates(pipe, fresh_seed_sequence(rs), sensor_noise_std=level)
+                    noisy = run_estimates(pipe, rs, sensor_noise_std=level)
                     nm = score_estimates(noisy, config, pooled)[1]
                 rec["noise"][k] = nm
             for k, dpipe in enumerate(depth_pipes):
-                rec["depth"][k] = score_estimates(run_estimates(dpipe, fresh_seed_sequence(rs)), config, pooled)[1]
+                rec["depth"][k] = score_estimates(run_estimates(dpipe, rs), config, pooled)[1]
             out.append(rec)
         return out
 
@@ -148,8 +149,7 @@ def run_anomaly_study(config: AnomalyStudyConfig, seed: int, *, progress: Callab
         raise ParameterError(f"progress must be callable or None, got {type(progress).__name__}")
     t0 = time.perf_counter()
     exp = config.experiment
-    fleet_ss, _ = np.random.SeedSequence(seed).spawn(2)
-    fleet = sample_fleet(exp.n_vehicles, exp.fleet, rng=np.random.default_rng(fleet_ss))
+    fleet = sample_fleet(exp.n_vehicles, exp.fleet, rng=np.random.default_rng(SeedPlan(seed).fleet()))
     V = exp.n_vehicles
     main = {name: MatchTally() for name in ESTIMATORS}
     per_vehicle = {(name, j): MatchTally() for name in ESTIMATORS for j in range(V)}

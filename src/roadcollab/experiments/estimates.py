@@ -14,7 +14,8 @@ import numpy as np
 from .._validation import check_nonnegative
 from ..collaboration.relay import Relay
 from ..models.profile import TimeRoad
-from .pipeline import FleetPipeline, record_run, spawn_seeds
+from .pipeline import FleetPipeline, record_run
+from .seeds import as_seed_sequence, run_stream
 
 __all__ = ["RunEstimates", "run_estimates"]
 
@@ -63,7 +64,8 @@ def run_estimates(pipe: FleetPipeline, rng, *, sensor_noise_std: float | None = 
     RunEstimates
     """
     cfg, grid = pipe.config, pipe.grid
-    road_ss, noise_ss = spawn_seeds(rng, 2)
+    ss = as_seed_sequence(rng)
+    road_ss, noise_ss = run_stream(ss, "road"), run_stream(ss, "noise")
     std = cfg.sensor_noise_std if sensor_noise_std is None else check_nonnegative("sensor_noise_std",
                                                                                   sensor_noise_std)
     road, ys, Ys = record_run(pipe, road_ss, noise_ss, std)

@@ -2,8 +2,8 @@
 
 A :class:`FleetPipeline` holds what every run of one fleet shares: the vehicles' estimators,
 the frequency grid and the fleet's linear MMSE estimators. :func:`pipeline_for` builds it once
-per process for a configuration and root seed. Seeds: ``SeedSequence(seed).spawn(2)`` gives the
-fleet (first child) and the runs' parent (second child, one child per run).
+per process for a configuration and root seed. Seeds: :class:`~roadcollab.experiments.seeds.SeedPlan`
+(the fleet stream and one seed per run).
 """
 
 from __future__ import annotations
@@ -22,8 +22,9 @@ from ..io.profiles import measured_road
 from ..models.vehicle import Vehicle, sample_fleet
 from .config import ExperimentConfig
 from .runner import cached
+from .seeds import SeedPlan
 
-__all__ = ["FleetPipeline", "fleet_and_run_seeds", "pipeline_for", "record_run", "spawn_seeds"]
+__all__ = ["FleetPipeline", "fleet_and_run_seeds", "pipeline_for", "record_run"]
 
 
 class FleetPipeline:
@@ -104,27 +105,6 @@ class FleetPipeline:
         return profile.sample(cfg.speed, cfg.sample_rate, duration=cfg.n_samples / cfg.sample_rate)
 
 
-def spawn_seeds(rng, n: int) -> list[np.random.SeedSequence]:
-    """Independent child seeds of one run (e.g. road, sensor noise, obfuscators).
-
-    Parameters
-    ----------
-    rng : numpy.random.SeedSequence | numpy.random.Generator | int
-        A SeedSequence is spawned directly; anything else seeds a Generator whose first 63-bit
-        integer becomes the root SeedSequence.
-    n : int
-        Number of children.
-
-    Returns
-    -------
-    list of numpy.random.SeedSequence
-        ``n`` children.
-    """
-    ss = rng if isinstance(rng, np.random.SeedSequence) else np.random.SeedSequence(
-        np.random.default_rng(rng).integers(2**63))
-    return ss.spawn(n)
-
-
 def record_run(pipe: FleetPipeline, road_ss: np.random.SeedSequence, noise_ss: np.random.SeedSequence,
                sensor_noise_std: float) -> tuple[TimeRoad, list[np.ndarray], list[np.ndarray]]:
     """The road of one run and every vehicle's record of it.
@@ -167,9 +147,9 @@ def fleet_and_run_seeds(config: ExperimentConfig, seed: int) -> tuple[list[Vehic
     run_seeds : list of numpy.random.SeedSequence
         ``config.n_runs`` children of the root seed's second child.
     """
-    fleet_ss, runs_ss = np.random.SeedSequence(seed).spawn(2)
-    fleet = sample_fleet(config.n_vehicles, config.fleet, rng=np.random.default_rng(fleet_ss))
-    return fleet, runs_ss.spawn(config.n_runs)
+    plan = SeedPlan(seed)
+    fleet = sample_fleet(config.n_vehicles, config.fleet, rng=np.random.default_rng(plan.fleet()))
+    return fleet, plan.runs(config.n_runs)
 
 
 def pipeline_for(config: ExperimentConfig, seed: int) -> FleetPipeline:

@@ -31,7 +31,8 @@ from ..errors import ParameterError
 from ..models.vehicle import Vehicle, sample_fleet
 from ..privacy.obfuscation import theorem1_errors
 from .config import ExperimentConfig
-from .pipeline import FleetPipeline, fleet_and_run_seeds, pipeline_for, record_run, spawn_seeds
+from .pipeline import FleetPipeline, fleet_and_run_seeds, pipeline_for, record_run
+from .seeds import SeedPlan, as_seed_sequence, run_stream
 from .runner import map_runs
 
 __all__ = ["ESTIMATORS", "RunResult", "ReproductionResult", "run_reproduction", "simulate_run"]
@@ -95,7 +96,8 @@ def simulate_run(pipe: FleetPipeline, rng, *, keep_traces: int = 0, privacy: boo
     RunResult
     """
     cfg, grid = pipe.config, pipe.grid
-    road_ss, noise_ss, priv_ss = spawn_seeds(rng, 3)
+    ss = as_seed_sequence(rng)
+    road_ss, noise_ss, priv_ss = (run_stream(ss, name) for name in ("road", "noise", "privacy"))
     road, ys, Ys = record_run(pipe, road_ss, noise_ss, cfg.sensor_noise_std)
     w = road.velocity
     n, sl = grid.n_samples, cfg.scored
@@ -243,15 +245,15 @@ class _ReproductionTask:
     privacy: bool
 
     def __call__(self, indices) -> list[RunResult]:
-        run_ss = fleet_and_run_seeds(self.config, self.seed)[1]
+        plan = SeedPlan(self.seed)
         out = []
         for i in indices:
             if self.config.redraw_fleet:
-                fleet_ss, sim_ss = run_ss[i].spawn(2)
+                fleet_ss, sim_ss = plan.run_fleet(i), plan.run_simulation(i)
                 pipe = FleetPipeline(self.config, sample_fleet(self.config.n_vehicles, self.config.fleet,
                                                                rng=np.random.default_rng(fleet_ss)))
             else:
-                pipe, sim_ss = pipeline_for(self.config, self.seed), run_ss[i]
+                pipe, sim_ss = pipeline_for(self.config, self.seed), plan.run(i)
             out.append(simulate_run(pipe, sim_ss, keep_traces=3 if i == 0 else 0, privacy=self.privacy))
         return out
 

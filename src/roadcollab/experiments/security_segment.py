@@ -22,6 +22,7 @@ import numpy as np
 
 from ..collaboration.relay import Exchange, Relay
 from ..lti.arx import arx_poles
+from .seeds import RUN_STREAMS, run_stream
 from ..lti.batch2x2 import receiver_z
 from ..models.simulation import add_sensor_noise, simulate_response
 from ..models.vehicle import half_car_model
@@ -384,7 +385,7 @@ def attack_segment(pipe, config: AttackStudyConfig, r: int, rs: np.random.SeedSe
     targets = target_poles(pipe)
     sens = baselines.l2_sensitivity(pipe.estimators[0], config.dp_rho)
     sigmas = {e: baselines.gaussian_sigma(e, config.dp_delta, sens) for e in eps_list}
-    road_ss, noise_ss, priv_ss, dp_ss, own_ss = rs.spawn(5)
+    road_ss, noise_ss, priv_ss, dp_ss, own_ss = (run_stream(rs, name) for name in RUN_STREAMS)
     road = _Road.of(pipe, cfg, np.random.default_rng(road_ss))
     noise_rng, priv_rng, dp_rng, own_rng = (np.random.default_rng(s) for s in (noise_ss, priv_ss, dp_ss, own_ss))
     ctx = _Context(pipe, config, r, key, road, noise_rng, own_rng)

@@ -23,6 +23,7 @@ from .config import ExperimentConfig
 from .pipeline import pipeline_for
 from .runner import map_runs
 from .security_segment import EXACT_MECHANISMS, SegmentAttacks, attack_segment, dp_mse_key, target_poles
+from .seeds import SeedPlan
 
 __all__ = ["AttackStudyConfig", "AttackStudyResult", "run_attack_study"]
 
@@ -139,8 +140,7 @@ def _study_pipeline(config: AttackStudyConfig, seed: int):
 
 def _run_seeds(config: AttackStudyConfig, seed: int):
     """One seed per segment."""
-    # Same split as the reproduction: child 0 draws the fleet, child 1 the runs.
-    return np.random.SeedSequence(seed).spawn(2)[1].spawn(config.n_runs)
+    return SeedPlan(seed).runs(config.n_runs)
 
 
 @dataclass(frozen=True)

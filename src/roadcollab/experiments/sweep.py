@@ -19,7 +19,9 @@ paired comparisons, free of most of the run-to-run scatter.
 
 Seeds::
 
-    SeedSequence(seed) --spawn(n_runs)--> run r --spawn(2)--> (fleet draw, simulate_run)
+    SeedSequence(seed) -> run r (child r) -> (fleet draw, simulate_run) (children 0 and 1)
+
+(:meth:`roadcollab.experiments.seeds.SeedPlan.sweep_run`).
 
 Every (grid point, run) pair is an independent task rebuilt from these seeds, so the result
 does not depend on the number of workers or on the scheduler.
@@ -44,6 +46,7 @@ from .reproduction import simulate_run
 from .runner import map_runs
 from .sweep_config import SWEPT_ESTIMATORS, SweepConfig
 from .sweep_result import SweepResult
+from .seeds import SeedPlan
 
 __all__ = ["run_sweep"]
 
@@ -55,8 +58,7 @@ def _run_seed_sequences(seed: int, n_runs: int, r: int) -> tuple[np.random.SeedS
     reusing a parent (or passing the same child to two ``simulate_run`` calls) would hand later
     grid points different randomness.
     """
-    fleet_ss, sim_ss = np.random.SeedSequence(seed).spawn(n_runs)[r].spawn(2)
-    return fleet_ss, sim_ss
+    return SeedPlan(seed).sweep_run(r)
 
 
 @dataclass(frozen=True)
