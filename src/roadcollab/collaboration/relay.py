@@ -113,8 +113,18 @@ class Relay:
 
     Examples
     --------
-    >>> steps = Relay(cars, "hardened").run(measurements)       # doctest: +SKIP
-    >>> w_hat_last = steps[-1].result.estimate                   # doctest: +SKIP
+    Three vehicles drive one road segment; Algorithm 1 with Algorithm 2 on every message:
+
+    >>> import numpy as np, roadcollab as rc
+    >>> cfg = rc.ExperimentConfig(n_vehicles=3, n_runs=1)
+    >>> pipe = rc.FleetPipeline(cfg, rc.sample_fleet(3, cfg.fleet, rng=1))
+    >>> road = pipe.road(np.random.default_rng(2))
+    >>> ys = rc.simulate_measurements(pipe.estimators, road.velocity, cfg.sensor_noise_std, rng=3)
+    >>> steps = rc.Relay(pipe.estimators, rc.Exchange("paper", cfg.obfuscation), rng=4).run(ys)
+    >>> [s.message.mechanism for s in steps]
+    ['paper', 'paper', 'paper']
+    >>> steps[-1].result.estimate.shape == (cfg.n_samples, 2)   # vehicle 3's road velocity, m/s
+    True
     """
 
     def __init__(self, estimators: Sequence[CollaborativeEstimator], exchange: Exchange | str = "none", *,

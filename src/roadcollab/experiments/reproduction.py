@@ -281,6 +281,16 @@ def run_reproduction(config: ExperimentConfig, seed: int, *, progress: Callable[
     Returns
     -------
     ReproductionResult
+
+    Examples
+    --------
+    >>> import roadcollab as rc
+    >>> res = rc.run_reproduction(rc.ExperimentConfig(n_vehicles=2, n_runs=1), seed=0)
+    >>> rows = res.table()                       # the rows of mse.csv, one per vehicle
+    >>> [r["vehicle"] for r in rows]
+    [1, 2]
+    >>> all(r["max_rel_diff_privacy"] < 1e-9 for r in rows)   # Theorem 1, measured
+    True
     """
     if not isinstance(config, ExperimentConfig):
         raise ParameterError(f"config must be an ExperimentConfig, got {type(config).__name__}")

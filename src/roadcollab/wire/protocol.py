@@ -165,6 +165,17 @@ def encode(message: Message) -> bytes:
     MessageError
         If the message is malformed, out of the limits, non-finite or has unstable dynamics:
         it runs the checks of :func:`decode`, so only decodable bytes are ever produced.
+
+    Examples
+    --------
+    >>> from roadcollab.wire.examples import example_message
+    >>> data = encode(example_message("hardened"))
+    >>> decode(data).mechanism
+    'hardened'
+    >>> decode(data[:-1])
+    Traceback (most recent call last):
+        ...
+    roadcollab.errors.MessageError: ...
     """
     h, arrays = message_fields(message)
     check_header(h)
