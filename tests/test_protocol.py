@@ -596,3 +596,19 @@ def test_fuzz_mutated_valid_encodings(data):
     msg = _decode_only_message_error(data)
     if msg is not None:
         _check_decoded(msg, data)
+
+
+def test_messages_validate_at_construction():
+    """A message that fails the codec's checks cannot be built, so every message that exists encodes."""
+    msg = small_exchange()
+    bad_e = msg.e.copy()
+    bad_e[3, 1] = np.inf
+    with pytest.raises(MessageError, match="e must be finite"):
+        ExchangeMessage(msg.mechanism, msg.sample_rate, msg.n_samples, msg.T, msg.S, bad_e, msg.wf)
+    with pytest.raises(MessageError, match="discrete-time stable"):
+        ExchangeMessage(msg.mechanism, msg.sample_rate, msg.n_samples, _sys(msg.T, A=1.01 * np.eye(msg.T.order)),
+                        msg.S, msg.e, msg.wf)
+    inv = small_inversion()
+    with pytest.raises(MessageError, match="mechanism must be one of"):
+        InversionMessage("gossip", inv.sample_rate, inv.n_samples, inv.z, inv.count)
+    assert decode(encode(msg)).mechanism == msg.mechanism

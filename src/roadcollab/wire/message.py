@@ -11,6 +11,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..lti.realisation import StateSpaceData
+from .describe import validate_message
+from .layout import MESSAGE_TYPE_EXCHANGE, MESSAGE_TYPE_INVERSION
 
 __all__ = ["ExchangeMessage", "InversionMessage"]
 
@@ -32,7 +34,15 @@ class ExchangeMessage:
     e, wf : (nfft, 2) ndarray
         ``e_j`` and ``w^f_j`` (or ``Psi1 e_j`` and ``Psi2^-1 w^f_j``) on the padded periodic
         grid of ``nfft`` samples.
+
+    Raises
+    ------
+    MessageError
+        On construction, if the message fails any check the codec applies (types, shapes, limits,
+        finite values, stable dynamics): a message that exists can be encoded and decoded.
     """
+
+    WIRE_TYPE = MESSAGE_TYPE_EXCHANGE     # class attribute (not a field): the codec's message type
 
     mechanism: str
     sample_rate: float
@@ -41,6 +51,9 @@ class ExchangeMessage:
     S: StateSpaceData
     e: np.ndarray
     wf: np.ndarray
+
+    def __post_init__(self) -> None:
+        validate_message(self)
 
 
 @dataclass(frozen=True, eq=False)
@@ -63,10 +76,20 @@ class InversionMessage:
         ``z`` on the padded periodic grid, m/s.
     count : int
         Number of vehicles whose inversions ``z`` averages (1 for ``hardened``).
+
+    Raises
+    ------
+    MessageError
+        On construction, if the message fails any check the codec applies.
     """
+
+    WIRE_TYPE = MESSAGE_TYPE_INVERSION    # class attribute (not a field): the codec's message type
 
     mechanism: str
     sample_rate: float
     n_samples: int
     z: np.ndarray
     count: int = 1
+
+    def __post_init__(self) -> None:
+        validate_message(self)

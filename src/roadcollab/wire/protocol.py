@@ -91,7 +91,8 @@ import numpy as np
 
 from ..errors import MessageError
 from .examples import example_message
-from .fields import Message, build_message, message_fields
+from .describe import message_fields
+from .fields import Message, build_message
 from .framing import as_buffer, check_frame_size, pack_message, read_header
 # _decode calls it through this module's namespace, so a test can replace protocol._read_array
 # to prove that an oversized header is refused before any payload array is read.
