@@ -172,4 +172,20 @@ class SegmentGrid:
         (n, channels) ndarray
         """
         x = check_signal("x", x)
-        return self.irfft(self.weight[:, None] * self.rfft(x), x.shape[0] if n is None else n)
+        return self.band_limited(self.rfft(x), x.shape[0] if n is None else n)
+
+    def band_limited(self, X, n: int | None = None) -> np.ndarray:
+        """Time signal of a spectrum weighted by the zero-phase band weight ``W``: how every
+        estimate and every truth is scored.
+
+        Parameters
+        ----------
+        X : (n_bins, channels) complex array_like
+        n : int, optional
+            Samples kept (default ``nfft``).
+
+        Returns
+        -------
+        (n, channels) ndarray
+        """
+        return self.irfft(self.weight[:, None] * X, n)

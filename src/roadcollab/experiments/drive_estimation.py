@@ -204,10 +204,8 @@ def estimate_drives(drives: list[Drive], *, gamma: float | None = None, band_low
                              f"{band_low_hz:g} Hz band edge), got {fs:.9g} Hz")
     n = min(d.n_samples for d in drives)
     grid = SegmentGrid(n, fs, band_low_hz=band_low_hz)
-    Wgt = grid.weight[:, None]
-
     def band(X):
-        return grid.irfft(Wgt * X, n)
+        return grid.band_limited(X, n)
 
     cars = _drive_estimators(drives, grid, speed=speed, sample_rate=fs, gamma=gamma, band_low_hz=band_low_hz)
     ys = [d.accel[:n] for d in drives]

@@ -70,11 +70,13 @@ def run_estimates(pipe: FleetPipeline, rng, *, sensor_noise_std: float | None = 
                                                                                   sensor_noise_std)
     road, ys, Ys = record_run(pipe, road_ss, noise_ss, std)
     n = grid.n_samples
-    Wgt = grid.weight[:, None]
     w = road.velocity
     plain = Relay(pipe.estimators, "none").run(ys, spectra=Ys)
     fused = Relay(pipe.estimators, "fused").run(ys, spectra=Ys)
-    band = lambda X: grid.irfft(Wgt * X, n)  # noqa: E731
+
+    def band(X):
+        return grid.band_limited(X, n)
+
     return RunEstimates(road=road, truth=band(grid.rfft(w)),
                         observer_only=np.array([band(s.result.W_obs) for s in plain]),
                         collaborative=np.array([band(s.result.W_hat) for s in plain]),

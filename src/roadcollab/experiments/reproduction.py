@@ -101,11 +101,10 @@ def simulate_run(pipe: FleetPipeline, rng, *, keep_traces: int = 0, privacy: boo
     road, ys, Ys = record_run(pipe, road_ss, noise_ss, cfg.sensor_noise_std)
     w = road.velocity
     n, sl = grid.n_samples, cfg.scored
-    Wgt = grid.weight[:, None]
-    truth = grid.irfft(Wgt * grid.rfft(w), n)[sl]
+    truth = grid.band_limited(grid.rfft(w), n)[sl]
 
     def mse(X):  # X: spectrum of an estimate; band-limited like the truth
-        return float(np.mean((grid.irfft(Wgt * X, n)[sl] - truth) ** 2))
+        return float(np.mean((grid.band_limited(X, n)[sl] - truth) ** 2))
 
     ests = pipe.estimators
     plain = Relay(ests, "none").run(ys, spectra=Ys)
@@ -136,8 +135,8 @@ def simulate_run(pipe: FleetPipeline, rng, *, keep_traces: int = 0, privacy: boo
     traces = None
     if keep_traces:
         traces = {"time": road.time[sl], "truth": truth, "truth_raw": w[sl],
-                  "plain": [grid.irfft(Wgt * s.result.W_hat, n)[sl] for s in plain[:keep_traces]],
-                  "private": [grid.irfft(Wgt * s.result.W_hat, n)[sl] for s in priv[:keep_traces]]}
+                  "plain": [grid.band_limited(s.result.W_hat, n)[sl] for s in plain[:keep_traces]],
+                  "private": [grid.band_limited(s.result.W_hat, n)[sl] for s in priv[:keep_traces]]}
     return RunResult(mse=out, max_rel_diff=rel, max_rel_diff_hardened=rel_h, theorem1_e=t1e, theorem1_wf=t1w,
                      theorem1_e_band=t1e_b, theorem1_wf_band=t1w_b,
                      truth_power=float(np.mean(truth**2)), traces=traces)

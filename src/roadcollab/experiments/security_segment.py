@@ -139,14 +139,14 @@ class _Road:
         w = pipe.road(rng).velocity
         W_true = grid.rfft(w)
         w_band = grid.irfft(grid.reg_weight[:, None] * W_true)
-        truth = grid.irfft(grid.weight[:, None] * W_true, grid.n_samples)[cfg.scored]
+        truth = grid.band_limited(W_true, grid.n_samples)[cfg.scored]
         return cls(grid, cfg.scored, w, w_band, truth)
 
     def mse(self, W_hat: np.ndarray) -> float:
         """MSE ((m/s)^2) over the scored samples of the estimate with spectrum ``W_hat`` (band-limited like the
         truth)."""
         g = self.grid
-        return float(np.mean((g.irfft(g.weight[:, None] * W_hat, g.n_samples)[self.scored] - self.truth) ** 2))
+        return float(np.mean((g.band_limited(W_hat, g.n_samples)[self.scored] - self.truth) ** 2))
 
 
 @dataclass(frozen=True)
