@@ -50,7 +50,7 @@ import numpy as np
 from ..detection.scoring import MatchTally
 from ..errors import ParameterError
 from .anomaly_config import ESTIMATORS
-from .anomaly_runs import condition_pipelines, run_seed_sequences, score_estimates
+from .anomaly_runs import condition_roads, run_seed_sequences, score_estimates
 from .calibration_config import OBJECTIVE_ESTIMATORS, AnomalyCalibrationConfig
 from .calibration_result import AnomalyCalibrationResult, CalibrationPoint
 from .estimates import run_estimates
@@ -74,10 +74,10 @@ class _CalibrationTask:
         out = []
         for k in indices:
             seed = config.seeds[k // config.runs_per_seed]
-            pipe, depth_pipes = condition_pipelines(study, seed)
+            pipe, default, by_depth = condition_roads(study, seed)
             rs = run_seed_sequences(seed, config.runs_per_seed)[k % config.runs_per_seed]
             # Estimates once per condition; only detection and scoring per grid point.
-            ests = [run_estimates(p, rs) for p in (pipe, *depth_pipes)]
+            ests = [run_estimates(pipe, rs, road_spec=spec) for spec in (default, *by_depth)]
             rec: dict = {}
             for g, cfg in enumerate(grid):   # grid-major: the detector's template cache stays warm
                 for c, est in enumerate(ests):

@@ -41,7 +41,7 @@ from ..detection.scoring import MatchTally
 from ..errors import ParameterError
 from ..models.vehicle import Vehicle, sample_fleet
 from .anomaly_config import ESTIMATORS, AnomalyStudyConfig
-from .anomaly_runs import condition_pipelines, run_seed_sequences, score_estimates, scored_region
+from .anomaly_runs import condition_roads, run_seed_sequences, score_estimates, scored_region
 from .estimates import RunEstimates, run_estimates
 from .runner import map_runs
 from .seeds import SeedPlan
@@ -99,25 +99,25 @@ class _AnomalyTask:
 
     def __call__(self, indices) -> list[dict]:
         config, exp = self.config, self.config.experiment
-        pipe, depth_pipes = condition_pipelines(config, self.seed)
+        pipe, default, by_depth = condition_roads(config, self.seed)
         runs_ss = run_seed_sequences(self.seed, config.n_runs)
         V = exp.n_vehicles
         pooled = range(1, V)   # vehicles 2..V
         out = []
         for i in indices:
             rs = runs_ss[i]
-            est = run_estimates(pipe, rs)
+            est = run_estimates(pipe, rs, road_spec=default)
             dets, matches = score_estimates(est, config, range(V))
             rec = {"main": matches, "noise": {}, "depth": {},
                    "map": _map_example(est, dets, config) if i == 0 else None}
             for k, level in enumerate(config.noise_levels):
                 nm = matches   # the default condition itself (same seeds) ...
                 if level != exp.sensor_noise_std:   # ... unless the level differs
-                    noisy = run_estimates(pipe, rs, sensor_noise_std=level)
+                    noisy = run_estimates(pipe, rs, sensor_noise_std=level, road_spec=default)
                     nm = score_estimates(noisy, config, pooled)[1]
                 rec["noise"][k] = nm
-            for k, dpipe in enumerate(depth_pipes):
-                rec["depth"][k] = score_estimates(run_estimates(dpipe, rs), config, pooled)[1]
+            for k, spec in enumerate(by_depth):
+                rec["depth"][k] = score_estimates(run_estimates(pipe, rs, road_spec=spec), config, pooled)[1]
             out.append(rec)
         return out
 

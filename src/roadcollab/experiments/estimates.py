@@ -14,6 +14,7 @@ import numpy as np
 from .._validation import check_nonnegative
 from ..collaboration.relay import Relay
 from ..models.profile import TimeRoad
+from ..models.road import RoadSpec
 from .pipeline import FleetPipeline, record_run
 from .seeds import as_seed_sequence, run_stream
 
@@ -48,7 +49,8 @@ class RunEstimates:
     positions: np.ndarray
 
 
-def run_estimates(pipe: FleetPipeline, rng, *, sensor_noise_std: float | None = None) -> RunEstimates:
+def run_estimates(pipe: FleetPipeline, rng, *, sensor_noise_std: float | None = None,
+                  road_spec: RoadSpec | None = None) -> RunEstimates:
     """Estimates of every vehicle on one run (no privacy chain: it changes no estimate).
 
     Parameters
@@ -58,6 +60,9 @@ def run_estimates(pipe: FleetPipeline, rng, *, sensor_noise_std: float | None = 
     sensor_noise_std : float, optional
         Override the configuration's accelerometer noise (m/s^2) for this run, e.g. for a
         noise sweep with estimators designed for the nominal noise.
+    road_spec : RoadSpec, optional
+        Road condition other than the configuration's, e.g. every anomaly of one depth
+        (:meth:`~roadcollab.experiments.pipeline.FleetPipeline.road`).
 
     Returns
     -------
@@ -68,7 +73,7 @@ def run_estimates(pipe: FleetPipeline, rng, *, sensor_noise_std: float | None = 
     road_ss, noise_ss = run_stream(ss, "road"), run_stream(ss, "noise")
     std = cfg.sensor_noise_std if sensor_noise_std is None else check_nonnegative("sensor_noise_std",
                                                                                   sensor_noise_std)
-    road, ys, Ys = record_run(pipe, road_ss, noise_ss, std)
+    road, ys, Ys = record_run(pipe, road_ss, noise_ss, std, road_spec)
     n = grid.n_samples
     w = road.velocity
     plain = Relay(pipe.estimators, "none").run(ys, spectra=Ys)

@@ -17,7 +17,7 @@ from ..collaboration.fusion import LinearMMSE, plant_moments, road_second_moment
 from ..collaboration.relay import simulate_measurements
 from ..errors import ParameterError
 from ..models.profile import TimeRoad
-from ..models.road import generate_road
+from ..models.road import RoadSpec, generate_road, with_anomalies
 from ..io.profiles import measured_road
 from ..models.vehicle import Vehicle, sample_fleet
 from .config import ExperimentConfig
@@ -80,21 +80,31 @@ class FleetPipeline:
                    for e in self.estimators]
         return LinearMMSE(self.grid, S, moments, [self.config.sensor_noise_std] * len(self.fleet))
 
-    def road(self, rng: np.random.Generator) -> TimeRoad:
+    def road(self, rng: np.random.Generator, spec: RoadSpec | None = None) -> TimeRoad:
         """Draw the run's road and sample it for the fleet's speed.
 
         Parameters
         ----------
         rng : numpy.random.Generator
+        spec : RoadSpec, optional
+            A road condition other than the configuration's (e.g. every anomaly of one depth);
+            the estimators, designed for the configuration's road, are unchanged. With a measured
+            profile, the anomalies of ``spec`` are added to the profile.
 
         Returns
         -------
         TimeRoad
-            Synthetic (``config.road_spec()``) or measured (``config.road_profile``) road,
-            sampled at ``config.speed`` m/s and ``config.sample_rate`` Hz for ``n_samples``.
+            Synthetic (``config.road_spec()`` or ``spec``) or measured (``config.road_profile``)
+            road, sampled at ``config.speed`` m/s and ``config.sample_rate`` Hz for ``n_samples``.
         """
         cfg = self.config
-        if cfg.road_profile is None:
+        if spec is not None:
+            if cfg.road_profile is None:
+                profile = generate_road(spec, rng=rng)
+            else:
+                path = None if cfg.road_profile == "packaged" else cfg.road_profile
+                profile = with_anomalies(measured_road(path, spacing=spec.spacing, rng=rng), spec, rng=rng)
+        elif cfg.road_profile is None:
             profile = generate_road(cfg.road_spec(), rng=rng)
         else:
             path = None if cfg.road_profile == "packaged" else cfg.road_profile
@@ -106,17 +116,19 @@ class FleetPipeline:
 
 
 def record_run(pipe: FleetPipeline, road_ss: np.random.SeedSequence, noise_ss: np.random.SeedSequence,
-               sensor_noise_std: float) -> tuple[TimeRoad, list[np.ndarray], list[np.ndarray]]:
+               sensor_noise_std: float, road_spec: RoadSpec | None = None
+               ) -> tuple[TimeRoad, list[np.ndarray], list[np.ndarray]]:
     """The road of one run and every vehicle's record of it.
 
     Parameters
     ----------
     pipe : FleetPipeline
-        Or any object with ``grid``, ``estimators`` and ``road(rng)``.
     road_ss, noise_ss : numpy.random.SeedSequence
         Seeds of the road and of the sensor noise.
     sensor_noise_std : float
         Accelerometer noise standard deviation, m/s^2.
+    road_spec : RoadSpec, optional
+        Road condition other than the configuration's (:meth:`FleetPipeline.road`).
 
     Returns
     -------
@@ -126,7 +138,7 @@ def record_run(pipe: FleetPipeline, road_ss: np.random.SeedSequence, noise_ss: n
     spectra : list of (N // 2 + 1, 2) ndarray
         Their spectra (``grid.rfft``).
     """
-    road = pipe.road(np.random.default_rng(road_ss))
+    road = pipe.road(np.random.default_rng(road_ss), road_spec)
     ys = simulate_measurements(pipe.estimators, road.velocity, sensor_noise_std, rng=np.random.default_rng(noise_ss))
     return road, ys, [pipe.grid.rfft(y) for y in ys]
 
