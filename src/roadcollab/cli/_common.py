@@ -74,6 +74,23 @@ def add_out_option(p: argparse.ArgumentParser) -> None:
     p.add_argument("--out", type=Path, required=True, help="output folder")
 
 
+def add_study_options(p: argparse.ArgumentParser, *, runs: int, runs_help: str, vehicles_help: str) -> None:
+    """``--runs``, ``--vehicles``, ``--seed`` and ``--out``, in that order (reproduce, attack, anomalies).
+
+    Parameters
+    ----------
+    p : argparse.ArgumentParser
+    runs : int
+        Default of ``--runs``.
+    runs_help, vehicles_help : str
+        Help texts of ``--runs`` and ``--vehicles``.
+    """
+    p.add_argument("--runs", type=positive_int, default=runs, help=runs_help)
+    p.add_argument("--vehicles", type=positive_int, default=10, help=vehicles_help)
+    p.add_argument("--seed", type=nonneg_int, default=0, help="root seed (default 0)")
+    add_out_option(p)
+
+
 def add_dask_options(p: argparse.ArgumentParser) -> None:
     """``--workers N`` or ``--scheduler ADDRESS`` (mutually exclusive): where the runs are computed."""
     g = p.add_mutually_exclusive_group()

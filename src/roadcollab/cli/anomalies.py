@@ -7,8 +7,8 @@ import argparse
 from ..experiments.anomaly_config import AnomalyStudyConfig
 from ..experiments.anomaly_study import run_anomaly_study
 from ..reporting.anomaly_report import write_anomalies
-from ._common import (add_dask_options, add_out_option, add_road_options, config_from_args, dask_options, nonneg_int,
-                      positive_int, print_table, run_with_progress)
+from ._common import (add_dask_options, add_road_options, add_study_options, config_from_args, dask_options,
+                      print_table, run_with_progress)
 
 __all__ = ["NAME", "add_parser", "run"]
 
@@ -29,10 +29,7 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
         The subcommand's parser.
     """
     p = subparsers.add_parser(NAME, help="road anomaly detection study (F1, position error, sweeps)")
-    p.add_argument("--runs", type=positive_int, default=20, help="roads (default 20)")
-    p.add_argument("--vehicles", type=positive_int, default=10, help="fleet size (default 10, at least 2)")
-    p.add_argument("--seed", type=nonneg_int, default=0, help="root seed (default 0)")
-    add_out_option(p)
+    add_study_options(p, runs=20, runs_help="roads (default 20)", vehicles_help="fleet size (default 10, at least 2)")
     p.add_argument("--noise", type=float, default=None, help="accelerometer noise std, m/s^2 (default 0.05)")
     p.add_argument("--iso-class", default=None, help="ISO 8608 roughness class (default C)")
     p.add_argument("--no-sweeps", action="store_true", help="skip the depth and noise sweeps")

@@ -7,8 +7,7 @@ import argparse
 from ..experiments.config import ExperimentConfig
 from ..experiments.security_study import AttackStudyConfig, run_attack_study
 from ..reporting.attack_report import write_attack
-from ._common import (add_dask_options, add_out_option, dask_options, nonneg_int, positive_int, print_table,
-                      run_with_progress)
+from ._common import (add_dask_options, add_study_options, dask_options, positive_int, print_table, run_with_progress)
 
 __all__ = ["NAME", "add_parser", "run"]
 
@@ -29,10 +28,8 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
         The subcommand's parser.
     """
     p = subparsers.add_parser(NAME, help="security study: attacks, linkability, exactness, baselines")
-    p.add_argument("--runs", type=positive_int, default=20, help="segments (default 20, at least 2)")
-    p.add_argument("--vehicles", type=positive_int, default=10, help="fleet size (default 10, at least 3)")
-    p.add_argument("--seed", type=nonneg_int, default=0, help="root seed (default 0)")
-    add_out_option(p)
+    add_study_options(p, runs=20, runs_help="segments (default 20, at least 2)",
+                      vehicles_help="fleet size (default 10, at least 3)")
     p.add_argument("--paillier-bits", type=positive_int, default=2048, help="Paillier key size (default 2048)")
     add_dask_options(p)
     return p

@@ -8,8 +8,8 @@ from rich.console import Console
 
 from ..experiments.reproduction import run_reproduction
 from ..reporting.reproduction_report import HEADLINE_COLUMNS, write_reproduction
-from ._common import (add_dask_options, add_out_option, add_road_options, config_from_args, dask_options, nonneg_int,
-                      positive_float, positive_int, print_table, run_with_progress)
+from ._common import (add_dask_options, add_road_options, add_study_options, config_from_args, dask_options,
+                      nonneg_int, positive_float, print_table, run_with_progress)
 
 __all__ = ["NAME", "add_parser", "run"]
 
@@ -30,10 +30,7 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
         The subcommand's parser.
     """
     p = subparsers.add_parser(NAME, help="Monte Carlo reproduction of the paper's Figs. 4-7")
-    p.add_argument("--runs", type=positive_int, default=100, help="Monte Carlo runs (default 100)")
-    p.add_argument("--vehicles", type=positive_int, default=10, help="fleet size (default 10)")
-    p.add_argument("--seed", type=nonneg_int, default=0, help="root seed (default 0)")
-    add_out_option(p)
+    add_study_options(p, runs=100, runs_help="Monte Carlo runs (default 100)", vehicles_help="fleet size (default 10)")
     p.add_argument("--noise", type=float, default=None, help="accelerometer noise std, m/s^2 (default 0.05)")
     p.add_argument("--uncertainty", type=float, default=None,
                    help="relative parameter uncertainty of each vehicle's model (default 0.10)")
