@@ -1,0 +1,271 @@
+"""Fusion that a malicious minority cannot steer: robust per-sample combination of inversions.
+
+The relayed fleet average (mechanism ``fused``) is a running mean: whoever holds it can replace
+it, and its ``count`` field decides how much weight it carries. No check at the next vehicle can
+undo that, because one message *is* the whole aggregate. A fusion node (a roadside unit, a
+server, or the last vehicle) that receives every vehicle's own inversion ``z_i = W P_hat_i^-1 y_i``
+(:meth:`~roadcollab.collaboration.algorithm1.CollaborativeEstimator.invert`, sent as a
+``hardened`` :class:`~roadcollab.wire.message.InversionMessage`) can instead combine them robustly,
+sample by sample and track by track:
+
+=================== ===========================================================================
+``mean``            The plain average (what ``fused`` relays). Breakdown point 0: one vehicle
+                    moves it arbitrarily far.
+``median``          Breakdown point ``floor((n - 1) / 2) / n``; asymptotic efficiency 64 % for
+                    Gaussian errors.
+``trimmed_mean``    Drops the ``trim`` largest and smallest values per sample: tolerates
+                    ``trim`` arbitrary contributions.
+``huber``           Huber M-estimate (``c = huber_c``) with the median as start and the
+                    normalised median absolute deviation across vehicles as scale, by
+                    iteratively reweighted means. The MAD scale and the bounded influence give
+                    the median's breakdown point, ``floor((n - 1) / 2)`` of ``n`` vehicles, at
+                    95 % Gaussian efficiency (``c = 1.345``; 1.5 by default).
+``weighted_huber``  The same with one scale per *vehicle*: ``s_i`` = normalised MAD of its
+                    residual against the per-sample median over the whole segment, floored at
+                    ``scale_floor`` times the median of the ``s_i``; vehicle ``i`` has weight
+                    ``1 / s_i^2`` times Huber's ``min(1, c s_i / |z_i - mu|)``. A vehicle whose
+                    signal is far from the others everywhere loses its weight as a whole, and the
+                    floor caps any one vehicle's weight at ``1 / scale_floor^2`` times the typical
+                    one. Median start and median of scales: breakdown ``floor((n - 1) / 2)``.
+=================== ===========================================================================
+
+Every contribution counts once: a message's ``count`` other than 1 is refused (a vehicle
+cannot buy weight), as is anything that does not fit the segment grid. Who sent a message is
+the transport's business (an authenticated channel, one message per vehicle and segment); a
+party with many identities (Sybil) is outside what any per-vehicle rule can handle.
+
+Honest cost, measured on the default fleet (10 vehicles, class C; MSE of the fused road
+velocity against the band-limited truth, relative to the plain mean; 6 runs, 3 for the weighted
+rule): nominal inversions ``P_hat_i^-1`` median 1.33, trimmed (1) 1.12, Huber 1.02, weighted
+Huber 1.36; posterior inversions ``E[P_i | theta_hat_i]^-1`` (the ``fused_posterior`` contributions)
+median 1.18, trimmed 0.96, Huber 0.98, weighted Huber 1.02. Worst case over one vehicle of ten
+sending ``10 z``, ``1e3 z``, ``-z`` or ``z`` plus 3 x its rms in noise (posterior inversions, 3
+runs): Huber 2.1 x, weighted Huber 1.35 x the honest mean's MSE. The nominal inversions differ
+much more in quality between vehicles (single-vehicle MSE 0.9e-3 to 8e-3), so losing one of the
+best costs more there (weighted Huber 1.9 x): robust fusion is meant for posterior inversions.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Sequence
+
+import numpy as np
+
+from .._validation import check_int, check_positive, check_real
+from ..errors import MessageError, ParameterError
+from ..estimation.grid import SegmentGrid
+from ..wire.message import InversionMessage
+
+__all__ = ["FUSION_RULES", "RobustFusion", "FusionRefusal", "FusionOutcome", "fuse_inversions"]
+
+#: Combination rules of :class:`RobustFusion`.
+FUSION_RULES = ("mean", "median", "trimmed_mean", "huber", "weighted_huber")
+_MAD_TO_STD = 1.4826          # Gaussian sigma per median absolute deviation
+_HUBER_ITERATIONS = 20
+
+
+@dataclass(frozen=True)
+class RobustFusion:
+    """How a fusion node combines the vehicles' inversions.
+
+    Parameters
+    ----------
+    rule : str
+        One of :data:`FUSION_RULES`.
+    trim : int
+        Values dropped at each end per sample (``trimmed_mean``).
+    huber_c : float
+        Huber threshold in units of the robust scale (``huber``, ``weighted_huber``).
+    scale_floor : float
+        Smallest vehicle scale, relative to the median vehicle scale (``weighted_huber``).
+    """
+
+    rule: str = "weighted_huber"
+    trim: int = 1
+    huber_c: float = 1.5
+    scale_floor: float = 0.5
+
+    def __post_init__(self) -> None:
+        if self.rule not in FUSION_RULES:
+            raise ParameterError(f"rule must be one of {FUSION_RULES}, got {self.rule!r}")
+        check_int("trim", self.trim, low=0)
+        check_positive("huber_c", self.huber_c)
+        check_real("scale_floor", self.scale_floor, low=0.0, low_open=True, high=1.0)
+
+    def tolerated(self, n: int) -> int:
+        """Largest number of arbitrary contributions out of ``n`` that cannot move the result
+        arbitrarily far (the breakdown point times ``n``).
+
+        Parameters
+        ----------
+        n : int
+            Contributions combined.
+
+        Returns
+        -------
+        int
+        """
+        n = check_int("n", n, low=1)
+        if self.rule == "mean":
+            return 0
+        if self.rule == "trimmed_mean":
+            return min(self.trim, (n - 1) // 2)
+        return (n - 1) // 2     # median start (and median of the scales for weighted_huber)
+
+    def combine(self, z) -> np.ndarray:
+        """Combine contributions sample by sample.
+
+        Parameters
+        ----------
+        z : (n, N, channels) array_like
+            ``n`` vehicles' signals (m/s) on one grid; finite.
+
+        Returns
+        -------
+        (N, channels) ndarray
+        """
+        z = np.asarray(z, dtype=float)
+        if z.ndim != 3 or z.shape[0] < 1:
+            raise ParameterError(f"z must have shape (n, N, channels) with n >= 1, got {z.shape}")
+        if not np.all(np.isfinite(z)):
+            raise ParameterError("z must be finite")
+        n = z.shape[0]
+        if self.rule == "mean" or n <= 2:
+            return z.mean(axis=0)
+        if self.rule == "median":
+            return np.median(z, axis=0)
+        if self.rule == "trimmed_mean":
+            t = min(self.trim, (n - 1) // 2)
+            return np.sort(z, axis=0)[t:n - t].mean(axis=0)
+        if self.rule == "huber":
+            return _huber(z, self.huber_c)
+        return _weighted_huber(z, self.huber_c, self.scale_floor)
+
+
+def _huber(z: np.ndarray, c: float) -> np.ndarray:
+    """Huber M-estimate of location across axis 0 with a fixed MAD scale (IRLS)."""
+    mu = np.median(z, axis=0)
+    scale = _MAD_TO_STD * np.median(np.abs(z - mu), axis=0)
+    # Where (almost) all vehicles agree exactly the MAD is 0: any scale works, the median is it.
+    tiny = np.finfo(float).tiny
+    scale = np.maximum(scale, 1e-12 * np.max(np.abs(mu)) + tiny)
+    for _ in range(_HUBER_ITERATIONS):
+        # min(1, c / |r|) written as c / max(|r|, c): no division by zero, no overflow.
+        w = c / np.maximum(np.abs(z - mu) / scale, c)
+        new = mu + np.sum(w * (z - mu), axis=0) / np.sum(w, axis=0)
+        if np.allclose(new, mu, rtol=1e-12, atol=1e-15):
+            return new
+        mu = new
+    return mu
+
+
+def _weighted_huber(z: np.ndarray, c: float, floor: float) -> np.ndarray:
+    """Huber M-estimate with one MAD scale per vehicle (axis 0) and inverse-variance weights."""
+    mu = np.median(z, axis=0)
+    n = z.shape[0]
+    s = _MAD_TO_STD * np.median(np.abs(z - mu).reshape(n, -1), axis=1)
+    s = np.maximum(s, floor * np.median(s))
+    if not s.min() > 0:          # most vehicles agree exactly with the median: it is the answer
+        return mu
+    a = ((s.min() / s) ** 2)[:, None, None]      # relative inverse-variance weights, in (0, 1]
+    s = s[:, None, None]
+    for _ in range(_HUBER_ITERATIONS):
+        w = a * c / np.maximum(np.abs(z - mu) / s, c)
+        new = mu + np.sum(w * (z - mu), axis=0) / np.sum(w, axis=0)
+        if np.allclose(new, mu, rtol=1e-12, atol=1e-15):
+            return new
+        mu = new
+    return mu
+
+
+@dataclass(frozen=True)
+class FusionRefusal:
+    """A contribution the fusion node did not use.
+
+    Attributes
+    ----------
+    index : int
+        Position of the message in the input sequence.
+    reason : str
+    """
+
+    index: int
+    reason: str
+
+
+@dataclass(frozen=True, eq=False)
+class FusionOutcome:
+    """The fused estimate of one segment and what went into it.
+
+    Attributes
+    ----------
+    z : (nfft, 2) ndarray
+        Fused road velocity on the padded grid, m/s (band-limited like the inputs).
+    used : tuple of int
+        Indices of the messages combined.
+    refused : tuple of FusionRefusal
+        Messages not used, with the reason.
+    tolerated : int
+        Arbitrary contributions among ``used`` the rule withstands.
+    """
+
+    z: np.ndarray
+    used: tuple[int, ...]
+    refused: tuple[FusionRefusal, ...]
+    tolerated: int
+
+
+def _refusal(message, grid: SegmentGrid) -> str | None:
+    if not isinstance(message, InversionMessage):
+        return f"not an InversionMessage ({type(message).__name__})"
+    if message.mechanism != "hardened":
+        return f"mechanism must be 'hardened' (one vehicle's own inversion), got {message.mechanism!r}"
+    if message.count != 1:
+        return f"count must be 1 (every vehicle counts once), got {message.count}"
+    if message.n_samples != grid.n_samples or message.sample_rate != grid.sample_rate:
+        return (f"grid mismatch: {message.n_samples} samples at {message.sample_rate} Hz, expected "
+                f"{grid.n_samples} at {grid.sample_rate} Hz")
+    if message.z.shape != (grid.nfft, 2):
+        return f"z must have shape ({grid.nfft}, 2), got {message.z.shape}"
+    return None
+
+
+def fuse_inversions(messages: Sequence[InversionMessage], grid: SegmentGrid,
+                    fusion: RobustFusion = RobustFusion()) -> FusionOutcome:
+    """Robustly fuse the vehicles' own inversions of one segment.
+
+    Parameters
+    ----------
+    messages : sequence of InversionMessage
+        One ``hardened`` message per vehicle (decoded; anything else is refused, not raised).
+    grid : SegmentGrid
+        The segment grid the fusion node works on.
+    fusion : RobustFusion
+        Combination rule.
+
+    Returns
+    -------
+    FusionOutcome
+
+    Raises
+    ------
+    MessageError
+        If no message is usable.
+    """
+    if not isinstance(grid, SegmentGrid):
+        raise ParameterError(f"grid must be a SegmentGrid, got {type(grid).__name__}")
+    if not isinstance(fusion, RobustFusion):
+        raise ParameterError(f"fusion must be a RobustFusion, got {type(fusion).__name__}")
+    used, refused = [], []
+    for i, m in enumerate(messages):
+        reason = _refusal(m, grid)
+        if reason is None:
+            used.append(i)
+        else:
+            refused.append(FusionRefusal(i, reason))
+    if not used:
+        raise MessageError(f"no usable contribution among {len(messages)} messages"
+                           + (f": {refused[0].reason}" if refused else ""))
+    z = fusion.combine(np.stack([messages[i].z for i in used]))
+    return FusionOutcome(z=z, used=tuple(used), refused=tuple(refused), tolerated=fusion.tolerated(len(used)))
