@@ -65,6 +65,17 @@ def test_fused_estimate_is_the_running_mean_of_every_inversion_so_far(pipe, reco
     assert _rel(e.invert(Ys[0], posterior=True), e.invert(Ys[0])) > 1e-3
 
 
+def test_a_claimed_count_cannot_buy_the_fused_average_weight(pipe, records):
+    """Vehicle 3 (two predecessors) weighs an incoming average claiming 999,999 vehicles as 2."""
+    _, ys, Ys = records
+    relay = Relay(pipe.estimators, "fused")
+    steps = relay.run(ys, spectra=Ys)
+    forged = dataclasses.replace(steps[1].message, count=999_999)
+    out = relay.step(2, ys[2], forged, Y=Ys[2])
+    assert out.message.count == 3
+    assert _rel(out.message.z, steps[2].message.z) < 1e-12
+
+
 def test_linear_mmse_uses_every_vehicle_and_matches_the_closed_form(pipe, records):
     _, ys, Ys = records
     g = pipe.grid

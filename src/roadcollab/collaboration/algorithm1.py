@@ -360,7 +360,7 @@ class CollaborativeEstimator:
                                 z=g.irfft(self.invert(result.Y)), count=1)
 
     def fused_message(self, result: VehicleEstimate, incoming: InversionMessage | None, *,
-                      posterior: bool = False) -> InversionMessage:
+                      posterior: bool = False, max_count: int | None = None) -> InversionMessage:
         """Running fleet average of ``z`` including this vehicle (the fused estimate).
 
         Parameters
@@ -371,6 +371,9 @@ class CollaborativeEstimator:
             The running average of the vehicles before (None for the first).
         posterior : bool
             Average posterior inversions (see :meth:`invert`).
+        max_count : int, optional
+            Vehicles that can have driven the segment before this one (its place in the relay):
+            the incoming average weighs at most this much, whatever its ``count`` claims.
 
         Returns
         -------
@@ -384,8 +387,10 @@ class CollaborativeEstimator:
                 raise MessageError(f"expected a fused message with z of shape {z.shape}, got "
                                    f"{incoming.mechanism!r} with {incoming.z.shape}")
             self._check_grid(incoming)
-            z = (incoming.count * incoming.z + z) / (incoming.count + 1)
-        count = 1 if incoming is None else incoming.count + 1
+            weight = incoming.count if max_count is None else min(incoming.count, max_count)
+            z = (weight * incoming.z + z) / (weight + 1)
+        count = 1 if incoming is None else (incoming.count if max_count is None
+                                            else min(incoming.count, max_count)) + 1
         return InversionMessage(mechanism="fused", sample_rate=g.sample_rate, n_samples=g.n_samples, z=z,
                                 count=count)
 

@@ -191,7 +191,9 @@ class Relay:
         if mech == "hardened":
             return RelayStep(result, est.hardened_message(result))
         if mech in ("fused", "fused_posterior"):
-            return RelayStep(result, est.fused_message(result, incoming, posterior=mech == "fused_posterior"))
+            # Vehicle j has j predecessors: a count above that cannot buy the average more weight.
+            return RelayStep(result, est.fused_message(result, incoming, posterior=mech == "fused_posterior",
+                                                       max_count=j))
         return RelayStep(result, dp_message(est.hardened_message(result), self.exchange.dp_sigma, rng=self.rng))
 
     def step(self, j: int, y, incoming=None, *, Y: np.ndarray | None = None) -> RelayStep:
