@@ -267,11 +267,75 @@ class CollaborativeEstimator:
             raise MessageError(f"message is for a grid of {message.n_samples} samples at {message.sample_rate} Hz, "
                                f"this vehicle uses {g.n_samples} at {g.sample_rate} Hz")
 
+    def received_z(self, message: ExchangeMessage | InversionMessage) -> np.ndarray:
+        """What a message implies: ``z_{j-1} = W T_{j-1}^-1 (e_{j-1} - S_{j-1} w^f_{j-1})`` on the active bins.
+
+        For an :class:`InversionMessage` it is the spectrum of the sent ``z``. A hostile but
+        well-formed message may make it huge or non-finite; the receiver guard
+        (:mod:`roadcollab.collaboration.guard`) checks it before use.
+
+        Parameters
+        ----------
+        message : ExchangeMessage | InversionMessage
+            From vehicle ``j - 1``, on this vehicle's grid.
+
+        Returns
+        -------
+        (K_active, 2) complex ndarray
+            m/s per bin of the unnormalised DFT.
+
+        Raises
+        ------
+        MessageError
+            If the message does not fit this vehicle's grid.
+        """
+        g = self.grid
+        act = self._act
+        if isinstance(message, InversionMessage):
+            if message.z.shape != (g.nfft, 2):
+                raise MessageError(f"message z must have shape ({g.nfft}, 2) on this segment grid, "
+                                   f"got {message.z.shape}")
+            self._check_grid(message)
+            return g.rfft(message.z)[act]
+        if message.e.shape != (g.nfft, 2) or message.wf.shape != (g.nfft, 2):
+            raise MessageError(f"message signals must have shape ({g.nfft}, 2) on this segment grid, "
+                               f"got {message.e.shape} and {message.wf.shape}")
+        self._check_grid(message)
+        om = g.omega_dt[act]
+        T_prev = self.response_cache.response(message.T, om)
+        S_prev = self.response_cache.response(message.S, om)
+        E_prev = g.rfft(message.e)[act]
+        Wf_prev = g.rfft(message.wf)[act]
+        # L1 w^f + L2 e = (-S_j^-1 T_j) W T_prev^-1 (e - S_prev w^f): eqs. 11-12 applied in
+        # factored form, matrix-vector products only (3x faster than forming L1 and L2;
+        # ``learning_filters`` forms them explicitly and the tests check both agree).
+        with np.errstate(all="ignore"):     # a hostile T may be singular: inf/NaN are the guard's to judge
+            return receiver_z(T_prev, S_prev, E_prev, Wf_prev, self._w_act)
+
+    def wf_from_active_z(self, z: np.ndarray) -> np.ndarray:
+        """``w^f_j = -S_j^-1 T_j z`` from ``z`` on the active bins (see :meth:`received_z`).
+
+        Parameters
+        ----------
+        z : (K_active, 2) complex ndarray
+            Road-velocity spectrum on the active bins, m/s.
+
+        Returns
+        -------
+        (K, 2) complex ndarray
+            ``w^f_j`` on every bin (zero outside the active ones).
+        """
+        Wf = np.zeros((self.grid.n_bins, 2), complex)
+        Wf[self._act] = matvec(self._minus_Sinv_T, z)
+        return Wf
+
     def learn(self, message: ExchangeMessage | InversionMessage) -> np.ndarray:
         """Learning update (eqs. 11-12): ``w^f_j = L1 w^f_{j-1} + L2 e_{j-1}`` (spectrum).
 
         For an :class:`InversionMessage` (hardened or fused exchange) the update is
         ``w^f_j = -S_j^-1 T_j z``, identical to the optimal filters applied to ``(T, S, e, w^f)``.
+        No plausibility check is made here: :class:`~roadcollab.collaboration.guard.ReceiverGuard`
+        does that before use.
 
         Parameters
         ----------
@@ -288,30 +352,7 @@ class CollaborativeEstimator:
         MessageError
             If the message does not fit this vehicle's grid.
         """
-        g = self.grid
-        if isinstance(message, InversionMessage):
-            if message.z.shape != (g.nfft, 2):
-                raise MessageError(f"message z must have shape ({g.nfft}, 2) on this segment grid, "
-                                   f"got {message.z.shape}")
-            self._check_grid(message)
-            return self.wf_from_z(g.rfft(message.z))
-        if message.e.shape != (g.nfft, 2) or message.wf.shape != (g.nfft, 2):
-            raise MessageError(f"message signals must have shape ({g.nfft}, 2) on this segment grid, "
-                               f"got {message.e.shape} and {message.wf.shape}")
-        self._check_grid(message)
-        act = self._act
-        om = g.omega_dt[act]
-        T_prev = self.response_cache.response(message.T, om)
-        S_prev = self.response_cache.response(message.S, om)
-        E_prev = g.rfft(message.e)[act]
-        Wf_prev = g.rfft(message.wf)[act]
-        # L1 w^f + L2 e = (-S_j^-1 T_j) W T_prev^-1 (e - S_prev w^f): eqs. 11-12 applied in
-        # factored form, matrix-vector products only (3x faster than forming L1 and L2;
-        # ``learning_filters`` forms them explicitly and the tests check both agree).
-        z = receiver_z(T_prev, S_prev, E_prev, Wf_prev, self._w_act)
-        Wf = np.zeros((g.n_bins, 2), complex)
-        Wf[act] = matvec(self._minus_Sinv_T, z)
-        return Wf
+        return self.wf_from_active_z(self.received_z(message))
 
     def estimate(self, y, message: ExchangeMessage | None = None, *, Wf: np.ndarray | None = None,
                  Y: np.ndarray | None = None) -> VehicleEstimate:

@@ -23,13 +23,14 @@ drives equal the simulation by construction.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Sequence
 
 import numpy as np
 
 from .._validation import check_nonnegative
 from ..collaboration.algorithm1 import CollaborativeEstimator, VehicleEstimate
+from ..collaboration.guard import GuardReport, ReceiverGuard
 from ..errors import ParameterError
 from ..wire.message import ExchangeMessage, InversionMessage
 from ..privacy.baselines import dp_message
@@ -83,12 +84,15 @@ class RelayStep:
         sender, never sent), for measuring Theorem 1 independently.
     psi : (Obfuscator, Obfuscator) | None
         For ``paper`` and ``paper_vehicle``: the private draws ``Psi^S1``, ``Psi^S2``.
+    guard : GuardReport | None
+        With a receiver guard: what it accepted and refused of the incoming message.
     """
 
     result: VehicleEstimate
     message: ExchangeMessage | InversionMessage
     clear: ExchangeMessage | None = None
     psi: tuple[Obfuscator, Obfuscator] | None = None
+    guard: GuardReport | None = None
 
     @property
     def estimate_spectrum(self) -> np.ndarray:
@@ -110,6 +114,12 @@ class Relay:
         The mechanism (a name means its defaults).
     rng : numpy.random.Generator | int | None
         Randomness of the mechanism (``Psi`` draws, DP noise).
+    guard : sequence of ReceiverGuard | None, optional
+        One receiver guard per vehicle (:func:`~roadcollab.collaboration.guard.fleet_guards`; None
+        entries allowed): each incoming message is checked before use, implausible bands fall back
+        to the receiver's observer, and the step carries the :class:`GuardReport`. Without a guard
+        (the default) every estimate is exactly Algorithm 1's. ``fused`` chains learn nothing from
+        the message and are not guarded.
 
     Examples
     --------
@@ -128,7 +138,7 @@ class Relay:
     """
 
     def __init__(self, estimators: Sequence[CollaborativeEstimator], exchange: Exchange | str = "none", *,
-                 rng=None) -> None:
+                 rng=None, guard: Sequence[ReceiverGuard | None] | None = None) -> None:
         estimators = list(estimators)
         if not estimators or not all(isinstance(e, CollaborativeEstimator) for e in estimators):
             raise ParameterError("estimators must be a non-empty sequence of CollaborativeEstimator")
@@ -139,6 +149,11 @@ class Relay:
         if not isinstance(self.exchange, Exchange):
             raise ParameterError(f"exchange must be an Exchange or a mechanism name, got {type(exchange).__name__}")
         self.rng = np.random.default_rng(rng)
+        self.guard = None if guard is None else tuple(guard)
+        if self.guard is not None and (len(self.guard) != len(estimators) or not all(
+                g is None or (isinstance(g, ReceiverGuard) and g.estimator is e) for g, e in zip(self.guard, estimators))):
+            raise ParameterError(f"guard must hold one ReceiverGuard (or None) per vehicle, built on that vehicle's "
+                                 f"estimator ({len(estimators)} vehicles), got {len(self.guard)} entries")
         self._channels: dict[int, ObfuscationChannel] = {}
 
     @property
@@ -217,8 +232,12 @@ class Relay:
         est = self.estimators[j]
         # The fused chain's estimate is the average itself: Algorithm 1 is not run on it.
         learn_from = None if self.exchange.mechanism in ("fused", "fused_posterior") else incoming
-        result = est.estimate(y, learn_from, Y=Y)
-        return self.send(j, result, incoming)
+        guard = None if self.guard is None or learn_from is None else self.guard[j]
+        if guard is None:
+            return self.send(j, est.estimate(y, learn_from, Y=Y), incoming)
+        Y = est.spectrum(y) if Y is None else Y
+        Wf, report = guard.feedforward(learn_from, Y)
+        return replace(self.send(j, est.estimate(y, Wf=Wf, Y=Y), incoming), guard=report)
 
     def run(self, measurements, *, spectra=None) -> list[RelayStep]:
         """Relay one segment down the whole fleet.

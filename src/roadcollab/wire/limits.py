@@ -9,8 +9,10 @@ refusal is a :class:`~roadcollab.errors.MessageError`.
 from __future__ import annotations
 
 import math
+import warnings
 
 import numpy as np
+import scipy.linalg
 
 from ..errors import MessageError
 from .layout import MECHANISM_CODES, MECHANISM_TYPE, MESSAGE_TYPE_EXCHANGE, TYPE_NAMES, Header, exchange_nbytes, inversion_nbytes
@@ -22,6 +24,9 @@ __all__ = [
     "MAX_SAMPLE_RATE",
     "MAX_COUNT",
     "DT_RTOL",
+    "RADIUS_MARGIN",
+    "MAX_TRANSIENT_GAIN",
+    "LYAPUNOV_RTOL",
     "check_mechanism",
     "check_header",
     "check_payload",
@@ -32,6 +37,12 @@ MAX_SIGNAL_LENGTH = 2 ** 20
 MAX_SAMPLE_RATE = 1e6
 MAX_COUNT = 10 ** 6
 DT_RTOL = 1e-12
+#: Computed spectral radius of A must be below ``1 - RADIUS_MARGIN`` (per sample).
+RADIUS_MARGIN = 1e-6
+#: Largest certified transient gain ``sup_k ||A^k||_2 <= sqrt(cond X)`` (Lyapunov certificate).
+MAX_TRANSIENT_GAIN = 1e8
+#: Largest relative residual of the Lyapunov solution ``A^T X A - X + I``.
+LYAPUNOV_RTOL = 1e-8
 
 # The largest valid message bounds what decode will even look at.
 MAX_MESSAGE_BYTES = max(exchange_nbytes(MAX_ORDER, MAX_ORDER, MAX_SIGNAL_LENGTH),
@@ -128,8 +139,40 @@ def _check_finite(name: str, arr: np.ndarray) -> None:
         raise MessageError(f"{name} must be finite, got {bad} non-finite entries (NaN or inf)")
 
 
+def _lyapunov_gain(A: np.ndarray) -> float:
+    """Certified bound on ``sup_k ||A^k||_2`` from the discrete Lyapunov equation.
+
+    Solve ``A^T X A - X = -I``. If the residual is small and ``X`` is positive definite, then
+    ``V(x) = x^T X x`` decreases along ``x_{k+1} = A x_k`` and
+    ``lambda_min(X) |A^k x|^2 <= V(A^k x) <= V(x) <= lambda_max(X) |x|^2``, so
+    ``||A^k||_2 <= sqrt(lambda_max(X) / lambda_min(X))`` for every ``k``: a bound that rests on the
+    solved ``X`` and its verified residual, not on computed eigenvalues of ``A``. Returns inf when no
+    certificate is found (``X`` not positive definite, residual too large, non-finite ``X``, or the
+    solver failed).
+    """
+    n = A.shape[0]
+    eye = np.eye(n)
+    try:
+        with np.errstate(all="ignore"), warnings.catch_warnings():
+            warnings.simplefilter("ignore", scipy.linalg.LinAlgWarning)   # judged by the residual below
+            X = scipy.linalg.solve_discrete_lyapunov(A.T, eye)
+            X = 0.5 * (X + X.T)
+            if not np.isfinite(X).all():
+                return math.inf
+            resid = np.linalg.norm(A.T @ X @ A - X + eye)
+            scale = np.linalg.norm(X) * (1.0 + np.linalg.norm(A) ** 2)
+            ev = np.linalg.eigvalsh(X)
+    except (np.linalg.LinAlgError, ValueError):
+        return math.inf     # overflow inside the solver (inf/NaN): no certificate
+    if not (resid <= LYAPUNOV_RTOL * scale and ev[0] > 0.0):
+        return math.inf
+    return float(math.sqrt(ev[-1] / ev[0]))
+
+
 def _check_system(name: str, A: np.ndarray, B: np.ndarray, C: np.ndarray, D: np.ndarray) -> None:
-    """Finite entries and a discrete-time stable A (spectral radius < 1)."""
+    """Finite entries and a discrete-time stable A: a margin on the computed spectral radius and a
+    Lyapunov certificate of bounded transient growth (which non-normal matrices cannot fool:
+    a 64x64 Jordan block with a 1e-16 corner computes as radius 0.99 but has none)."""
     for part, arr in (("A", A), ("B", B), ("C", C), ("D", D)):
         _check_finite(f"{name}.{part}", arr)
     if A.shape[0] == 0:
@@ -140,8 +183,14 @@ def _check_system(name: str, A: np.ndarray, B: np.ndarray, C: np.ndarray, D: np.
             radius = float(np.max(np.abs(np.linalg.eigvals(A))))
     except (np.linalg.LinAlgError, ValueError) as err:
         raise MessageError(f"{name}.A: eigenvalues could not be computed ({err})") from err
-    if not radius < 1.0:
-        raise MessageError(f"{name} must be discrete-time stable (spectral radius of A < 1), got {radius:.6g}")
+    if not radius < 1.0 - RADIUS_MARGIN:
+        raise MessageError(f"{name} must be discrete-time stable (spectral radius of A < 1 - {RADIUS_MARGIN:g}), "
+                           f"got {radius:.6g}")
+    gain = _lyapunov_gain(A)
+    if not gain <= MAX_TRANSIENT_GAIN:
+        raise MessageError(f"{name} must be discrete-time stable with a Lyapunov certificate: {name}.A has no "
+                           f"certified bound sup_k ||A^k|| <= {MAX_TRANSIENT_GAIN:g} (got {gain:.3g}); "
+                           f"a non-normal A whose computed eigenvalues mislead")
 
 
 def check_payload(h: Header, arrays: dict[str, np.ndarray]) -> None:
@@ -156,7 +205,9 @@ def check_payload(h: Header, arrays: dict[str, np.ndarray]) -> None:
     Raises
     ------
     MessageError
-        If an entry is NaN or infinite, or ``T`` or ``S`` is not discrete-time stable.
+        If an entry is NaN or infinite, or ``T`` or ``S`` is not discrete-time stable: computed
+        spectral radius not below ``1 - RADIUS_MARGIN``, or no Lyapunov certificate bounding
+        ``sup_k ||A^k||`` by ``MAX_TRANSIENT_GAIN``.
     """
     if h.msg_type == MESSAGE_TYPE_EXCHANGE:
         for name in ("T", "S"):

@@ -67,8 +67,14 @@ Checked from the header alone, before any array is allocated:
 =====================  =====================================================================
 
 Checked on the payload: every float finite (no NaN, no inf), and T and S discrete-time
-stable, i.e. the spectral radius of A below 1 (a message whose eigenvalues cannot be
-computed is refused too).
+stable: the computed spectral radius of A below ``1 - RADIUS_MARGIN`` (1e-6), and a Lyapunov
+certificate (``A^T X A - X = -I`` solved, residual verified to ``LYAPUNOV_RTOL`` = 1e-8
+relative, ``X`` positive definite) bounding every power, ``||A^k||_2 <= sqrt(cond X) <=
+MAX_TRANSIENT_GAIN`` (1e8). The certificate does not rest on computed eigenvalues, which a
+non-normal A can fool (a 64x64 Jordan block, eigenvalue 0.99, corner 1e-16: true radius 1.55,
+computed 0.99). Honest messages measured (default fleet, all mechanisms): radius <= 0.99959,
+``sqrt(cond X)`` <= 4.4e3. A message whose eigenvalues or certificate cannot be computed is
+refused too.
 
 :func:`encode` runs exactly the same checks, so it never produces a message that
 :func:`decode` would refuse.

@@ -1,0 +1,330 @@
+"""Hostile-but-well-formed messages against one receiver, with and without the receiver guard.
+
+For one receiver (vehicle ``receiver`` of the fleet, 0-based) and several runs, the honest message
+of the vehicle before it is replaced by a hostile construction that still has the right types,
+shapes and limits (issue 9, section 1):
+
+=================== ==========================================================================
+``honest``          the message as sent (the baseline: the guard must not refuse it)
+``scale_z_10/1e3``  ``z`` scaled (``e`` and ``w^f`` scaled for an exchange message)
+``scale_e_10/1e3``  ``e`` alone scaled (exchange only)
+``tone``            an in-band 2 Hz tone of three times ``z``'s RMS added to ``z``
+``zero_z``          ``z = 0`` (the road erased)
+``near_singular_T`` the sender's ``T`` with its second output scaled by 1e-9 (exchange only)
+``static_T``        ``T = 1e-3 I``, order 0 (exchange only)
+``static_T_tiny``   ``T = 1e-300 I``: ``z`` overflows (exchange only)
+``jordan_trap``     ``T.A`` a 64x64 Jordan block, eigenvalue 0.99, corner 1e-16 (true radius 1.55;
+                    exchange only): must be refused at decode
+``extreme``         every 50th sample of ``e`` (or ``z``) set to 1e300
+``fake_pothole``    ``(I - D P_hat)^-1 W p`` added to ``z``: a 5 cm x 0.5 m pothole signature ``p`` in
+                    the middle of the segment, with the fleet's nominal model (the attacker's
+                    knowledge)
+=================== ==========================================================================
+
+Each row gives the receiver's MSE over its own observer-only MSE (target <= 2) with the guard and
+without it, whether the hostile message was refused at decode (``MessageError`` on construction
+or decode), refused by the guard (in bands or entirely) or accepted, and whether the receiver's
+next message encodes and decodes.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..collaboration.algorithm1 import CollaborativeEstimator
+from ..collaboration.guard import ReceiverGuard
+from ..collaboration.relay import Exchange, Relay
+from ..errors import MessageError, ParameterError
+from ..lti.batch2x2 import inv2x2, matvec
+from ..lti.realisation import StateSpaceData
+from ..models.vehicle import Vehicle
+from ..wire.message import ExchangeMessage, InversionMessage
+from ..wire.protocol import decode, encode
+from .config import ExperimentConfig
+from .pipeline import pipeline_for, record_run
+from .seeds import SeedPlan, run_stream
+
+__all__ = ["CONSTRUCTIONS", "PoisoningRow", "PoisoningResult", "hostile_message", "poisoning_rows"]
+
+#: Hostile constructions per mechanism.
+CONSTRUCTIONS = {
+    "none": ("honest", "scale_z_10", "scale_z_1e3", "scale_e_10", "scale_e_1e3", "tone", "zero_z",
+             "near_singular_T", "static_T", "static_T_tiny", "jordan_trap", "extreme", "fake_pothole"),
+    "hardened": ("honest", "scale_z_10", "scale_z_1e3", "tone", "zero_z", "extreme", "fake_pothole"),
+}
+
+
+@dataclass(frozen=True)
+class PoisoningRow:
+    """One hostile construction on one run.
+
+    Attributes
+    ----------
+    mechanism : str
+        ``"none"`` (ExchangeMessage) or ``"hardened"`` (InversionMessage).
+    construction : str
+        A name of :data:`CONSTRUCTIONS`.
+    run : int
+        Run index.
+    outcome : str
+        ``"decode_refused"``, ``"guard_refused"`` (whole message), ``"guard_partial"`` (some bands)
+        or ``"accepted"``.
+    refused_bands : int
+        Bands the guard refused.
+    ratio : float
+        Receiver MSE with the guard over its observer-only MSE.
+    ratio_unguarded : float
+        The same without the guard (NaN if the estimate is not finite).
+    finite : bool
+        The guarded estimate is finite.
+    next_message_encodes : bool
+        The receiver's next message encodes and decodes.
+    reason : str
+        The decode error or the guard's first reason ("" if accepted).
+    """
+
+    mechanism: str
+    construction: str
+    run: int
+    outcome: str
+    refused_bands: int
+    ratio: float
+    ratio_unguarded: float
+    finite: bool
+    next_message_encodes: bool
+    reason: str
+
+
+@dataclass(frozen=True)
+class PoisoningResult:
+    """Rows of a poisoning measurement.
+
+    Attributes
+    ----------
+    rows : tuple of PoisoningRow
+    """
+
+    rows: tuple[PoisoningRow, ...]
+
+    def to_rows(self) -> list[dict]:
+        """Rows for a CSV, one dict per :class:`PoisoningRow` (field names as columns).
+
+        Returns
+        -------
+        list of dict
+        """
+        return [dataclasses.asdict(r) for r in self.rows]
+
+
+def _with(message, **changes):
+    """A copy of a message with fields replaced (validated again on construction)."""
+    return dataclasses.replace(message, **changes)
+
+
+def _add_to_z(message, dz: np.ndarray, sender: CollaborativeEstimator):
+    """The message with ``dz`` (time signal on the padded grid) added to the ``z`` it implies."""
+    if isinstance(message, InversionMessage):
+        return _with(message, z=message.z + dz)
+    g = sender.grid
+    dE = np.zeros((g.n_bins, 2), complex)
+    dE[g.active] = matvec(sender.T_ss_f, g.rfft(dz)[g.active])     # z = W T^-1 e: add T dz to e
+    return _with(message, e=message.e + g.irfft(dE))
+
+
+def _static(gain: float, dt: float) -> StateSpaceData:
+    return StateSpaceData(np.zeros((0, 0)), np.zeros((0, 2)), np.zeros((2, 0)), gain * np.eye(2), dt)
+
+
+def _jordan_trap(dt: float) -> StateSpaceData:
+    """64x64 Jordan block, eigenvalue 0.99, corner 1e-16: computes as radius 0.99, is 1.55."""
+    n = 64
+    A = 0.99 * np.eye(n) + np.diag(np.ones(n - 1), 1)
+    A[-1, 0] = 1e-16
+    B = np.zeros((n, 2))
+    B[-1] = 1.0
+    C = np.zeros((2, n))
+    C[:, 0] = 1.0
+    return StateSpaceData(A, B, C, np.eye(2), dt)
+
+
+def _pothole_dz(nominal: CollaborativeEstimator, config: ExperimentConfig) -> np.ndarray:
+    """``(I - D P_hat)^-1 W p``: what adds a pothole's velocity signature ``p`` to the estimate."""
+    g = nominal.grid
+    fs, v = config.sample_rate, config.speed
+    x = np.arange(g.nfft) * v / fs
+    centre = (config.margin + config.segment_length / 2)
+    h = np.where(np.abs(x - centre) <= 0.25, -0.05, 0.0)          # 5 cm deep, 0.5 m long
+    k = max(1, int(round(0.25 / (v / fs))))
+    h = np.convolve(h, np.ones(k) / k, mode="same")                # tyre enveloping, 0.25 m
+    p = np.zeros((g.nfft, 2))
+    p[:, 0] = np.gradient(h, 1.0 / fs)                             # left track, m/s
+    act = g.active
+    M = np.eye(2) - nominal.D_f[act] @ nominal.P_f[act]
+    dZ = np.zeros((g.n_bins, 2), complex)
+    dZ[act] = matvec(inv2x2(M), g.reg_weight[act][:, None] * g.rfft(p)[act])
+    return g.irfft(dZ)
+
+
+def hostile_message(name: str, honest, sender: CollaborativeEstimator, pothole_dz: np.ndarray, z_rms: float):
+    """Build one hostile construction from an honest message.
+
+    Parameters
+    ----------
+    name : str
+        A name of :data:`CONSTRUCTIONS` for the message's mechanism.
+    honest : ExchangeMessage | InversionMessage
+        The sender's honest message.
+    sender : CollaborativeEstimator
+        The sender (its ``T`` response, for adding to ``z`` through ``e``).
+    pothole_dz : (nfft, 2) ndarray
+        The fake pothole's ``z`` perturbation (m/s).
+    z_rms : float
+        RMS of the honest ``z`` (m/s); the tone has three times this amplitude.
+
+    Returns
+    -------
+    ExchangeMessage | InversionMessage
+
+    Raises
+    ------
+    MessageError
+        If the construction is not a valid message (the Jordan trap must be).
+    """
+    g = sender.grid
+    exch = isinstance(honest, ExchangeMessage)
+    if name == "honest":
+        return honest
+    if name.startswith("scale_z_"):
+        k = float(name.rsplit("_", 1)[1])
+        return _with(honest, e=k * honest.e, wf=k * honest.wf) if exch else _with(honest, z=k * honest.z)
+    if name.startswith("scale_e_"):
+        return _with(honest, e=float(name.rsplit("_", 1)[1]) * honest.e)
+    if name == "zero_z":
+        return _with(honest, e=0 * honest.e, wf=0 * honest.wf) if exch else _with(honest, z=0 * honest.z)
+    if name == "tone":
+        t = np.arange(g.nfft) / g.sample_rate
+        return _add_to_z(honest, 3.0 * z_rms * np.sin(2 * np.pi * 2.0 * t)[:, None] * np.ones(2), sender)
+    if name == "extreme":
+        field = "e" if exch else "z"
+        arr = getattr(honest, field).copy()
+        arr[::50] = 1e300
+        return _with(honest, **{field: arr})
+    if name == "fake_pothole":
+        return _add_to_z(honest, pothole_dz, sender)
+    dt = g.dt
+    if name == "near_singular_T":
+        T = honest.T
+        C, D = T.C.copy(), T.D.copy()
+        C[1] *= 1e-9
+        D[1] *= 1e-9
+        return _with(honest, T=StateSpaceData(T.A, T.B, C, D, dt))
+    if name in ("static_T", "static_T_tiny"):
+        return _with(honest, T=_static(1e-3 if name == "static_T" else 1e-300, dt))
+    if name == "jordan_trap":
+        return _with(honest, T=_jordan_trap(dt))
+    raise ParameterError(f"name must be one of {CONSTRUCTIONS['none']}, got {name!r}")
+
+
+def _nominal_estimator(config: ExperimentConfig, grid) -> CollaborativeEstimator:
+    """The fleet's nominal vehicle, as an attacker who knows only the public fleet model builds it."""
+    nom = config.fleet.nominal
+    return CollaborativeEstimator(Vehicle(-1, nom, nom), config.noise_model(), grid, gamma=config.gamma)
+
+
+def _attempt(name, honest, sender, dz, z_rms):
+    """(message as the receiver decodes it, None) or (None, the decode error)."""
+    try:
+        return decode(encode(hostile_message(name, honest, sender, dz, z_rms))), ""
+    except MessageError as err:
+        return None, str(err)
+
+
+def _encodes(message) -> bool:
+    try:
+        decode(encode(message))
+    except MessageError:
+        return False
+    return True
+
+
+def _run_constructions(pipe, guard, mech, run, ys, Ys, mse, dz) -> list[PoisoningRow]:
+    """Every construction of ``mech`` against the guard's receiver on one run's records."""
+    j = pipe.estimators.index(guard.estimator)
+    sender = pipe.estimators[j - 1]
+    honest = Relay(pipe.estimators[j - 1:j], Exchange(mech)).step(0, ys[j - 1], Y=Ys[j - 1]).message
+    z_rms = float(np.sqrt(np.mean(pipe.grid.irfft(sender.invert(Ys[j - 1])) ** 2)))
+    plain = Relay([guard.estimator], Exchange(mech))
+    guarded = Relay([guard.estimator], Exchange(mech), guard=[guard])
+    obs = mse(plain.step(0, ys[j], None, Y=Ys[j]).result.W_obs)
+    rows = []
+    for name in CONSTRUCTIONS[mech]:
+        msg, err = _attempt(name, honest, sender, dz, z_rms)
+        if msg is None:           # refused at decode: the receiver runs on its own (w^f = 0)
+            step, ratio_u, outcome = plain.step(0, ys[j], None, Y=Ys[j]), 1.0, "decode_refused"
+        else:
+            step = guarded.step(0, ys[j], msg, Y=Ys[j])
+            with np.errstate(all="ignore"):     # unguarded: Algorithm 1 as it is (may be NaN)
+                ratio_u = mse(guard.estimator.estimate(None, msg, Y=Ys[j]).W_hat) / obs
+            rep = step.guard
+            outcome = ("guard_refused" if rep.whole_message_refused else
+                       "guard_partial" if rep.refused_bands else "accepted")
+            err = rep.reasons[0] if rep.reasons else ""
+        est = step.result.W_hat
+        rows.append(PoisoningRow(
+            mechanism=mech, construction=name, run=run, outcome=outcome,
+            refused_bands=0 if step.guard is None else len(step.guard.refused_bands),
+            ratio=mse(est) / obs, ratio_unguarded=float(ratio_u) if np.isfinite(ratio_u) else float("nan"),
+            finite=bool(np.isfinite(est).all()), next_message_encodes=_encodes(step.message), reason=err))
+    return rows
+
+
+def poisoning_rows(config: ExperimentConfig | None = None, *, seed: int = 0, n_runs: int = 2, receiver: int = 1,
+                   mechanisms=("none", "hardened"), guard_options: dict | None = None) -> PoisoningResult:
+    """Measure every hostile construction against one receiver, with and without its guard.
+
+    Parameters
+    ----------
+    config : ExperimentConfig, optional
+        Default ``ExperimentConfig()`` (10 vehicles; only the sender and the receiver drive).
+    seed : int
+        Root seed (fleet and runs, :class:`~roadcollab.experiments.seeds.SeedPlan`).
+    n_runs : int
+        Runs (roads and sensor noise) per construction.
+    receiver : int
+        0-based index of the receiving vehicle (>= 1); vehicle ``receiver - 1`` is the attacker.
+    mechanisms : sequence of str
+        Keys of :data:`CONSTRUCTIONS`.
+    guard_options : dict, optional
+        Keyword options of :class:`~roadcollab.collaboration.guard.ReceiverGuard`.
+
+    Returns
+    -------
+    PoisoningResult
+        One row per mechanism, construction and run.
+    """
+    config = ExperimentConfig() if config is None else config
+    if not 1 <= int(receiver) < config.n_vehicles:
+        raise ParameterError(f"receiver must be in [1, {config.n_vehicles - 1}], got {receiver}")
+    bad = [m for m in mechanisms if m not in CONSTRUCTIONS]
+    if bad:
+        raise ParameterError(f"mechanisms must be among {sorted(CONSTRUCTIONS)}, got {bad}")
+    pipe = pipeline_for(config, seed)
+    grid, n, sl = pipe.grid, pipe.grid.n_samples, config.scored
+    guard = ReceiverGuard(pipe.estimators[receiver], pipe.road_moment, config.sensor_noise_std,
+                          **(guard_options or {}))
+    dz = _pothole_dz(_nominal_estimator(config, grid), config)
+    rows: list[PoisoningRow] = []
+    for run, ss in enumerate(SeedPlan(seed).runs(n_runs)):
+        road, ys, Ys = record_run(pipe, run_stream(ss, "road"), run_stream(ss, "noise"), config.sensor_noise_std)
+        truth = grid.band_limited(grid.rfft(road.velocity), n)[sl]
+
+        def mse(X):
+            with np.errstate(all="ignore"):
+                return float(np.mean((grid.band_limited(X, n)[sl] - truth) ** 2))
+
+        for mech in mechanisms:
+            rows.extend(_run_constructions(pipe, guard, mech, run, ys, Ys, mse, dz))
+    return PoisoningResult(tuple(rows))

@@ -1,0 +1,124 @@
+"""Receivers that cannot be poisoned (issue 9, section 1): the stability certificate, the
+receiver guard and the hostile-but-well-formed messages."""
+
+import numpy as np
+import pytest
+
+import roadcollab as rc
+from roadcollab.collaboration.guard import GuardReport, ReceiverGuard, fleet_guards, third_octave_bands
+from roadcollab.collaboration.relay import Exchange, Relay
+from roadcollab.errors import MessageError, ParameterError
+from roadcollab.experiments.pipeline import pipeline_for, record_run
+from roadcollab.experiments.poisoning import CONSTRUCTIONS, _jordan_trap, poisoning_rows
+from roadcollab.experiments.seeds import SeedPlan, run_stream
+from roadcollab.lti.realisation import StateSpaceData
+from roadcollab.wire.message import ExchangeMessage
+from roadcollab.wire.protocol import decode, encode
+
+SMALL = rc.ExperimentConfig(n_vehicles=3, n_runs=1, segment_length=120.0)
+DT = 1 / 200.0
+
+
+def _exchange_with_T(T):
+    z = np.zeros((600, 2))
+    S = StateSpaceData(np.array([[0.5]]), np.ones((1, 2)), np.ones((2, 1)), np.eye(2), DT)
+    return ExchangeMessage("none", 200.0, 400, T, S, z, z)
+
+
+def test_jordan_trap_fools_eigvals_but_is_refused():
+    T = _jordan_trap(DT)
+    assert np.max(np.abs(np.linalg.eigvals(T.A))) < 0.999     # the computed radius is fooled
+    with pytest.raises(MessageError, match="T must be discrete-time stable with a Lyapunov certificate"):
+        _exchange_with_T(T)
+
+
+@pytest.mark.parametrize("A", [
+    0.9 * np.eye(64) + np.diag(np.ones(63), 1),                  # Jordan block: ||A^k|| ~ 1e70 transient
+    np.array([[0.0, 1e200], [0.0, 0.0]]),                        # nilpotent, a 1e200 entry
+    np.array([[0.5, 1e9], [0.0, 0.5]]),                          # stable but a 1e9-fold transient
+])
+def test_non_normal_traps_refused(A):
+    n = A.shape[0]
+    T = StateSpaceData(A, np.ones((n, 2)), np.ones((2, n)), np.eye(2), DT)
+    assert np.max(np.abs(np.linalg.eigvals(A))) < 1.0
+    with pytest.raises(MessageError, match="T must be discrete-time stable"):
+        _exchange_with_T(T)
+
+
+def test_radius_margin():
+    A = np.array([[1.0 - 1e-7]])
+    with pytest.raises(MessageError, match=r"spectral radius of A < 1 - 1e-06"):
+        _exchange_with_T(StateSpaceData(A, np.ones((1, 2)), np.ones((2, 1)), np.eye(2), DT))
+
+
+@pytest.fixture(scope="module")
+def default_fleet_run():
+    cfg = rc.ExperimentConfig(n_runs=1, segment_length=120.0)      # the default fleet (10 vehicles, seed 0)
+    pipe = pipeline_for(cfg, 0)
+    ss = SeedPlan(0).runs(1)[0]
+    _, ys, Ys = record_run(pipe, run_stream(ss, "road"), run_stream(ss, "noise"), cfg.sensor_noise_std)
+    return cfg, pipe, ys, Ys
+
+
+@pytest.mark.parametrize("mechanism", ["none", "paper", "paper_vehicle", "hardened"])
+def test_every_honest_message_of_the_default_fleet_decodes_and_passes_the_guard(default_fleet_run, mechanism):
+    cfg, pipe, ys, Ys = default_fleet_run
+    guards = fleet_guards(pipe.estimators, pipe.road_moment, cfg.sensor_noise_std)
+    steps = Relay(pipe.estimators, Exchange(mechanism, cfg.obfuscation), rng=3, guard=guards).run(ys, spectra=Ys)
+    plain = Relay(pipe.estimators, Exchange(mechanism, cfg.obfuscation), rng=3).run(ys, spectra=Ys)
+    assert steps[0].guard is None and all(s.guard is None for s in plain)
+    for s, p in zip(steps, plain):
+        assert decode(encode(s.message)).mechanism == s.message.mechanism
+    refused = [s.guard for s in steps[1:] if s.guard.refused]
+    assert not refused, refused[0].reasons
+    for s, p in zip(steps, plain):     # accepted: exactly Algorithm 1
+        np.testing.assert_array_equal(s.result.W_hat, p.result.W_hat)
+
+
+@pytest.fixture(scope="module")
+def poisoning():
+    return poisoning_rows(SMALL, seed=1, n_runs=1, receiver=1)
+
+
+def _row(result, mech, name):
+    (row,) = [r for r in result.rows if r.mechanism == mech and r.construction == name]
+    return row
+
+
+@pytest.mark.parametrize("mech,name", [(m, c) for m, cs in CONSTRUCTIONS.items() for c in cs])
+def test_hostile_message_cannot_poison_the_receiver(poisoning, mech, name):
+    row = _row(poisoning, mech, name)
+    assert row.finite
+    assert row.next_message_encodes
+    assert row.ratio <= 2.0, (row.ratio, row.outcome, row.reason)
+
+
+def test_outcomes(poisoning):
+    assert _row(poisoning, "none", "jordan_trap").outcome == "decode_refused"
+    for mech in CONSTRUCTIONS:
+        assert _row(poisoning, mech, "honest").outcome == "accepted"
+        for name in ("scale_z_1e3", "extreme"):
+            assert _row(poisoning, mech, name).outcome == "guard_refused"
+            # without the guard the same message ruins the estimate (or makes it NaN)
+            assert not _row(poisoning, mech, name).ratio_unguarded <= 100
+    assert poisoning.to_rows()[0].keys() >= {"mechanism", "construction", "ratio", "outcome"}
+
+
+def test_guard_report_and_relay_validation(default_fleet_run):
+    cfg, pipe, ys, Ys = default_fleet_run
+    g = ReceiverGuard(pipe.estimators[1], pipe.road_moment, cfg.sensor_noise_std)
+    with pytest.raises(ParameterError, match="guard must hold one ReceiverGuard"):
+        Relay(pipe.estimators, "none", guard=[g])
+    with pytest.raises(ParameterError, match="road_moment must be a finite"):
+        ReceiverGuard(pipe.estimators[1], pipe.road_moment[:5], cfg.sensor_noise_std)
+    z, rep = g.check("not a message", Ys[1])
+    assert isinstance(rep, GuardReport) and rep.whole_message_refused and not np.any(z)
+
+
+def test_third_octave_bands_partition():
+    f = np.arange(1, 2001) * 0.05
+    bands = third_octave_bands(f, min_bins=16)
+    assert np.array_equal(np.concatenate(bands), np.arange(f.size))
+    assert min(len(b) for b in bands) >= 16
+    with pytest.raises(ParameterError, match="freqs"):
+        third_octave_bands(np.array([1.0, 0.5]))
