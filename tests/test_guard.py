@@ -1,6 +1,8 @@
 """Receivers that cannot be poisoned (issue 9, section 1): the stability certificate, the
 receiver guard and the hostile-but-well-formed messages."""
 
+import dataclasses
+
 import numpy as np
 import pytest
 
@@ -122,3 +124,24 @@ def test_third_octave_bands_partition():
     assert min(len(b) for b in bands) >= 16
     with pytest.raises(ParameterError, match="freqs"):
         third_octave_bands(np.array([1.0, 0.5]))
+
+
+@pytest.mark.parametrize("mechanism", ["fused", "fused_posterior"])
+def test_guarded_fused_chain(default_fleet_run, mechanism):
+    """An honest average passes unchanged; a forged one (x 1e3) is refused and the chain restarts
+    from the receiver's own inversion (count 1), finite, and its message encodes."""
+    cfg, pipe, ys, Ys = default_fleet_run
+    guards = fleet_guards(pipe.estimators, pipe.road_moment, cfg.sensor_noise_std)
+    relay = Relay(pipe.estimators, mechanism, guard=guards)
+    plain = Relay(pipe.estimators, mechanism).run(ys, spectra=Ys)
+    steps = relay.run(ys, spectra=Ys)
+    for s, p in zip(steps[1:], plain[1:]):
+        if not s.guard.refused:
+            np.testing.assert_array_equal(s.message.z, p.message.z)
+    assert sum(s.guard.refused for s in steps[1:]) <= 1
+    forged = dataclasses.replace(plain[3].message, z=1e3 * plain[3].message.z)
+    out = relay.step(4, ys[4], forged, Y=Ys[4])
+    assert out.guard.whole_message_refused and out.message.count == 1
+    own = pipe.estimators[4].invert(Ys[4], posterior=mechanism == "fused_posterior")
+    np.testing.assert_allclose(out.message.z, pipe.grid.irfft(own), atol=1e-15)
+    assert decode(encode(out.message)).count == 1

@@ -119,7 +119,8 @@ class Relay:
         entries allowed): each incoming message is checked before use, implausible bands fall back
         to the receiver's observer, and the step carries the :class:`GuardReport`. Without a guard
         (the default) every estimate is exactly Algorithm 1's. ``fused`` chains learn nothing from
-        the message and are not guarded.
+        the message: there the incoming average is checked the same way, refused bands are
+        replaced by the receiver's own inversion and a wholly refused average restarts the chain.
 
     Examples
     --------
@@ -230,14 +231,38 @@ class Relay:
         RelayStep
         """
         est = self.estimators[j]
+        fused = self.exchange.mechanism in ("fused", "fused_posterior")
+        guard = None if self.guard is None or incoming is None else self.guard[j]
+        if fused and guard is not None:
+            return self._guarded_fused_step(j, y, incoming, Y, guard)
         # The fused chain's estimate is the average itself: Algorithm 1 is not run on it.
-        learn_from = None if self.exchange.mechanism in ("fused", "fused_posterior") else incoming
-        guard = None if self.guard is None or learn_from is None else self.guard[j]
+        learn_from = None if fused else incoming
         if guard is None:
             return self.send(j, est.estimate(y, learn_from, Y=Y), incoming)
         Y = est.spectrum(y) if Y is None else Y
         Wf, report = guard.feedforward(learn_from, Y)
         return replace(self.send(j, est.estimate(y, Wf=Wf, Y=Y), incoming), guard=report)
+
+    def _guarded_fused_step(self, j: int, y, incoming, Y, guard: ReceiverGuard) -> RelayStep:
+        """A fused chain's step with the incoming average checked against the receiver's own
+        inversion: refused bands of the average are replaced by that inversion (so the new
+        average there is the receiver's own), a wholly refused average restarts the chain."""
+        est = self.estimators[j]
+        Y = est.spectrum(y) if Y is None else Y
+        z_ok, report = guard.check(incoming, Y)
+        if report.whole_message_refused:
+            incoming = None
+        elif report.refused_bands:
+            g = self.grid
+            posterior = self.exchange.mechanism == "fused_posterior"
+            own = est.invert(Y, posterior=posterior)
+            Z = np.zeros_like(own)
+            Z[g.active] = z_ok
+            for b in report.refused_bands:
+                idx = np.flatnonzero(g.active)[guard.bands[b]]
+                Z[idx] = own[idx]
+            incoming = replace(incoming, z=g.irfft(Z))
+        return replace(self.send(j, est.estimate(y, None, Y=Y), incoming), guard=report)
 
     def run(self, measurements, *, spectra=None) -> list[RelayStep]:
         """Relay one segment down the whole fleet.
