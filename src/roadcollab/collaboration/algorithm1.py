@@ -422,7 +422,7 @@ class CollaborativeEstimator:
             ``mechanism == "fused"``, ``count`` = vehicles averaged.
         """
         g = self.grid
-        z = g.irfft(self.invert(result.Y, posterior=posterior))
+        z, weight = g.irfft(self.invert(result.Y, posterior=posterior)), 0
         if incoming is not None:
             if incoming.mechanism != "fused" or incoming.z.shape != z.shape:
                 raise MessageError(f"expected a fused message with z of shape {z.shape}, got "
@@ -430,10 +430,8 @@ class CollaborativeEstimator:
             self._check_grid(incoming)
             weight = incoming.count if max_count is None else min(incoming.count, max_count)
             z = (weight * incoming.z + z) / (weight + 1)
-        count = 1 if incoming is None else (incoming.count if max_count is None
-                                            else min(incoming.count, max_count)) + 1
         return InversionMessage(mechanism="fused", sample_rate=g.sample_rate, n_samples=g.n_samples, z=z,
-                                count=count)
+                                count=weight + 1)
 
     def message(self, result: VehicleEstimate) -> ExchangeMessage:
         """The plain message ``(T_j, S_j, e_j, w^f_j)`` of Algorithm 1.
