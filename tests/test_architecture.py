@@ -24,7 +24,7 @@ ALLOWED = {
 }
 BASE = {"errors", "_validation", "__version__"}
 #: Imports allowed inside functions: optional or heavy third-party modules only.
-LAZY_OK = {"control", "slycot", "dask", "matplotlib", "phe", "cryptography", "rich", "tomllib", "tomli"}
+LAZY_OK = {"control", "slycot", "dask", "matplotlib", "phe", "cryptography", "rich", "tomllib", "tomli", "gmpy2"}
 MAX_MODULE_LINES = 450
 
 

@@ -28,6 +28,7 @@ from roadcollab.privacy.baselines import (
     paillier_cost,
     seal,
 )
+from roadcollab.privacy.baselines.paillier_packed import encrypt_packed, pack, precompute_rn, slot_layout, unpack
 from roadcollab.errors import MessageError, ParameterError
 from roadcollab.wire.message import InversionMessage
 from roadcollab.wire.protocol import encode, inversion_nbytes
@@ -339,7 +340,7 @@ def _check_byte_bounds(cost, n, key_bits):
 
 def test_paillier_round_trip_and_cost_small_message(keypair512):
     values = np.array([0.0, 1.0, -1.0, 3.5e-3, -2.25e2, 1e-9, 123.456789012345])
-    cost = paillier_cost(values, key_bits=512, keypair=keypair512)
+    cost = paillier_cost(values, key_bits=512, keypair=keypair512, packing=False)
     assert cost["n_values"] == 7 and cost["extrapolated_from"] is None
     assert math.isnan(cost["keygen_ms"])
     assert cost["ms_per_value"] > 0 and cost["decrypt_ms_per_value"] > 0
@@ -355,14 +356,14 @@ def test_paillier_round_trip_and_cost_small_message(keypair512):
 def test_paillier_extrapolates_from_a_sample(keypair512):
     z = np.random.default_rng(10).standard_normal((100, 2)) * 0.05
     m = hardened(z)
-    cost = paillier_cost(m, key_bits=512, sample=8, rng=0, keypair=keypair512)
+    cost = paillier_cost(m, key_bits=512, sample=8, rng=0, keypair=keypair512, packing=False)
     assert cost["n_values"] == 200 and cost["extrapolated_from"] == 8
     assert math.isclose(cost["ms_per_message"], 200 * cost["ms_per_value"])
     _check_byte_bounds(cost, 200, 512)
 
 
 def test_paillier_generates_and_times_its_own_key():
-    cost = paillier_cost([0.5, -0.25, 1e-3], key_bits=1024)
+    cost = paillier_cost([0.5, -0.25, 1e-3], key_bits=1024, packing=False)
     assert cost["keygen_ms"] > 0 and cost["key_bits"] == 1024
     _check_byte_bounds(cost, 3, 1024)
 
@@ -372,7 +373,7 @@ def test_paillier_round_trip_check_can_fail(keypair512, monkeypatch):
     honest = priv.decrypt
     monkeypatch.setattr(priv, "decrypt", lambda c: honest(c) + 1e-6)
     with pytest.raises(RuntimeError, match="round trip"):
-        paillier_cost([1.0, 2.0], key_bits=512, keypair=keypair512)
+        paillier_cost([1.0, 2.0], key_bits=512, keypair=keypair512, packing=False)
 
 
 def test_paillier_rejects_bad_arguments(keypair512):
@@ -391,6 +392,55 @@ def test_paillier_rejects_bad_arguments(keypair512):
         paillier_cost([1.0], key_bits=512, sample=0, keypair=keypair512)
     with pytest.raises(ParameterError, match="precision"):
         paillier_cost([1.0], key_bits=512, keypair=keypair512, precision=0.0)
+
+
+def test_packed_slot_layout_of_the_deployed_key():
+    # 1e-13 of full scale needs 46 bits; 16 summands add 4; a 56-bit slot, 36 slots in 2047 bits.
+    assert slot_layout(1.0, 1e-13, 2048, 16) == (46, 56, 36)
+    assert slot_layout(1.0, 1e-13, 2048, 1) == (46, 48, 42)
+
+
+def test_paillier_packed_round_trip_and_cost(keypair512):
+    x = np.random.default_rng(11).standard_normal(200) * 0.05
+    cost = paillier_cost(x, key_bits=512, keypair=keypair512, sample=3, rng=0)
+    v, w, slots = slot_layout(float(np.max(np.abs(x))), cost["precision"], 512, 16)
+    assert cost["packing"] and cost["values_per_ciphertext"] == slots == 511 // w
+    assert cost["n_ciphertexts"] == math.ceil(200 / slots) and cost["extrapolated_from"] == 3
+    # Ciphertexts are integers mod n^2, sent at fixed width (no exponent: the precision is public).
+    assert cost["bytes_per_message"] == cost["n_ciphertexts"] * 128
+    assert cost["ms_per_message"] > 0 and cost["offline_ms_per_message"] > 0 and cost["decrypt_ms_per_message"] > 0
+    assert cost["gmpy2"]
+
+
+def test_packed_ciphertexts_add_homomorphically_within_the_headroom(keypair512):
+    pub, priv = keypair512
+    gen = np.random.default_rng(12)
+    xs = [gen.uniform(-1.0, 1.0, 50) for _ in range(16)]
+    prec = 1e-13
+    v, w, slots = slot_layout(1.0, prec, 512, 16)
+    n2 = pub.nsquare
+    total = 1
+    for x in xs:
+        plain = pack(x, prec, v, w, slots)
+        for_sum = encrypt_packed(pub, plain, precompute_rn(pub, len(plain)))
+        total = for_sum if total == 1 else [a * b % n2 for a, b in zip(total, for_sum)]
+    back = unpack([priv.raw_decrypt(int(c)) for c in total], 50, prec, v, w, slots, n_summands=16)
+    assert np.max(np.abs(back - np.sum(xs, axis=0))) <= 16 * prec
+
+
+def test_paillier_packed_round_trip_check_can_fail(keypair512, monkeypatch):
+    pub, priv = keypair512
+    honest = priv.raw_decrypt
+    monkeypatch.setattr(priv, "raw_decrypt", lambda c: honest(c) + 1000)
+    with pytest.raises(RuntimeError, match="round trip"):
+        paillier_cost([1.0, 2.0], key_bits=512, keypair=keypair512)
+
+
+def test_paillier_packing_arguments(keypair512):
+    with pytest.raises(ParameterError, match="packing"):
+        paillier_cost([1.0], key_bits=512, keypair=keypair512, packing="yes")
+    with pytest.raises(ParameterError, match="n_summands"):
+        paillier_cost([1.0], key_bits=512, keypair=keypair512, n_summands=0)
 
 
 # -------------------------------------------------------------------------------------------

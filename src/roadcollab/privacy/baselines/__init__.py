@@ -6,8 +6,9 @@ Three mechanisms the paper argues against, each applied to what vehicles exchang
    filtering", IEEE TAC 59(2), 2014): the Gaussian mechanism on the hardened message ``z``.
    Calibration uses the *analytic* Gaussian mechanism of Balle and Wang (ICML 2018),
    which is valid for every ``epsilon > 0``.
-2. **Paillier homomorphic encryption** (:mod:`.paillier`, using :mod:`phe`): one ciphertext
-   per fixed-point number.
+2. **Paillier homomorphic encryption** (:mod:`.paillier`, :mod:`.paillier_packed`; :mod:`phe` keys,
+   gmpy2 arithmetic): as deployed, 36 fixed-point values per 2048-bit ciphertext and ``r^n``
+   precomputed offline; the earlier one-ciphertext-per-number path with ``packing=False``.
 3. **Authenticated encryption of the channel** (:mod:`.aead`, ChaCha20-Poly1305 from
    :mod:`cryptography`): protects against an eavesdropper only; the receiving vehicle still
    sees everything.

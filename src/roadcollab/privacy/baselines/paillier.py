@@ -1,10 +1,15 @@
-"""Paillier homomorphic encryption baseline: one ciphertext per fixed-point number (:mod:`phe`).
+"""Paillier homomorphic encryption baseline (:mod:`phe` keys, gmpy2 arithmetic).
 
-:func:`paillier_cost` measures what it costs to send one message this way: key generation,
-encryption and decryption time per value (with the round trip checked), and the ciphertext
-bytes, extrapolated from a random sample of the values for long messages. ``phe`` is imported
-only when a cost is measured; it draws its obfuscators from :class:`random.SystemRandom`
-(intended, cannot be seeded).
+:func:`paillier_cost` measures what it costs to send one message: key generation, encryption and
+decryption time (with the round trip checked) and the ciphertext bytes. Two ways:
+
+- ``packing=True`` (default, as deployed; :mod:`.paillier_packed`): 36 fixed-point values per 2048-bit
+  ciphertext with headroom for homomorphic sums, ``r^n mod n^2`` precomputed offline, gmpy2 arithmetic;
+- ``packing=False`` (the earlier baseline, kept for comparison): ``phe``'s ``encrypt`` per value, one
+  ciphertext per number and ``r^n`` computed online.
+
+``phe``/``gmpy2`` are imported only when a cost is measured; obfuscators come from the operating
+system's secure randomness (intended, cannot be seeded).
 """
 
 from __future__ import annotations
@@ -16,6 +21,7 @@ import numpy as np
 from ..._validation import check_int, check_matrix, check_positive
 from ...errors import ParameterError
 from ...wire.message import InversionMessage
+from .paillier_packed import packed_cost
 from .timing import median_ms
 
 __all__ = ["PAILLIER_REL_PRECISION", "paillier_cost"]
@@ -139,11 +145,26 @@ def _message_nbytes(sizes: np.ndarray, n: int, extrapolated: bool) -> int:
     return int(sizes.sum()) if not extrapolated else int(round(sizes.mean() * n))
 
 
-def paillier_cost(values, *, key_bits: int = 2048, sample: int = 32, rng=None, keypair=None,
-                  precision: float | None = None) -> dict:
-    """Cost of sending a message as Paillier ciphertexts, one per fixed-point number (:mod:`phe`).
+def _per_value_cost(x: np.ndarray, pub, priv, precision: float, scale: float, sample: int, gen) -> dict:
+    """The earlier baseline: ``phe``'s ``encrypt`` per value on ``sample`` values, extrapolated to ``x``."""
+    chosen, extrapolated = _choose_sample(x, sample, gen)
+    encrypted, enc_ms = _time_encryption(pub, chosen, precision)
+    decrypted, dec_ms = _time_decryption(priv, encrypted)
+    _check_round_trip(decrypted, chosen, max(1e-12 * scale, precision))
+    sizes = _ciphertext_nbytes(encrypted)
+    n = x.size
+    return {"ms_per_message": enc_ms * n, "bytes_per_message": _message_nbytes(sizes, n, extrapolated),
+            "ms_per_value": enc_ms, "decrypt_ms_per_value": dec_ms, "bytes_per_value": float(sizes.mean()),
+            "extrapolated_from": len(chosen) if extrapolated else None}
 
-    Every value is encrypted separately with ``public_key.encrypt(x, precision=p)``, which
+
+def paillier_cost(values, *, key_bits: int = 2048, sample: int = 32, rng=None, keypair=None,
+                  precision: float | None = None, packing: bool = True, n_summands: int = 16) -> dict:
+    """Cost of sending a message as Paillier ciphertexts: packed as deployed, or one per number.
+
+    ``packing=True``: see :mod:`.paillier_packed` (slot layout, offline ``r^n``); the online time is
+    ``ms_per_message``, the offline precomputation ``offline_ms_per_message``. ``packing=False``:
+    every value is encrypted separately with ``public_key.encrypt(x, precision=p)``, which
     stores ``round(x / 16**e)`` with the fixed exponent ``e = floor(log16(p))`` (resolution
     ``16**e <= p``). A ciphertext travels as the integer ``c`` modulo ``n^2`` plus its
     exponent: ``(c.bit_length() + 7) // 8 + 4`` bytes.
@@ -155,8 +176,9 @@ def paillier_cost(values, *, key_bits: int = 2048, sample: int = 32, rng=None, k
     key_bits : int
         Modulus length, bits (2048 for the reported cost; 512 keeps tests fast).
     sample : int
-        If there are more values than this, encrypt ``sample`` values chosen at random
-        (without replacement) and extrapolate time and bytes to the whole message.
+        If there are more values (``packing=False``) or ciphertexts (offline phase and decryption of
+        ``packing=True``) than this, time ``sample`` of them chosen at random (without replacement) and
+        extrapolate to the whole message.
     rng : None, int or numpy.random.Generator
         Chooses the sample (numpy). Encryption itself draws its obfuscator with ``phe``'s
         secure randomness (:class:`random.SystemRandom`), which is intended and not seeded.
@@ -167,6 +189,10 @@ def paillier_cost(values, *, key_bits: int = 2048, sample: int = 32, rng=None, k
         Absolute fixed-point resolution, units of ``values``. Default
         ``PAILLIER_REL_PRECISION * max|values|`` (1e-13 of the message's full scale, i.e.
         about 43 bits, plenty for double-precision signals).
+    packing : bool
+        Several values per ciphertext with offline randomness (True), or ``phe`` per value (False).
+    n_summands : int
+        ``packing=True``: ciphertexts whose homomorphic sum the slots must hold without overflow (>= 1).
 
     Returns
     -------
@@ -178,7 +204,10 @@ def paillier_cost(values, *, key_bits: int = 2048, sample: int = 32, rng=None, k
         ``n_values`` (int), ``extrapolated_from`` (number of values actually encrypted if
         the totals were extrapolated, else None), ``key_bits``, ``precision`` (absolute),
         ``gmpy2`` (bool: whether ``phe`` uses gmpy2 for modular arithmetic; pure-Python
-        ``pow`` is several times slower).
+        ``pow`` is several times slower), ``packing`` (bool). With ``packing=True`` also
+        ``offline_ms_per_message`` (precomputing every ``r^n``), ``decrypt_ms_per_message``,
+        ``n_ciphertexts``, ``values_per_ciphertext``, ``slot_bits``, ``value_bits``, ``n_summands``;
+        ``extrapolated_from`` then counts ciphertexts.
 
     Raises
     ------
@@ -195,23 +224,14 @@ def paillier_cost(values, *, key_bits: int = 2048, sample: int = 32, rng=None, k
     key_bits = check_int("key_bits", key_bits, low=256, high=16384)
     sample = check_int("sample", sample, low=1)
     scale, precision = _scale_and_precision(x, precision)
-    chosen, extrapolated = _choose_sample(x, sample, rng)
+    if not isinstance(packing, bool):
+        raise ParameterError(f"packing must be a bool, got {packing!r}")
+    n_summands = check_int("n_summands", n_summands, low=1, high=2 ** 16)
     pub, priv, keygen_ms = _keypair(keypair, key_bits)
-    encrypted, enc_ms = _time_encryption(pub, chosen, precision)
-    decrypted, dec_ms = _time_decryption(priv, encrypted)
-    _check_round_trip(decrypted, chosen, max(1e-12 * scale, precision))
-    sizes = _ciphertext_nbytes(encrypted)
-    n = x.size
-    return {
-        "ms_per_message": enc_ms * n,
-        "bytes_per_message": _message_nbytes(sizes, n, extrapolated),
-        "keygen_ms": keygen_ms,
-        "ms_per_value": enc_ms,
-        "decrypt_ms_per_value": dec_ms,
-        "bytes_per_value": float(sizes.mean()),
-        "n_values": int(n),
-        "extrapolated_from": len(chosen) if extrapolated else None,
-        "key_bits": key_bits,
-        "precision": precision,
-        "gmpy2": bool(util.HAVE_GMP),
-    }
+    gen = np.random.default_rng(rng)
+    if packing:
+        out = packed_cost(x, pub, priv, precision, scale, n_summands=n_summands, sample=sample, rng=gen)
+    else:
+        out = _per_value_cost(x, pub, priv, precision, scale, sample, gen)
+    return {**out, "keygen_ms": keygen_ms, "n_values": int(x.size), "key_bits": key_bits,
+            "precision": precision, "gmpy2": bool(util.HAVE_GMP), "packing": packing}

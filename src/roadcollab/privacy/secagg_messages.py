@@ -1,0 +1,199 @@
+"""Parameters and messages of secure aggregation (:mod:`.secure_aggregation` runs the protocol).
+
+Every message a vehicle or the aggregator receives is untrusted: construction checks its shape and
+raises :class:`roadcollab.errors.MessageError`. Wire sizes (``nbytes``) count the fields that would travel.
+"""
+
+from __future__ import annotations
+
+import struct
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .._validation import check_int, check_real
+from ..errors import MessageError, ParameterError
+from ._secagg_kernels import KEY_NBYTES, SHARE_NBYTES
+
+__all__ = ["AggregationRefused", "SecAggSpec", "session_id", "VehicleSecrets", "KeyAdvert", "MaskedInput",
+           "Reveal", "AggregateResult"]
+
+_ID = struct.Struct("<I")
+
+
+class AggregationRefused(MessageError):
+    """Unmasking refused: fewer surviving inputs than ``k`` (or than the Shamir threshold ``t``)."""
+
+
+@dataclass(frozen=True)
+class SecAggSpec:
+    """Public parameters of secure aggregation.
+
+    Attributes
+    ----------
+    min_inputs : int
+        ``k``: the smallest number of inputs whose sum may be revealed (>= 2).
+    threshold : int
+        ``t``: Shamir threshold; any ``t`` vehicles' shares recover a secret, ``t - 1`` reveal
+        nothing. Privacy holds against the aggregator plus ``c < t`` vehicles; unmasking needs
+        ``t`` vehicles to answer in round 3. ``t <= k`` is required.
+    clip : float
+        Public bound on every contribution, m/s: values are clipped to ``[-clip, clip]`` at the
+        source (this also bounds what a malicious vehicle can add to the sum).
+    frac_bits : int
+        Fixed-point fraction bits ``f``: resolution ``2^-f`` m/s (default 40: 9.1e-13 m/s).
+    """
+
+    min_inputs: int = 5
+    threshold: int = 5
+    clip: float = 16.0
+    frac_bits: int = 40
+
+    def __post_init__(self) -> None:
+        k = check_int("min_inputs", self.min_inputs, low=2)
+        check_int("threshold", self.threshold, low=1, high=k)
+        f = check_int("frac_bits", self.frac_bits, low=8, high=52)
+        check_real("clip", self.clip, low=0.0, low_open=True, high=float(2 ** (53 - f)))
+
+    @property
+    def resolution(self) -> float:
+        """Fixed-point resolution ``2^-frac_bits``, m/s (rounding error per value <= half of it)."""
+        return 2.0 ** -self.frac_bits
+
+    def check_fleet(self, n: int) -> int:
+        """``n`` if ``n`` vehicles fit: ``n >= k`` and ``n * clip * 2^f < 2^63`` (no wrap of the sum).
+
+        Parameters
+        ----------
+        n : int
+            Vehicles in the session.
+
+        Returns
+        -------
+        int
+            ``n``.
+        """
+        n = check_int("n_vehicles", n, low=self.min_inputs)
+        if n * self.clip * 2.0 ** self.frac_bits >= 2.0 ** 63:
+            raise ParameterError(f"n_vehicles * clip * 2^frac_bits must be < 2^63, got {n} * {self.clip:g} * "
+                                 f"2^{self.frac_bits}")
+        return n
+
+
+def session_id(segment: int, round_: int) -> bytes:
+    """Domain-separation label of one aggregation: 16 bytes (segment, round), bound into every derived key.
+
+    Parameters
+    ----------
+    segment : int
+        Segment index (>= 0).
+    round_ : int
+        Aggregation round on that segment (>= 0).
+
+    Returns
+    -------
+    bytes
+    """
+    return struct.pack("<QQ", check_int("segment", segment, low=0), check_int("round_", round_, low=0))
+
+
+@dataclass(frozen=True, repr=False)
+class VehicleSecrets:
+    """One vehicle's secrets for one session (never sent). ``repr`` hides them.
+
+    Attributes
+    ----------
+    vehicle : int
+        Id (>= 1).
+    session : bytes
+        From :func:`session_id`.
+    c_sk, s_sk, b_seed, share_seed : bytes
+        Sealing key, mask-seed key, self-mask seed and Shamir coefficient seed, 32 bytes each.
+    """
+
+    vehicle: int
+    session: bytes
+    c_sk: bytes
+    s_sk: bytes
+    b_seed: bytes
+    share_seed: bytes
+
+    def __repr__(self) -> str:
+        return f"VehicleSecrets(vehicle={self.vehicle}, <secret>)"
+
+
+@dataclass(frozen=True)
+class KeyAdvert:
+    """Round 0 message: ``vehicle`` (id) and its public keys ``c_pk``, ``s_pk`` (32 bytes each)."""
+
+    vehicle: int
+    c_pk: bytes
+    s_pk: bytes
+
+    @property
+    def nbytes(self) -> int:
+        """Wire size: id (4) and two keys (64) = 68."""
+        return _ID.size + 2 * KEY_NBYTES
+
+
+@dataclass(frozen=True)
+class MaskedInput:
+    """Round 2 message (untrusted at the aggregator): ``vehicle`` and its masked ring vector ``y``.
+
+    Raises
+    ------
+    MessageError
+        If ``y`` is not a 2-D ``uint64`` array with 2 columns or ``vehicle`` is not a positive int.
+    """
+
+    vehicle: int
+    y: np.ndarray
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.vehicle, int) or self.vehicle < 1:
+            raise MessageError(f"masked input: vehicle must be a positive int, got {self.vehicle!r}")
+        if not isinstance(self.y, np.ndarray) or self.y.dtype != np.uint64 or self.y.ndim != 2 \
+                or self.y.shape[1] != 2:
+            raise MessageError(f"masked input of vehicle {self.vehicle}: y must be a (L, 2) uint64 array, got "
+                               f"{getattr(self.y, 'dtype', type(self.y).__name__)} {getattr(self.y, 'shape', '')}")
+
+    @property
+    def nbytes(self) -> int:
+        """Wire size: id (4) and 8 bytes per ring element."""
+        return _ID.size + self.y.nbytes
+
+
+@dataclass(frozen=True)
+class Reveal:
+    """Round 3 message of ``vehicle``: its shares ``{i: y}`` of ``b_i`` (survivors) and of ``s_i`` (dropped)."""
+
+    vehicle: int
+    self_mask_shares: dict = field(default_factory=dict)
+    key_shares: dict = field(default_factory=dict)
+
+    @property
+    def nbytes(self) -> int:
+        """Wire size: id (4), then per share an id (4) and 66 bytes."""
+        return _ID.size + (len(self.self_mask_shares) + len(self.key_shares)) * (_ID.size + SHARE_NBYTES)
+
+
+@dataclass(frozen=True)
+class AggregateResult:
+    """What the aggregator obtains: the sum over the surviving vehicles and who they are.
+
+    Attributes
+    ----------
+    total : (L, 2) ndarray
+        ``sum_{U_2} clip(z_i)`` to the fixed-point resolution, m/s.
+    survivors, dropped : tuple of int
+        ``U_2`` and ``U_1 \\ U_2``.
+    """
+
+    total: np.ndarray
+    survivors: tuple
+    dropped: tuple
+
+    @property
+    def average(self) -> np.ndarray:
+        """The fused estimate ``total / |U_2|``, m/s."""
+        return self.total / len(self.survivors)
