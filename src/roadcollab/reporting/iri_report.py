@@ -83,7 +83,7 @@ def write_iri(result: IRISegments, out, *, command: str, source: str, car: Golde
     """
     out = output_dir(out)
     write_csv(out / "iri.csv", result.to_rows(), _COLUMNS)
-    series = {"mean of the tracks": result.mean}
+    series = {"mean of the tracks" if result.tracks == 2 else "IRI of the measured track": result.mean}
     if result.tracks == 2:
         series.update({"left track": result.left, "right track": result.right})
     plotting_iri.plot_iri(result.start, result.end, series, out / "iri.png",
