@@ -2,7 +2,7 @@
 
 Subcommands: ``reproduce`` (Figs. 4-7), ``sweep`` (where Algorithm 1 beats a single vehicle),
 ``attack`` (security study), ``anomalies``, ``calibrate-anomalies``, ``estimate`` (recorded drives),
-``bench``, ``message example``. Long work shows a progress bar.
+``bench``, ``iri`` (International Roughness Index), ``message example``. Long work shows a progress bar.
 
 Each subcommand is a module of this package with ``NAME``, ``add_parser(subparsers)`` and
 ``run(args, command_line)``; helpers they share are in :mod:`roadcollab.cli._common`.
@@ -14,13 +14,13 @@ import argparse
 import sys
 
 from .. import __version__
-from . import anomalies, attack, bench, calibrate, estimate, message, reproduce, sweep
+from . import anomalies, attack, bench, calibrate, estimate, iri, message, reproduce, sweep
 from ._common import command_line
 
 __all__ = ["main", "build_parser"]
 
 # In the order of ``roadcollab --help``.
-COMMANDS = (reproduce, attack, anomalies, calibrate, sweep, bench, estimate, message)
+COMMANDS = (reproduce, attack, anomalies, calibrate, sweep, bench, estimate, iri, message)
 _RUN = {module.NAME: module.run for module in COMMANDS}
 
 
@@ -28,7 +28,7 @@ def build_parser() -> argparse.ArgumentParser:
     """The ``argparse`` parser of the ``roadcollab`` command.
 
     Subcommands ``reproduce``, ``sweep``, ``attack``, ``anomalies``, ``calibrate-anomalies``, ``bench``,
-    ``estimate`` and ``message example``; the parsed subcommand is ``args.command``.
+    ``estimate``, ``iri`` and ``message example``; the parsed subcommand is ``args.command``.
 
     Returns
     -------
