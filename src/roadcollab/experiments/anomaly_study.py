@@ -43,6 +43,7 @@ from ..models.vehicle import Vehicle, sample_fleet
 from .anomaly_config import ESTIMATORS, AnomalyStudyConfig
 from .anomaly_runs import condition_roads, run_seed_sequences, score_estimates, scored_region
 from .estimates import RunEstimates, run_estimates
+from .pipeline import PipelineCache
 from .runner import map_runs
 from .seeds import SeedPlan
 
@@ -97,9 +98,9 @@ class _AnomalyTask:
     config: AnomalyStudyConfig
     seed: int
 
-    def __call__(self, indices) -> list[dict]:
+    def __call__(self, indices, cache: PipelineCache) -> list[dict]:
         config, exp = self.config, self.config.experiment
-        pipe, default, by_depth = condition_roads(config, self.seed)
+        pipe, default, by_depth = condition_roads(config, self.seed, cache)
         runs_ss = run_seed_sequences(self.seed, config.n_runs)
         V = exp.n_vehicles
         pooled = range(1, V)   # vehicles 2..V
@@ -157,7 +158,7 @@ def run_anomaly_study(config: AnomalyStudyConfig, seed: int, *, progress: Callab
     by_noise = {(i, name): MatchTally() for i in range(len(config.noise_levels)) for name in ESTIMATORS}
     pooled = range(1, V)   # vehicles 2..V
     runs = map_runs(_AnomalyTask(config, seed), config.n_runs, workers=workers, scheduler=scheduler,
-                    progress=progress)
+                    progress=progress, shared=PipelineCache())
     for rec in runs:
         for (name, j), m in rec["main"].items():
             per_vehicle[name, j].add(m)

@@ -31,7 +31,7 @@ from ..errors import ParameterError
 from ..models.vehicle import Vehicle, sample_fleet
 from ..privacy.obfuscation import theorem1_errors
 from .config import ExperimentConfig
-from .pipeline import FleetPipeline, fleet_and_run_seeds, pipeline_for, record_run
+from .pipeline import FleetPipeline, PipelineCache, fleet_and_run_seeds, record_run
 from .seeds import SeedPlan, as_seed_sequence, run_stream
 from .runner import map_runs
 
@@ -237,22 +237,22 @@ class ReproductionResult:
 
 @dataclass(frozen=True)
 class _ReproductionTask:
-    """Picklable task: runs ``indices`` of a reproduction (rebuilds its setup once per process)."""
+    """Picklable task: runs ``indices`` of a reproduction (its setup from the study's cache)."""
 
     config: ExperimentConfig
     seed: int
     privacy: bool
 
-    def __call__(self, indices) -> list[RunResult]:
+    def __call__(self, indices, cache: PipelineCache) -> list[RunResult]:
         plan = SeedPlan(self.seed)
         out = []
         for i in indices:
             if self.config.redraw_fleet:
                 fleet_ss, sim_ss = plan.run_fleet(i), plan.run_simulation(i)
-                pipe = FleetPipeline(self.config, sample_fleet(self.config.n_vehicles, self.config.fleet,
-                                                               rng=np.random.default_rng(fleet_ss)))
+                pipe = cache.fleet_pipeline(self.config, sample_fleet(self.config.n_vehicles, self.config.fleet,
+                                                                      rng=np.random.default_rng(fleet_ss)))
             else:
-                pipe, sim_ss = pipeline_for(self.config, self.seed), plan.run(i)
+                pipe, sim_ss = cache.pipeline(self.config, self.seed), plan.run(i)
             out.append(simulate_run(pipe, sim_ss, keep_traces=3 if i == 0 else 0, privacy=self.privacy))
         return out
 
@@ -296,5 +296,5 @@ def run_reproduction(config: ExperimentConfig, seed: int, *, progress: Callable[
     seed = check_int("seed", seed, low=0)
     fleet = fleet_and_run_seeds(config, seed)[0]
     runs = map_runs(_ReproductionTask(config, seed, privacy), config.n_runs, workers=workers, scheduler=scheduler,
-                    progress=progress)
+                    progress=progress, shared=PipelineCache())
     return ReproductionResult(config=config, seed=seed, fleet=fleet, runs=runs)
