@@ -52,13 +52,13 @@ def _mse_axes(ax, vehicles) -> None:
     ax.legend()
 
 
-def plot_mse(rows: list[dict], path) -> Path:
+def plot_mse(rows: list, path) -> Path:
     """Fig. 4: MSE per vehicle of every estimator (mean over runs; std bars for Algorithm 1 + 2
     and the online observer).
 
     Parameters
     ----------
-    rows : list of dict
+    rows : list of MseRow
         ``mse.csv`` rows.
     path : str or Path
         Output image.
@@ -67,11 +67,11 @@ def plot_mse(rows: list[dict], path) -> Path:
     -------
     Path
     """
-    v = np.array([r["vehicle"] for r in rows])
+    v = np.array([r.vehicle for r in rows])
     fig, ax = plt.subplots(figsize=(8, 4.8))
-    ax.errorbar(v, [r["mse_mean"] for r in rows], yerr=[r["mse_std"] for r in rows], fmt="o-", capsize=4,
+    ax.errorbar(v, [r.mse_mean for r in rows], yerr=[r.mse_std for r in rows], fmt="o-", capsize=4,
                 label="Algorithm 1 + 2 (collaborative, private)")
-    ax.errorbar(v + 0.1, [r["observer_only_mse_mean"] for r in rows], yerr=[r["observer_only_mse_std"] for r in rows],
+    ax.errorbar(v + 0.1, [r.observer_only_mse_mean for r in rows], yerr=[r.observer_only_mse_std for r in rows],
                 fmt="s--", capsize=4, alpha=0.8, label="observer only (own, online)")
     for key, label, style in (("own_inversion_mse_mean", "own inversion (own, offline)", "d:"),
                               ("own_posterior_inversion_mse_mean", "own posterior inversion", "x:"),
@@ -79,20 +79,20 @@ def plot_mse(rows: list[dict], path) -> Path:
                               ("fused_posterior_mse_mean", "fused, posterior inversions (1..j)", "<-"),
                               ("centralized_mse_mean", "centralized linear MMSE (1..j)", "v-."),
                               ("oracle_bound_mse_mean", "oracle bound (true models, 1..j)", "k:")):
-        ax.plot(v, [r[key] for r in rows], style, label=label)
+        ax.plot(v, [getattr(r, key) for r in rows], style, label=label)
     _mse_axes(ax, v)
     ax.legend(fontsize=7, loc="best")
     ax.set_title("MSE per vehicle (mean over runs; bars: std)")
     return save_figure(fig, path)
 
 
-def plot_fusion(rows: list[dict], path) -> Path:
+def plot_fusion(rows: list, path) -> Path:
     """MSE vs vehicle for the fleet estimates: observer only, Algorithm 1, fused, centralized
     and the oracle bound.
 
     Parameters
     ----------
-    rows : list of dict
+    rows : list of MseRow
         ``mse.csv`` rows.
     path : str or Path
         Output image.
@@ -101,7 +101,7 @@ def plot_fusion(rows: list[dict], path) -> Path:
     -------
     Path
     """
-    v = np.array([r["vehicle"] for r in rows])
+    v = np.array([r.vehicle for r in rows])
     fig, ax = plt.subplots(figsize=(7, 4))
     for key, label, style in (("observer_only_mse_mean", "observer only", "s--"),
                               ("mse_mean", "Algorithm 1", "o-"),
@@ -109,7 +109,7 @@ def plot_fusion(rows: list[dict], path) -> Path:
                               ("fused_posterior_mse_mean", "fused (posterior inversions)", "<-"),
                               ("centralized_mse_mean", "centralized linear MMSE", "v-."),
                               ("oracle_bound_mse_mean", "oracle bound", "k:")):
-        ax.plot(v, [r[key] for r in rows], style, label=label)
+        ax.plot(v, [getattr(r, key) for r in rows], style, label=label)
     _mse_axes(ax, v)
     return save_figure(fig, path)
 
