@@ -245,29 +245,30 @@ def small_study():
 def test_small_study_rows_in_range(small_study, tmp_path):
     cfg, res, calls = small_study
     assert calls == [1, 2]
-    assert [r["estimator"] for r in res.detection_rows] == list(ESTIMATORS)
+    assert [r.estimator for r in res.detection_rows] == list(ESTIMATORS)
     assert len(res.depth_rows) == 2 * 3 and len(res.noise_rows) == 2 * 3 and len(res.vehicle_rows) == 3 * 3
     for row in res.detection_rows + res.depth_rows + res.noise_rows + res.vehicle_rows:
         for k in ("precision", "recall", "f1", "kind_accuracy", "side_accuracy"):
-            assert 0.0 <= row[k] <= 1.0, (k, row)
-        assert row["median_position_error_m"] <= cfg.tolerance
-        assert row["n_matched"] <= min(row["n_true"], row["n_detected"])
+            assert 0.0 <= getattr(row, k) <= 1.0, (k, row)
+        assert row.median_position_error_m <= cfg.tolerance
+        assert row.n_matched <= min(row.n_true, row.n_detected)
     # Vehicles 2..3 pooled: the default-noise sweep point is the default condition itself.
     for est in ESTIMATORS:
-        main = next(r for r in res.detection_rows if r["estimator"] == est)
-        sweep = next(r for r in res.noise_rows if r["estimator"] == est and r["sensor_noise_std"] == 0.05)
-        assert main == {k: v for k, v in sweep.items() if k != "sensor_noise_std"}
-        per_v = [r for r in res.vehicle_rows if r["estimator"] == est and r["vehicle"] >= 2]
-        assert sum(r["n_true"] for r in per_v) == main["n_true"] > 0
-        assert sum(r["n_matched"] for r in per_v) == main["n_matched"]
+        main = next(r for r in res.detection_rows if r.estimator == est)
+        sweep = next(r for r in res.noise_rows if r.estimator == est and r.sensor_noise_std == 0.05)
+        assert dataclasses.asdict(main) == {k: v for k, v in dataclasses.asdict(sweep).items()
+                                            if k != "sensor_noise_std"}
+        per_v = [r for r in res.vehicle_rows if r.estimator == est and r.vehicle >= 2]
+        assert sum(r.n_true for r in per_v) == main.n_true > 0
+        assert sum(r.n_matched for r in per_v) == main.n_matched
     # Vehicle 1 has no predecessor: its collaborative estimate is its observer.
-    v1 = {r["estimator"]: r for r in res.vehicle_rows if r["vehicle"] == 1}
-    assert v1["collaborative"] == {**v1["observer_only"], "estimator": "collaborative"}
+    v1 = {r.estimator: r for r in res.vehicle_rows if r.vehicle == 1}
+    assert v1["collaborative"] == dataclasses.replace(v1["observer_only"], estimator="collaborative")
     # Deeper anomalies are easier; the map example holds truth and all estimators.
-    f1 = {(r["depth_m"], r["estimator"]): r["f1"] for r in res.depth_rows}
+    f1 = {(r.depth_m, r.estimator): r.f1 for r in res.depth_rows}
     assert all(f1[0.04, e] >= f1[0.015, e] for e in ESTIMATORS)
     ex = res.map_example
-    assert ex["vehicle"] == cfg.map_vehicle and ex["truth"] and set(ex["detections"]) == set(ESTIMATORS)
+    assert ex.vehicle == cfg.map_vehicle and ex.truth and set(ex.detections) == set(ESTIMATORS)
 
     from roadcollab.reporting import plotting
     for fn, arg in ((plotting.plot_anomaly_map, ex), (plotting.plot_f1_vs_depth, res.depth_rows),
@@ -362,5 +363,5 @@ def test_measured_profile_with_injected_anomalies():
     cfg = AnomalyStudyConfig(experiment=ExperimentConfig(n_vehicles=3, road_profile="packaged"), n_runs=1,
                              depths=(), noise_levels=())
     res = run_anomaly_study(cfg, 0)
-    fused = next(r for r in res.detection_rows if r["estimator"] == "fused")
-    assert fused["n_true"] > 0 and fused["recall"] > 0.5
+    fused = next(r for r in res.detection_rows if r.estimator == "fused")
+    assert fused.n_true > 0 and fused.recall > 0.5

@@ -82,13 +82,13 @@ def test_scores_equal_the_anomaly_study_on_the_same_seed_and_runs(tiny):
                              noise_levels=(), detector=DetectorSpec(snr_threshold=4.5, min_depth=0.0125))
     study = run_anomaly_study(cfg, 1000)
     by_condition = {"default": study.detection_rows,
-                    "all_20mm": [r for r in study.depth_rows if r["depth_m"] == 0.02],
-                    "all_30mm": [r for r in study.depth_rows if r["depth_m"] == 0.03]}
+                    "all_20mm": [r for r in study.depth_rows if r.depth_m == 0.02],
+                    "all_30mm": [r for r in study.depth_rows if r.depth_m == 0.03]}
     for c, rows in by_condition.items():
-        assert [r["estimator"] for r in rows] == list(ESTIMATORS)
+        assert [r.estimator for r in rows] == list(ESTIMATORS)
         for r in rows:
             for m in ("f1", "precision", "recall"):
-                assert float(row[f"{m}_{c}_{r['estimator']}"]) == pytest.approx(r[m], rel=1e-12), (c, m)
+                assert float(row[f"{m}_{c}_{r.estimator}"]) == pytest.approx(getattr(r, m), rel=1e-12), (c, m)
 
 
 def test_same_arguments_give_identical_files(tiny, tmp_path):

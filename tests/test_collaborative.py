@@ -158,9 +158,9 @@ def test_exact_models_without_noise_reconstruct_from_vehicle_2():
     cfg = dataclasses.replace(CFG, n_vehicles=3, n_runs=2, sensor_noise_std=0.0,
                               fleet=FleetSpec(estimate_uncertainty=0.0))
     rows = run_reproduction(cfg, 5, privacy=False).table()
-    assert rows[0]["nmse_mean"] > 10 * max(r["nmse_mean"] for r in rows[1:])   # the causal observer is not exact
+    assert rows[0].nmse_mean > 10 * max(r.nmse_mean for r in rows[1:])   # the causal observer is not exact
     for r in rows[1:]:
-        assert r["nmse_mean"] < 1e-4
+        assert r.nmse_mean < 1e-4
 
 
 def test_same_seed_same_outputs_and_different_seed_differs():

@@ -120,9 +120,9 @@ def test_posterior_draws_match_the_fleet_model_by_rejection():
 
 def test_oracle_bound_is_not_beaten_and_vehicle1_online_is_near_its_inversion():
     res = run_reproduction(dataclasses.replace(CFG, n_runs=6), 3, privacy=False)
-    assert min(r["z"] for r in res.bound_check()) > -3
+    assert min(r.z for r in res.bound_check()) > -3
     row = res.table()[0]
-    assert row["observer_only_mse_mean"] < 4 * row["own_inversion_mse_mean"]
+    assert row.observer_only_mse_mean < 4 * row.own_inversion_mse_mean
 
 
 def test_regularisation_corner_sits_below_the_band():

@@ -66,7 +66,7 @@ def run(args: argparse.Namespace, command_line: str) -> int:
     write_anomalies(result, args.out, command=command_line, elapsed=elapsed)
     print_table(f"Anomaly detection, {cfg.n_runs} runs, {elapsed:.1f} s",
                 ("estimator", "precision", "recall", "F1", "median position error (m)"),
-                [(r["estimator"], f"{r['precision']:.3f}", f"{r['recall']:.3f}", f"{r['f1']:.3f}",
-                  f"{r['median_position_error_m']:.3f}") for r in result.detection_rows])
+                [(r.estimator, f"{r.precision:.3f}", f"{r.recall:.3f}", f"{r.f1:.3f}",
+                  f"{r.median_position_error_m:.3f}") for r in result.detection_rows])
     print(f"wrote {args.out}/report.md")
     return 0

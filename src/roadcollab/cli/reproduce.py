@@ -7,7 +7,7 @@ import argparse
 from rich.console import Console
 
 from ..experiments.reproduction import run_reproduction
-from ..reporting.reproduction_report import HEADLINE_COLUMNS, write_reproduction
+from ..reporting.reproduction_report import headline_table, write_reproduction
 from ._common import (add_dask_options, add_road_options, add_study_options, config_from_args, dask_options,
                       nonneg_int, positive_float, print_table, run_with_progress)
 
@@ -84,9 +84,9 @@ def run(args: argparse.Namespace, command_line: str) -> int:
                                         lambda cb: run_reproduction(cfg, args.seed, progress=cb, **dask_options(args)))
     measured = _measured(args)
     summary = write_reproduction(result, args.out, command=command_line, elapsed=elapsed, measured=measured)
-    print_table(f"MSE per vehicle ((m/s)^2), {cfg.n_runs} runs, {elapsed:.1f} s",
-                [header for _, header in HEADLINE_COLUMNS],
-                [(str(r["vehicle"]), *(f"{r[k]:.3g}" for k, _ in HEADLINE_COLUMNS[1:])) for r in result.table()])
+    headers, values = headline_table(result.table())
+    print_table(f"MSE per vehicle ((m/s)^2), {cfg.n_runs} runs, {elapsed:.1f} s", headers,
+                [(str(v[0]), *(f"{x:.3g}" for x in v[1:])) for v in values])
     Console().print(f"vehicle 1 online / Algorithm 1 (vehicles 2..{cfg.n_vehicles}): "
                     f"{summary['vehicle1_observer_over_algorithm1']:.2f}x; fused / centralized at vehicle "
                     f"{cfg.n_vehicles}: {summary['fused_over_centralized_last']:.2f}x; wrote {args.out}/report.md")

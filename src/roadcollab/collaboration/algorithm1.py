@@ -129,6 +129,21 @@ class CollaborativeEstimator:
         The fleet distribution the vehicle's parameter estimate came from. Needed only for the
         posterior inversion (``invert(..., posterior=True)``), which inverts ``E[P | theta_hat]``
         instead of the nominal ``P_hat``.
+
+    Examples
+    --------
+    Vehicle 2 refines its estimate with vehicle 1's message (the relay runs this down a fleet,
+    :class:`~roadcollab.collaboration.relay.Relay`):
+
+    >>> import numpy as np
+    >>> import roadcollab as rc
+    >>> cfg = rc.ExperimentConfig(n_vehicles=2, segment_length=60.0)
+    >>> first, second = rc.FleetPipeline(cfg, rc.sample_fleet(2, cfg.fleet, rng=1)).estimators
+    >>> ys = rc.simulate_measurements([first, second], np.zeros((cfg.n_samples, 2)), 0.05, rng=2)
+    >>> r1 = first.estimate(ys[0])                      # vehicle 1: its own observer
+    >>> r2 = second.estimate(ys[1], first.message(r1))  # vehicle 2: Algorithm 1
+    >>> r2.estimate.shape == (cfg.n_samples, 2)
+    True
     """
 
     def __init__(self, vehicle: Vehicle, noise: JDPNoise, grid: SegmentGrid, *, gamma: float,

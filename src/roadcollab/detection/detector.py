@@ -347,6 +347,20 @@ def detect_anomalies(w_hat, *, positions, speed, sample_rate, spec: DetectorSpec
     -------
     list of Detection
         Sorted by position. See the module docstring for the algorithm.
+
+    Examples
+    --------
+    A 3 cm deep pothole on the left track, seen in a noise-free road velocity:
+
+    >>> import numpy as np
+    >>> import roadcollab as rc
+    >>> fs, speed = 200.0, 15.0
+    >>> x = np.arange(4000) * speed / fs                    # positions, m
+    >>> h = np.where((x > 100.0) & (x < 100.5), -0.03, 0.0)  # elevation, m
+    >>> w = np.column_stack([np.gradient(h) * fs, np.zeros_like(h)])   # road velocity, m/s
+    >>> dets = rc.detect_anomalies(w, positions=x, speed=speed, sample_rate=fs)
+    >>> [(d.kind, d.side, round(d.position)) for d in dets]
+    [('pothole', 'left', 100)]
     """
     if not isinstance(spec, DetectorSpec):
         raise ParameterError(f"spec must be a DetectorSpec, got {type(spec).__name__}")

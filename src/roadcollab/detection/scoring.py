@@ -9,7 +9,7 @@ from the pooled counts, as the anomaly study and the detector calibration report
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass
 
 import numpy as np
 from scipy.optimize import linear_sum_assignment
@@ -19,7 +19,7 @@ from ..errors import ParameterError
 from ..models.anomaly import Anomaly
 from .detector import Detection
 
-__all__ = ["MatchResult", "MatchTally", "match_detections"]
+__all__ = ["DetectionScores", "MatchResult", "MatchTally", "match_detections"]
 
 
 def _precision_recall_f1(n_matched: int, n_detected: int, n_true: int) -> tuple[float, float, float]:
@@ -212,6 +212,36 @@ def match_detections(detections, truth, *, tolerance=1.0, region=None) -> MatchR
         pairs=tuple(counted))
 
 
+@dataclass(frozen=True)
+class DetectionScores:
+    """Pooled detection scores of one estimator (the score columns of the anomaly study's CSVs).
+
+    Attributes
+    ----------
+    precision, recall, f1 : float
+        From the pooled counts.
+    median_position_error_m : float
+        Median center error of the matched pairs, m (NaN without pairs).
+    median_depth_rel_error : float
+        Median relative depth error of the matched pairs (NaN without pairs).
+    kind_accuracy, side_accuracy : float
+        Share of matched pairs of the right kind / on the right track (NaN without pairs).
+    n_true, n_detected, n_matched : int
+        Pooled counts.
+    """
+
+    precision: float
+    recall: float
+    f1: float
+    median_position_error_m: float
+    median_depth_rel_error: float
+    kind_accuracy: float
+    side_accuracy: float
+    n_true: int
+    n_detected: int
+    n_matched: int
+
+
 class MatchTally:
     """Pooled counts and pair statistics of many :class:`MatchResult` (e.g. one estimator over
     runs and vehicles); precision, recall and F1 come from the pooled counts."""
@@ -253,22 +283,28 @@ class MatchTally:
         self.pos_err += other.pos_err
         self.depth_err += other.depth_err
 
+    def scores(self) -> DetectionScores:
+        """The pooled scores.
+
+        Returns
+        -------
+        DetectionScores
+        """
+        p, r, f1 = _precision_recall_f1(self.n_matched, self.n_detected, self.n_true)
+        nan = float("nan")
+        return DetectionScores(
+            precision=p, recall=r, f1=f1, median_position_error_m=_median_or_nan(self.pos_err),
+            median_depth_rel_error=_median_or_nan(self.depth_err),
+            kind_accuracy=self.n_kind / self.n_matched if self.n_matched else nan,
+            side_accuracy=self.n_side / self.n_matched if self.n_matched else nan,
+            n_true=self.n_true, n_detected=self.n_detected, n_matched=self.n_matched)
+
     def row(self) -> dict:
-        """The pooled scores as a CSV row.
+        """The pooled scores as a dict (:meth:`scores`, keys in column order).
 
         Returns
         -------
         dict
-            ``precision, recall, f1, median_position_error_m`` (m), ``median_depth_rel_error``,
-            ``kind_accuracy, side_accuracy`` (NaN without pairs), ``n_true, n_detected, n_matched``.
+            The fields of :class:`DetectionScores`.
         """
-        p, r, f1 = _precision_recall_f1(self.n_matched, self.n_detected, self.n_true)
-        nan = float("nan")
-        return {
-            "precision": p, "recall": r, "f1": f1,
-            "median_position_error_m": _median_or_nan(self.pos_err),
-            "median_depth_rel_error": _median_or_nan(self.depth_err),
-            "kind_accuracy": self.n_kind / self.n_matched if self.n_matched else nan,
-            "side_accuracy": self.n_side / self.n_matched if self.n_matched else nan,
-            "n_true": self.n_true, "n_detected": self.n_detected, "n_matched": self.n_matched,
-        }
+        return asdict(self.scores())

@@ -67,6 +67,16 @@ class SegmentGrid:
         The band weight ``W`` and the regularisation weight ``W_reg`` (0 at DC).
     active : (n_bins,) bool ndarray
         Bins where ``W_reg > 0``.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from roadcollab import SegmentGrid
+    >>> g = SegmentGrid(1000, 100.0, band_low_hz=0.5)
+    >>> g.nfft >= 1250                     # zero-padded: at least pad_factor * N
+    True
+    >>> g.rfft(np.zeros((1000, 2))).shape == (g.nfft // 2 + 1, 2)
+    True
     """
 
     n_samples: int

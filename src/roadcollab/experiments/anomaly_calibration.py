@@ -54,6 +54,7 @@ from .anomaly_runs import condition_roads, run_seed_sequences, score_estimates
 from .calibration_config import OBJECTIVE_ESTIMATORS, AnomalyCalibrationConfig
 from .calibration_result import AnomalyCalibrationResult, CalibrationPoint
 from .estimates import run_estimates
+from .pipeline import PipelineCache
 from .runner import map_runs
 
 __all__ = ["calibrate_anomalies"]
@@ -66,7 +67,7 @@ class _CalibrationTask:
 
     config: AnomalyCalibrationConfig
 
-    def __call__(self, indices) -> list[dict]:
+    def __call__(self, indices, cache: PipelineCache) -> list[dict]:
         config = self.config
         study = config.study_config()
         grid = [dataclasses.replace(study, detector=spec) for spec in config.grid()]
@@ -74,7 +75,7 @@ class _CalibrationTask:
         out = []
         for k in indices:
             seed = config.seeds[k // config.runs_per_seed]
-            pipe, default, by_depth = condition_roads(study, seed)
+            pipe, default, by_depth = condition_roads(study, seed, cache)
             rs = run_seed_sequences(seed, config.runs_per_seed)[k % config.runs_per_seed]
             # Estimates once per condition; only detection and scoring per grid point.
             ests = [run_estimates(pipe, rs, road_spec=spec) for spec in (default, *by_depth)]
@@ -138,7 +139,8 @@ def calibrate_anomalies(config: AnomalyCalibrationConfig, *, progress: Callable[
     keys = [(g, c, e) for g in range(n_grid) for c in range(n_cond) for e in ESTIMATORS]
     per_seed = [{key: MatchTally() for key in keys} for _ in range(S)]
     total = {key: MatchTally() for key in keys}
-    runs = map_runs(_CalibrationTask(config), S * R, workers=workers, scheduler=scheduler, progress=progress)
+    runs = map_runs(_CalibrationTask(config), S * R, workers=workers, scheduler=scheduler, progress=progress,
+                    shared=PipelineCache())
     for k, rec in enumerate(runs):
         for key in keys:
             per_seed[k // R][key].merge(rec[key])

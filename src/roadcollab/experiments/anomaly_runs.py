@@ -18,7 +18,7 @@ from ..detection.scoring import match_detections
 from ..models.road import RoadSpec
 from .anomaly_config import ESTIMATORS, AnomalyStudyConfig
 from .estimates import RunEstimates
-from .pipeline import FleetPipeline, pipeline_for
+from .pipeline import FleetPipeline, PipelineCache
 from .seeds import SeedPlan
 
 __all__ = ["condition_roads", "run_seed_sequences", "score_estimates",
@@ -90,14 +90,17 @@ def run_seed_sequences(seed: int, n_runs: int) -> list[np.random.SeedSequence]:
     return SeedPlan(seed).runs(n_runs)
 
 
-def condition_roads(config: AnomalyStudyConfig, seed: int) -> tuple[FleetPipeline, RoadSpec, list[RoadSpec]]:
+def condition_roads(config: AnomalyStudyConfig, seed: int, cache: PipelineCache
+                    ) -> tuple[FleetPipeline, RoadSpec, list[RoadSpec]]:
     """The fleet pipeline and the road conditions of a study (same fleet and estimators for all).
 
     Parameters
     ----------
     config : AnomalyStudyConfig
     seed : int
-        Root seed of the fleet (:func:`~roadcollab.experiments.pipeline.pipeline_for`).
+        Root seed of the fleet (:meth:`~roadcollab.experiments.pipeline.PipelineCache.pipeline`).
+    cache : PipelineCache
+        The study's cache, which builds the pipeline once.
 
     Returns
     -------
@@ -107,4 +110,4 @@ def condition_roads(config: AnomalyStudyConfig, seed: int) -> tuple[FleetPipelin
     by_depth : list of RoadSpec
         One per ``config.depths``, every anomaly that deep (high).
     """
-    return pipeline_for(config.experiment, seed), config.road_spec(), [config.road_spec(d) for d in config.depths]
+    return cache.pipeline(config.experiment, seed), config.road_spec(), [config.road_spec(d) for d in config.depths]

@@ -29,7 +29,6 @@ study (20 runs, 10 vehicles, 6 depths, 5 noise levels) took 16 s with ``--worker
 """
 from __future__ import annotations
 
-import dataclasses
 import time
 from dataclasses import dataclass
 from typing import Callable
@@ -41,8 +40,11 @@ from ..detection.scoring import MatchTally
 from ..errors import ParameterError
 from ..models.vehicle import Vehicle, sample_fleet
 from .anomaly_config import ESTIMATORS, AnomalyStudyConfig
+from .anomaly_rows import (AnomalyMap, DepthDetectionRow, DetectionRow, NoiseDetectionRow,
+                           VehicleDetectionRow)
 from .anomaly_runs import condition_roads, run_seed_sequences, score_estimates, scored_region
 from .estimates import RunEstimates, run_estimates
+from .pipeline import PipelineCache
 from .runner import map_runs
 from .seeds import SeedPlan
 
@@ -51,7 +53,7 @@ __all__ = ["AnomalyStudyResult", "run_anomaly_study"]
 
 @dataclass(frozen=True, eq=False)
 class AnomalyStudyResult:
-    """Rows of the study (lists of dicts, ready for CSV) and the map example.
+    """Rows of the study (typed, one list per CSV) and the map example.
 
     Attributes
     ----------
@@ -60,20 +62,16 @@ class AnomalyStudyResult:
         Root seed.
     fleet : list of Vehicle
         The fleet of every run and condition.
-    detection_rows : list of dict
-        One per estimator on the default condition, pooled over runs and vehicles 2..V:
-        ``estimator, precision, recall, f1, median_position_error_m, median_depth_rel_error,
-        kind_accuracy, side_accuracy, n_true, n_detected, n_matched``.
-    depth_rows : list of dict
-        The same columns plus ``depth_m``, per sweep depth and estimator.
-    noise_rows : list of dict
-        The same columns plus ``sensor_noise_std``, per noise level and estimator.
-    vehicle_rows : list of dict
-        The same columns plus ``vehicle`` (1-based), default condition, per vehicle and estimator.
-    map_example : dict
-        Run 1, vehicle ``map_vehicle``: ``vehicle``, ``region`` (m), ``truth`` (list of dicts
-        ``start, end, center, side, kind, depth``), ``detections`` (estimator -> list of dicts
-        ``position, side, kind, depth, confidence``), ``tolerance``.
+    detection_rows : list of DetectionRow
+        One per estimator on the default condition, pooled over runs and vehicles 2..V.
+    depth_rows : list of DepthDetectionRow
+        Per sweep depth and estimator.
+    noise_rows : list of NoiseDetectionRow
+        Per noise level and estimator.
+    vehicle_rows : list of VehicleDetectionRow
+        Per vehicle (1-based) and estimator, default condition.
+    map_example : AnomalyMap
+        Run 1, vehicle ``map_vehicle``.
     elapsed_s : float
         Wall-clock time of the study.
     """
@@ -81,11 +79,11 @@ class AnomalyStudyResult:
     config: AnomalyStudyConfig
     seed: int
     fleet: list[Vehicle]
-    detection_rows: list[dict]
-    depth_rows: list[dict]
-    noise_rows: list[dict]
-    vehicle_rows: list[dict]
-    map_example: dict
+    detection_rows: list[DetectionRow]
+    depth_rows: list[DepthDetectionRow]
+    noise_rows: list[NoiseDetectionRow]
+    vehicle_rows: list[VehicleDetectionRow]
+    map_example: AnomalyMap
     elapsed_s: float
 
 
@@ -97,9 +95,9 @@ class _AnomalyTask:
     config: AnomalyStudyConfig
     seed: int
 
-    def __call__(self, indices) -> list[dict]:
+    def __call__(self, indices, cache: PipelineCache) -> list[dict]:
         config, exp = self.config, self.config.experiment
-        pipe, default, by_depth = condition_roads(config, self.seed)
+        pipe, default, by_depth = condition_roads(config, self.seed, cache)
         runs_ss = run_seed_sequences(self.seed, config.n_runs)
         V = exp.n_vehicles
         pooled = range(1, V)   # vehicles 2..V
@@ -157,7 +155,7 @@ def run_anomaly_study(config: AnomalyStudyConfig, seed: int, *, progress: Callab
     by_noise = {(i, name): MatchTally() for i in range(len(config.noise_levels)) for name in ESTIMATORS}
     pooled = range(1, V)   # vehicles 2..V
     runs = map_runs(_AnomalyTask(config, seed), config.n_runs, workers=workers, scheduler=scheduler,
-                    progress=progress)
+                    progress=progress, shared=PipelineCache())
     for rec in runs:
         for (name, j), m in rec["main"].items():
             per_vehicle[name, j].add(m)
@@ -172,25 +170,21 @@ def run_anomaly_study(config: AnomalyStudyConfig, seed: int, *, progress: Callab
                 by_depth[k, name].add(m)
     map_example = runs[0]["map"]
 
-    detection_rows = [{"estimator": name, **main[name].row()} for name in ESTIMATORS]
-    vehicle_rows = [{"vehicle": j + 1, "estimator": name, **per_vehicle[(name, j)].row()}
+    detection_rows = [DetectionRow.of(main[name].scores(), estimator=name) for name in ESTIMATORS]
+    vehicle_rows = [VehicleDetectionRow.of(per_vehicle[(name, j)].scores(), vehicle=j + 1, estimator=name)
                     for j in range(V) for name in ESTIMATORS]
-    depth_rows = [{"depth_m": d, "estimator": name, **by_depth[(k, name)].row()}
+    depth_rows = [DepthDetectionRow.of(by_depth[(k, name)].scores(), depth_m=d, estimator=name)
                   for k, d in enumerate(config.depths) for name in ESTIMATORS]
-    noise_rows = [{"sensor_noise_std": s, "estimator": name, **by_noise[(k, name)].row()}
+    noise_rows = [NoiseDetectionRow.of(by_noise[(k, name)].scores(), sensor_noise_std=s, estimator=name)
                   for k, s in enumerate(config.noise_levels) for name in ESTIMATORS]
     return AnomalyStudyResult(config=config, seed=seed, fleet=fleet, detection_rows=detection_rows,
                               depth_rows=depth_rows, noise_rows=noise_rows, vehicle_rows=vehicle_rows,
                               map_example=map_example, elapsed_s=time.perf_counter() - t0)
 
 
-def _map_example(est: RunEstimates, dets: dict, config: AnomalyStudyConfig) -> dict:
+def _map_example(est: RunEstimates, dets: dict, config: AnomalyStudyConfig) -> AnomalyMap:
     """Truth and detections of vehicle ``map_vehicle`` on one run (see ``AnomalyStudyResult.map_example``)."""
     j = config.map_vehicle - 1
-    truth = [{"start": a.position, "end": a.end, "center": a.center, "side": a.side, "kind": a.kind,
-              "depth": a.depth} for a in est.road.anomalies]
-    return {
-        "vehicle": config.map_vehicle, "run": 1, "region": scored_region(est), "tolerance": config.tolerance,
-        "truth": truth,
-        "detections": {name: [dataclasses.asdict(d) for d in dets[name, j]] for name in ESTIMATORS},
-    }
+    return AnomalyMap(vehicle=config.map_vehicle, run=1, region=scored_region(est), tolerance=config.tolerance,
+                      truth=tuple(est.road.anomalies),
+                      detections={name: tuple(dets[name, j]) for name in ESTIMATORS})

@@ -10,7 +10,30 @@ import numpy as np
 from .anomaly_config import ESTIMATORS
 from .calibration_config import AnomalyCalibrationConfig
 
-__all__ = ["CalibrationPoint", "AnomalyCalibrationResult"]
+__all__ = ["CalibrationPoint", "AnomalyCalibrationResult", "score_column"]
+
+#: The leading columns of ``calibration.csv``; the per-condition scores follow (:func:`score_column`).
+_POINT_COLUMNS = ("snr_threshold", "min_depth_m", "objective", "gap_to_best", "gap_se")
+#: The scores of every condition and estimator in ``calibration.csv``, in column order.
+_METRICS = ("f1", "precision", "recall")
+
+
+def score_column(metric: str, condition: str, estimator: str) -> str:
+    """The ``calibration.csv`` column of one score.
+
+    Parameters
+    ----------
+    metric : str
+        ``"f1"``, ``"precision"`` or ``"recall"``.
+    condition, estimator : str
+        A condition of the configuration and an estimator.
+
+    Returns
+    -------
+    str
+        ``<metric>_<condition>_<estimator>``.
+    """
+    return f"{metric}_{condition}_{estimator}"
 
 
 @dataclass(frozen=True, eq=False)
@@ -87,18 +110,29 @@ class AnomalyCalibrationResult:
         se = float(np.std(d, ddof=1) / math.sqrt(d.size)) if d.size > 1 else float("nan")
         return self.best.objective - point.objective, se
 
+    def columns(self) -> list[str]:
+        """The columns of ``calibration.csv`` (they depend on the configured conditions).
+
+        Returns
+        -------
+        list of str
+            ``snr_threshold, min_depth_m, objective, gap_to_best, gap_se``, then
+            :func:`score_column` of every metric (f1, precision, recall), condition and estimator.
+        """
+        return list(_POINT_COLUMNS) + [score_column(m, c, e) for m in _METRICS for c in self.config.conditions
+                                       for e in ESTIMATORS]
+
     def to_rows(self) -> list[dict]:
-        """One dict per grid point for ``calibration.csv``: ``snr_threshold, min_depth_m,
-        objective, gap_to_best, gap_se``, then ``f1_<condition>_<estimator>`` for every condition
-        and estimator, then the same for ``precision_`` and ``recall_``."""
+        """One dict per grid point for ``calibration.csv``, keys :meth:`columns` in order.
+
+        Returns
+        -------
+        list of dict
+        """
         rows = []
         for p in self.points:
             gap, se = self.gap(p)
-            row = {"snr_threshold": p.snr_threshold, "min_depth_m": p.min_depth, "objective": p.objective,
-                   "gap_to_best": gap, "gap_se": se}
-            for metric in ("f1", "precision", "recall"):
-                for c in self.config.conditions:
-                    for e in ESTIMATORS:
-                        row[f"{metric}_{c}_{e}"] = p.scores[c, e][metric]
-            rows.append(row)
+            values = [p.snr_threshold, p.min_depth, p.objective, gap, se] + [
+                p.scores[c, e][m] for m in _METRICS for c in self.config.conditions for e in ESTIMATORS]
+            rows.append(dict(zip(self.columns(), values)))
         return rows

@@ -48,11 +48,39 @@ from .config import ExperimentConfig
 from ..io.drives import Drive
 from ..models.vehicle import Vehicle
 
-__all__ = ["ESTIMATORS", "ANOMALY_COLUMNS", "DriveEstimates", "integrate_elevation", "estimate_drives",
+__all__ = ["ESTIMATORS", "AnomalyRow", "DriveEstimates", "integrate_elevation", "estimate_drives",
            "find_anomalies"]
 
 ESTIMATORS = ("single", "collaborative", "fused")
-ANOMALY_COLUMNS = ["estimator", "vehicle", "position_m", "side", "kind", "depth_m", "confidence"]
+
+
+@dataclass(frozen=True)
+class AnomalyRow:
+    """One detection of ``anomalies.csv`` (the fields are its columns, in order).
+
+    Attributes
+    ----------
+    estimator : str
+        One of :data:`ESTIMATORS`.
+    vehicle : int
+        1-based drive number.
+    position_m : float
+        Center, m.
+    side, kind : str
+        Track (``left``, ``right``, ``both``) and ``pothole`` or ``bump``.
+    depth_m : float
+        m.
+    confidence : float
+        The detector's confidence.
+    """
+
+    estimator: str
+    vehicle: int
+    position_m: float
+    side: str
+    kind: str
+    depth_m: float
+    confidence: float
 
 
 def integrate_elevation(w, sample_rate: float) -> np.ndarray:
@@ -223,7 +251,7 @@ def estimate_drives(drives: list[Drive], *, gamma: float | None = None, band_low
                           band_low_hz=float(band_low_hz))
 
 
-def find_anomalies(est: DriveEstimates, spec=None) -> list[dict]:
+def find_anomalies(est: DriveEstimates, spec=None) -> list[AnomalyRow]:
     """Anomalies in every band-limited estimate of every drive.
 
     One call of :func:`roadcollab.detection.detector.detect_anomalies` per (estimator, drive).
@@ -237,9 +265,8 @@ def find_anomalies(est: DriveEstimates, spec=None) -> list[dict]:
 
     Returns
     -------
-    list of dict
-        Rows with :data:`ANOMALY_COLUMNS`: estimator, vehicle (1-based drive number), position_m
-        (center, m), side, kind, depth_m (m), confidence.
+    list of AnomalyRow
+        In estimator, then drive, then position order.
     """
     spec = DetectorSpec() if spec is None else spec
     rows = []
@@ -247,7 +274,6 @@ def find_anomalies(est: DriveEstimates, spec=None) -> list[dict]:
         for j, w in enumerate(est.velocity[name]):
             for det in detect_anomalies(w, positions=est.positions, speed=est.speed, sample_rate=est.sample_rate,
                                         spec=spec):
-                rows.append({"estimator": name, "vehicle": j + 1, "position_m": float(det.position),
-                             "side": det.side, "kind": det.kind, "depth_m": float(det.depth),
-                             "confidence": float(det.confidence)})
+                rows.append(AnomalyRow(name, j + 1, float(det.position), det.side, det.kind, float(det.depth),
+                                       float(det.confidence)))
     return rows

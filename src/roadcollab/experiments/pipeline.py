@@ -1,9 +1,11 @@
 """Per-fleet setup of a configuration and the seeds of a reproduction.
 
 A :class:`FleetPipeline` holds what every run of one fleet shares: the vehicles' estimators,
-the frequency grid and the fleet's linear MMSE estimators. :func:`pipeline_for` builds it once
-per process for a configuration and root seed. Seeds: :class:`~roadcollab.experiments.seeds.SeedPlan`
-(the fleet stream and one seed per run).
+the frequency grid and the fleet's linear MMSE estimators. A :class:`PipelineCache`, owned by a
+study and handed to its runs by :func:`~roadcollab.experiments.runner.map_runs` (``shared=``), builds
+it once per worker process for a configuration and root seed, and shares the road moment between the
+fleets of one configuration. Seeds: :class:`~roadcollab.experiments.seeds.SeedPlan` (the fleet
+stream and one seed per run).
 """
 
 from __future__ import annotations
@@ -21,10 +23,12 @@ from ..models.road import RoadSpec, generate_road, with_anomalies
 from ..io.profiles import measured_road
 from ..models.vehicle import Vehicle, sample_fleet
 from .config import ExperimentConfig
-from .runner import cached
 from .seeds import SeedPlan
 
-__all__ = ["FleetPipeline", "fleet_and_run_seeds", "pipeline_for", "record_run"]
+__all__ = ["FleetPipeline", "PipelineCache", "fleet_and_run_seeds", "pipeline_for", "record_run"]
+
+#: Pipelines a :class:`PipelineCache` keeps (the oldest is dropped beyond this).
+_MAX_PIPELINES = 8
 
 
 class FleetPipeline:
@@ -36,6 +40,9 @@ class FleetPipeline:
     config : ExperimentConfig
     fleet : list of Vehicle
         ``config.n_vehicles`` vehicles in driving order.
+    road_moment : (n_bins, 2) ndarray, optional
+        The configuration's per-bin road second moment if already computed (another fleet of the
+        same configuration, :class:`PipelineCache`); computed on first use otherwise.
 
     Attributes
     ----------
@@ -45,7 +52,8 @@ class FleetPipeline:
         One per vehicle, designed for ``config.noise_model()``.
     """
 
-    def __init__(self, config: ExperimentConfig, fleet: list[Vehicle]) -> None:
+    def __init__(self, config: ExperimentConfig, fleet: list[Vehicle], *, road_moment: np.ndarray | None = None
+                 ) -> None:
         if len(fleet) != config.n_vehicles:
             raise ParameterError(f"fleet must have n_vehicles={config.n_vehicles} vehicles, got {len(fleet)}")
         self.config = config
@@ -54,16 +62,14 @@ class FleetPipeline:
         noise = config.noise_model()
         self.estimators = [CollaborativeEstimator(v, noise, self.grid, gamma=config.gamma, oracle=config.oracle,
                                                   fleet=config.fleet) for v in fleet]
+        if road_moment is not None:
+            self.__dict__["road_moment"] = road_moment   # the cached_property's slot
 
     @functools.cached_property
     def road_moment(self) -> np.ndarray:
-        """Per-bin road second moment of the configuration's road model (design draws); cached
-        per process by configuration, since it depends on nothing else."""
-
-        def build():
-            return road_second_moment(lambda rng: self.road(rng).velocity[:self.grid.n_samples], self.grid)
-
-        return cached(("road_moment", repr(self.config)), build)
+        """Per-bin road second moment of the configuration's road model (design draws); it depends
+        on the configuration only, so fleets of one configuration can share it (``road_moment=``)."""
+        return road_second_moment(lambda rng: self.road(rng).velocity[:self.grid.n_samples], self.grid)
 
     @functools.cached_property
     def centralized(self) -> LinearMMSE:
@@ -164,8 +170,82 @@ def fleet_and_run_seeds(config: ExperimentConfig, seed: int) -> tuple[list[Vehic
     return fleet, plan.runs(config.n_runs)
 
 
+class PipelineCache:
+    """Fleet pipelines and road moments built on first use and kept, owned by one study.
+
+    A study creates one, passes it to :func:`~roadcollab.experiments.runner.map_runs` as
+    ``shared=`` (so each worker process holds one copy for all its chunks, and a serial run one for
+    all runs) and its tasks ask it for pipelines. Every builder is deterministic, so results do not
+    depend on whether it hits. A copy (pickle) starts empty: what it holds is rebuilt where it is used.
+
+    Examples
+    --------
+    >>> import roadcollab as rc
+    >>> cache = PipelineCache()
+    >>> cfg = rc.ExperimentConfig(n_vehicles=2)
+    >>> cache.pipeline(cfg, 0) is cache.pipeline(cfg, 0)
+    True
+    """
+
+    def __init__(self) -> None:
+        self._pipelines: dict = {}
+        self._moments: dict = {}
+
+    def __getstate__(self) -> dict:
+        return {}
+
+    def __setstate__(self, state: dict) -> None:
+        self.__init__()
+
+    def pipeline(self, config: ExperimentConfig, seed: int) -> FleetPipeline:
+        """The pipeline of a configuration and the fleet of a root seed (built once).
+
+        Parameters
+        ----------
+        config : ExperimentConfig
+        seed : int
+            Root seed; the fleet is :func:`fleet_and_run_seeds`'s.
+
+        Returns
+        -------
+        FleetPipeline
+            The same object for equal ``(repr(config), seed)``.
+        """
+        key = (repr(config), seed)
+        if key not in self._pipelines:
+            if len(self._pipelines) >= _MAX_PIPELINES:
+                self._pipelines.pop(next(iter(self._pipelines)))
+            self._pipelines[key] = FleetPipeline(config, fleet_and_run_seeds(config, seed)[0])
+        return self._pipelines[key]
+
+    def fleet_pipeline(self, config: ExperimentConfig, fleet: list[Vehicle]) -> FleetPipeline:
+        """A new pipeline for a fleet drawn per run, sharing the configuration's road moment.
+
+        Parameters
+        ----------
+        config : ExperimentConfig
+        fleet : list of Vehicle
+            ``config.n_vehicles`` vehicles in driving order.
+
+        Returns
+        -------
+        FleetPipeline
+            With the road moment of ``config`` computed once per cache.
+        """
+        pipe = FleetPipeline(config, fleet, road_moment=self._moments.get(repr(config)))
+        self._moments[repr(config)] = pipe.road_moment
+        return pipe
+
+
+#: The process-wide cache behind :func:`pipeline_for` (the security study's path only).
+_LEGACY_CACHE = PipelineCache()
+
+
 def pipeline_for(config: ExperimentConfig, seed: int) -> FleetPipeline:
     """The (per-process cached) pipeline of a configuration and root seed.
+
+    Kept for the security study only, whose rewrite switches to a :class:`PipelineCache` of its
+    own passed by ``map_runs(shared=...)``; every other study owns its cache.
 
     Parameters
     ----------
@@ -178,5 +258,4 @@ def pipeline_for(config: ExperimentConfig, seed: int) -> FleetPipeline:
     FleetPipeline
         Built once per process and key ``(repr(config), seed)``.
     """
-    return cached(("pipeline", repr(config), seed),
-                  lambda: FleetPipeline(config, fleet_and_run_seeds(config, seed)[0]))
+    return _LEGACY_CACHE.pipeline(config, seed)

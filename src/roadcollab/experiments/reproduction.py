@@ -20,6 +20,7 @@ applications (anomaly detection) use are :func:`roadcollab.experiments.estimates
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 from typing import Callable
 
@@ -31,7 +32,8 @@ from ..errors import ParameterError
 from ..models.vehicle import Vehicle, sample_fleet
 from ..privacy.obfuscation import theorem1_errors
 from .config import ExperimentConfig
-from .pipeline import FleetPipeline, fleet_and_run_seeds, pipeline_for, record_run
+from .pipeline import FleetPipeline, PipelineCache, fleet_and_run_seeds, record_run
+from .reproduction_rows import BoundRow, FleetRow, MseRow, RunTraces
 from .seeds import SeedPlan, as_seed_sequence, run_stream
 from .runner import map_runs
 
@@ -63,7 +65,7 @@ class RunResult:
         The same errors relative over the whole band (2-norms).
     truth_power : float
         Mean square of the band-limited true road velocity, (m/s)^2.
-    traces : dict | None
+    traces : RunTraces or None
         Time series for Figs. 5-7.
     """
 
@@ -75,7 +77,7 @@ class RunResult:
     theorem1_e_band: np.ndarray
     theorem1_wf_band: np.ndarray
     truth_power: float
-    traces: dict | None = None
+    traces: RunTraces | None = None
 
 
 
@@ -134,9 +136,9 @@ def simulate_run(pipe: FleetPipeline, rng, *, keep_traces: int = 0, privacy: boo
             t1e[j], t1w[j], t1e_b[j], t1w_b[j] = theorem1_errors(priv[j].clear, priv[j].message, *priv[j].psi, grid)
     traces = None
     if keep_traces:
-        traces = {"time": road.time[sl], "truth": truth, "truth_raw": w[sl],
-                  "plain": [grid.band_limited(s.result.W_hat, n)[sl] for s in plain[:keep_traces]],
-                  "private": [grid.band_limited(s.result.W_hat, n)[sl] for s in priv[:keep_traces]]}
+        traces = RunTraces(time=road.time[sl], truth=truth, truth_raw=w[sl],
+                           plain=[grid.band_limited(s.result.W_hat, n)[sl] for s in plain[:keep_traces]],
+                           private=[grid.band_limited(s.result.W_hat, n)[sl] for s in priv[:keep_traces]])
     return RunResult(mse=out, max_rel_diff=rel, max_rel_diff_hardened=rel_h, theorem1_e=t1e, theorem1_wf=t1w,
                      theorem1_e_band=t1e_b, theorem1_wf_band=t1w_b,
                      truth_power=float(np.mean(truth**2)), traces=traces)
@@ -180,44 +182,56 @@ class ReproductionResult:
     def _stack(self, name: str) -> np.ndarray:
         return np.vstack([getattr(r, name) for r in self.runs])
 
-    def table(self) -> list[dict]:
-        """Rows of ``mse.csv``: one per vehicle (1-based), MSE in (m/s)^2.
+    def table(self) -> list[MseRow]:
+        """Rows of ``mse.csv``, one per vehicle (:class:`MseRow`).
 
-        ``mse_*`` is Algorithm 1 with Algorithm 2 (the paper's estimate), ``mse_no_privacy_mean``
-        Algorithm 1 in the clear; every other estimator has ``<name>_mse_mean`` and
-        ``<name>_nmse_mean`` (divided by the band-limited truth's mean square).
+        Returns
+        -------
+        list of MseRow
         """
         pw = np.array([r.truth_power for r in self.runs])[:, None]
-        priv = self.mse("algorithm1_private")
         R = len(self.runs)
         std = (lambda x: x.std(ddof=1)) if R > 1 else (lambda x: 0.0)
-        rel, t1e, t1w = self._stack("max_rel_diff"), self._stack("theorem1_e"), self._stack("theorem1_wf")
-        t1e_b, t1w_b = self._stack("theorem1_e_band"), self._stack("theorem1_wf_band")
+        mse = {name: self.mse(name) for name in ESTIMATORS}
+        worst = [self._stack(name).max(axis=0) for name in ("max_rel_diff", "theorem1_e", "theorem1_wf",
+                                                            "theorem1_e_band", "theorem1_wf_band")]
+        others = ("own_inversion", "own_posterior_inversion", "fused", "fused_posterior", "centralized",
+                  "oracle_bound")
         rows = []
         for j in range(self.config.n_vehicles):
-            row = {"vehicle": j + 1, "mse_mean": priv[:, j].mean(), "mse_std": std(priv[:, j]),
-                   "mse_no_privacy_mean": self.mse("algorithm1")[:, j].mean(),
-                   "nmse_mean": (priv[:, j:j + 1] / pw).mean()}
-            for name in ("observer_only", "own_inversion", "own_posterior_inversion", "fused", "fused_posterior",
-                         "centralized", "oracle_bound"):
-                m = self.mse(name)
-                row[f"{name}_mse_mean"] = m[:, j].mean()
-                row[f"{name}_mse_std"] = std(m[:, j])
-                row[f"{name}_nmse_mean"] = (m[:, j:j + 1] / pw).mean()
-            row["max_rel_diff_privacy"] = rel[:, j].max()
-            row["theorem1_e_max"] = t1e[:, j].max()
-            row["theorem1_wf_max"] = t1w[:, j].max()
-            row["theorem1_e_band_max"] = t1e_b[:, j].max()
-            row["theorem1_wf_band_max"] = t1w_b[:, j].max()
-            rows.append(row)
+            col = {name: m[:, j] for name, m in mse.items()}
+            nmse = {name: (m[:, j:j + 1] / pw).mean() for name, m in mse.items()}
+            rows.append(MseRow(
+                j + 1, col["algorithm1_private"].mean(), std(col["algorithm1_private"]), col["algorithm1"].mean(),
+                col["observer_only"].mean(), std(col["observer_only"]), *(col[name].mean() for name in others),
+                nmse["algorithm1_private"], nmse["observer_only"], *(nmse[name] for name in others),
+                *(w[j] for w in worst)))
         return rows
 
-    def bound_check(self) -> list[dict]:
-        """Is the oracle bound beaten? Paired per-run differences against ``oracle_bound``.
+    def to_rows(self) -> list[dict]:
+        """Rows of ``mse.csv`` as dicts (:meth:`table`; keys are the columns, in order).
 
         Returns
         -------
         list of dict
+        """
+        return [dataclasses.asdict(r) for r in self.table()]
+
+    def fleet_rows(self) -> list[FleetRow]:
+        """Rows of ``fleet.csv``: true and estimated parameters of every vehicle.
+
+        Returns
+        -------
+        list of FleetRow
+        """
+        return [FleetRow.of(v) for v in self.fleet]
+
+    def bound_check(self) -> list[BoundRow]:
+        """Is the oracle bound beaten? Paired per-run differences against ``oracle_bound``.
+
+        Returns
+        -------
+        list of BoundRow
             Per estimator and vehicle: ``mean_excess`` (mean of ``mse - oracle``, (m/s)^2),
             its standard error, and ``z = mean_excess / stderr``. An estimator beats the bound
             (beyond Monte Carlo error) where ``z < -3``.
@@ -230,29 +244,29 @@ class ReproductionResult:
             for j in range(self.config.n_vehicles):
                 se = d[:, j].std(ddof=1) / np.sqrt(R) if R > 1 else 0.0
                 mean = float(d[:, j].mean())
-                rows.append({"estimator": name, "vehicle": j + 1, "mean_excess": mean, "stderr": float(se),
-                             "z": mean / se if se > 0 else float("inf") if mean >= 0 else float("-inf")})
+                rows.append(BoundRow(name, j + 1, mean, float(se),
+                                     mean / se if se > 0 else float("inf") if mean >= 0 else float("-inf")))
         return rows
 
 
 @dataclass(frozen=True)
 class _ReproductionTask:
-    """Picklable task: runs ``indices`` of a reproduction (rebuilds its setup once per process)."""
+    """Picklable task: runs ``indices`` of a reproduction (its setup from the study's cache)."""
 
     config: ExperimentConfig
     seed: int
     privacy: bool
 
-    def __call__(self, indices) -> list[RunResult]:
+    def __call__(self, indices, cache: PipelineCache) -> list[RunResult]:
         plan = SeedPlan(self.seed)
         out = []
         for i in indices:
             if self.config.redraw_fleet:
                 fleet_ss, sim_ss = plan.run_fleet(i), plan.run_simulation(i)
-                pipe = FleetPipeline(self.config, sample_fleet(self.config.n_vehicles, self.config.fleet,
-                                                               rng=np.random.default_rng(fleet_ss)))
+                pipe = cache.fleet_pipeline(self.config, sample_fleet(self.config.n_vehicles, self.config.fleet,
+                                                                      rng=np.random.default_rng(fleet_ss)))
             else:
-                pipe, sim_ss = pipeline_for(self.config, self.seed), plan.run(i)
+                pipe, sim_ss = cache.pipeline(self.config, self.seed), plan.run(i)
             out.append(simulate_run(pipe, sim_ss, keep_traces=3 if i == 0 else 0, privacy=self.privacy))
         return out
 
@@ -285,10 +299,10 @@ def run_reproduction(config: ExperimentConfig, seed: int, *, progress: Callable[
     --------
     >>> import roadcollab as rc
     >>> res = rc.run_reproduction(rc.ExperimentConfig(n_vehicles=2, n_runs=1), seed=0)
-    >>> rows = res.table()                       # the rows of mse.csv, one per vehicle
-    >>> [r["vehicle"] for r in rows]
+    >>> rows = res.table()                       # the rows of mse.csv (MseRow), one per vehicle
+    >>> [r.vehicle for r in rows]
     [1, 2]
-    >>> all(r["max_rel_diff_privacy"] < 1e-9 for r in rows)   # Theorem 1, measured
+    >>> all(r.max_rel_diff_privacy < 1e-9 for r in rows)   # Theorem 1, measured
     True
     """
     if not isinstance(config, ExperimentConfig):
@@ -296,5 +310,5 @@ def run_reproduction(config: ExperimentConfig, seed: int, *, progress: Callable[
     seed = check_int("seed", seed, low=0)
     fleet = fleet_and_run_seeds(config, seed)[0]
     runs = map_runs(_ReproductionTask(config, seed, privacy), config.n_runs, workers=workers, scheduler=scheduler,
-                    progress=progress)
+                    progress=progress, shared=PipelineCache())
     return ReproductionResult(config=config, seed=seed, fleet=fleet, runs=runs)

@@ -2,8 +2,10 @@
 
 Every run gets its own :class:`numpy.random.SeedSequence` child, and each task rebuilds what
 it needs from plain, picklable inputs, so the results are identical for every worker count and
-scheduler. Workers cache the per-configuration setup (the fleet's estimators) so it is built
-once per worker process, not once per task.
+scheduler. What the runs share (e.g. a study's
+:class:`~roadcollab.experiments.pipeline.PipelineCache`) is passed once as ``shared``: a serial
+run hands the same object to every task, Dask scatters it once to every worker, so per-fleet
+setup is built once per worker process, not once per task or chunk. Nothing is kept between calls.
 """
 
 from __future__ import annotations
@@ -17,34 +19,7 @@ from threadpoolctl import threadpool_limits
 from .._validation import check_int
 from ..errors import ParameterError
 
-__all__ = ["map_runs", "cached"]
-
-_CACHE: dict = {}
-
-
-def cached(key, build: Callable[[], object]):
-    """Per-process memo for expensive setup (keyed by a hashable description of it).
-
-    A worker process builds a fleet's pipeline once for all the runs it is given; results do
-    not depend on whether the memo hits (the builders are deterministic).
-
-    Parameters
-    ----------
-    key : hashable
-        Description of what ``build`` makes (e.g. the configuration's repr and the seed).
-    build : callable
-        Makes the object on a miss.
-
-    Returns
-    -------
-    object
-    """
-    if key not in _CACHE:
-        if len(_CACHE) > 8:
-            _CACHE.clear()
-        _CACHE[key] = build()
-    return _CACHE[key]
-
+__all__ = ["map_runs"]
 
 @dataclass(frozen=True)
 class _SingleThreaded:
@@ -54,9 +29,9 @@ class _SingleThreaded:
 
     task: Callable
 
-    def __call__(self, indices):
+    def __call__(self, indices, *shared):
         with threadpool_limits(limits=1):
-            return self.task(indices)
+            return self.task(indices, *shared)
 
 
 def _chunks(n: int, size: int) -> list[range]:
@@ -95,8 +70,10 @@ def _client(workers: int | None, scheduler: str | None):
 
 def map_runs(task: Callable[[Sequence[int]], list], n_runs: int, *, workers: int | None = None,
              scheduler: str | None = None, progress: Callable[[int], None] | None = None,
-             chunk_size: int | None = None) -> list:
+             chunk_size: int | None = None, shared: object | None = None) -> list:
     """Evaluate ``task(indices) -> list of results`` over ``range(n_runs)`` in chunks.
+
+    With ``shared``, the task is called as ``task(indices, shared)``.
 
     Parameters
     ----------
@@ -112,6 +89,9 @@ def map_runs(task: Callable[[Sequence[int]], list], n_runs: int, *, workers: int
     chunk_size : int, optional
         Runs per task (default: serial all at once one by one; parallel about 4 tasks per
         worker).
+    shared : object, optional
+        Passed to every call of ``task``: the same object in a serial run, one copy per worker
+        process on Dask (scattered once, so a cache in it persists across that worker's chunks).
 
     Returns
     -------
@@ -124,10 +104,11 @@ def map_runs(task: Callable[[Sequence[int]], list], n_runs: int, *, workers: int
     if scheduler is not None and workers is not None:
         raise ParameterError("give either workers (a local cluster) or scheduler (an existing one), not both")
     task = _SingleThreaded(task)
+    extra = () if shared is None else (shared,)
     if workers is None and scheduler is None:
         out = []
         for i in range(n_runs):
-            out.extend(task([i]))
+            out.extend(task([i], *extra))
             if progress is not None:
                 progress(i + 1)
         return out
@@ -137,7 +118,9 @@ def map_runs(task: Callable[[Sequence[int]], list], n_runs: int, *, workers: int
         n_workers = max(1, len(client.scheduler_info().get("workers", {})) or (workers or 1))
         size = chunk_size or max(1, -(-n_runs // (4 * n_workers)))
         chunks = _chunks(n_runs, size)
-        futures = {client.submit(task, list(c), pure=False): k for k, c in enumerate(chunks)}
+        if extra:
+            extra = (client.scatter(shared, broadcast=True, hash=False),)
+        futures = {client.submit(task, list(c), *extra, pure=False): k for k, c in enumerate(chunks)}
         results: list = [None] * len(chunks)
         done = 0
         for fut in as_completed(futures):

@@ -41,7 +41,7 @@ import numpy as np
 from .._validation import check_int
 from ..errors import ParameterError
 from ..models.vehicle import sample_fleet
-from .pipeline import FleetPipeline
+from .pipeline import PipelineCache
 from .reproduction import simulate_run
 from .runner import map_runs
 from .sweep_config import SWEPT_ESTIMATORS, SweepConfig
@@ -68,7 +68,7 @@ class _SweepTask:
     config: SweepConfig
     seed: int
 
-    def __call__(self, indices) -> list[dict]:
+    def __call__(self, indices, cache: PipelineCache) -> list[dict]:
         cfg = self.config
         points = cfg.points()
         out = []
@@ -76,7 +76,8 @@ class _SweepTask:
             p, r = divmod(i, cfg.n_runs)
             exp = cfg.point_config(*points[p])
             fleet_ss, sim_ss = _run_seed_sequences(self.seed, cfg.n_runs, r)
-            pipe = FleetPipeline(exp, sample_fleet(cfg.n_vehicles, exp.fleet, rng=np.random.default_rng(fleet_ss)))
+            pipe = cache.fleet_pipeline(exp, sample_fleet(cfg.n_vehicles, exp.fleet,
+                                                          rng=np.random.default_rng(fleet_ss)))
             res = simulate_run(pipe, sim_ss, privacy=False)
             out.append({k: np.asarray(res.mse[k], dtype=float) for k in SWEPT_ESTIMATORS})
         return out
@@ -122,6 +123,7 @@ def run_sweep(config: SweepConfig, seed: int, *, progress: Callable[[int], None]
         raise ParameterError(f"config must be a SweepConfig, got {type(config).__name__}")
     seed = check_int("seed", seed, low=0)
     P, R, V = len(config.points()), config.n_runs, config.n_vehicles
-    runs = map_runs(_SweepTask(config, seed), P * R, workers=workers, scheduler=scheduler, progress=progress)
+    runs = map_runs(_SweepTask(config, seed), P * R, workers=workers, scheduler=scheduler, progress=progress,
+                    shared=PipelineCache())
     mse = {k: np.array([run[k] for run in runs]).reshape(P, R, V) for k in SWEPT_ESTIMATORS}
     return SweepResult(config=config, seed=seed, mse=mse)

@@ -165,8 +165,8 @@ def half_car_model(params: HalfCarParameters) -> HalfCarModel:
     Examples
     --------
     >>> m = half_car_model(HalfCarParameters(500, 400, 0.75, 0.75, 20e3, 1.5e3))
-    >>> round(float(abs(m.poles()[0]) / (2 * np.pi)), 2)  # heave mode, Hz
-    1.42
+    >>> [round(float(f), 2) for f in sorted(set(np.round(abs(m.poles()) / (2 * np.pi), 6)))]  # heave, roll (Hz)
+    [1.42, 1.69]
     """
     if not isinstance(params, HalfCarParameters):
         raise ParameterError(f"params must be a HalfCarParameters, got {type(params).__name__}")
@@ -254,6 +254,15 @@ def sample_fleet(n_vehicles: int, spec: FleetSpec = FleetSpec(), *, rng=None) ->
     Returns
     -------
     list of Vehicle
+
+    Examples
+    --------
+    >>> import roadcollab as rc
+    >>> fleet = rc.sample_fleet(3, rng=0)
+    >>> [v.index for v in fleet]
+    [0, 1, 2]
+    >>> fleet[0].true_params == fleet[0].estimated_params   # each vehicle only knows an estimate
+    False
     """
     n_vehicles = check_int("n_vehicles", n_vehicles, low=1)
     if not isinstance(spec, FleetSpec):

@@ -5,15 +5,13 @@ from __future__ import annotations
 from pathlib import Path
 
 from . import plotting
-from .records import markdown_table, output_dir, run_header, write_config, write_csv
+from ..experiments.anomaly_rows import (DepthDetectionRow, DetectionRow, MapRow, NoiseDetectionRow,
+                                        VehicleDetectionRow)
+from .records import markdown_table, output_dir, row_columns, run_header, write_config, write_rows
 
-__all__ = ["DETECTION_COLUMNS", "anomaly_markdown", "write_anomalies"]
+__all__ = ["anomaly_markdown", "write_anomalies"]
 
-#: Columns of ``detection.csv`` (positions in m, depth errors relative).
-DETECTION_COLUMNS = ["estimator", "precision", "recall", "f1", "median_position_error_m", "median_depth_rel_error",
-                     "kind_accuracy", "side_accuracy", "n_true", "n_detected", "n_matched"]
-_MAP_COLUMNS = ["source", "estimator", "position_m", "side", "kind", "depth_m", "confidence"]
-#: Columns of the F1 curves shown in the report, after the swept quantity.
+#: Fields of the F1 curves shown in the report, after the swept quantity.
 _CURVE_REPORT_COLUMNS = ["estimator", "precision", "recall", "f1", "median_position_error_m"]
 
 
@@ -32,14 +30,14 @@ def _detection_lines(result) -> list[str]:
         "",
         "### Detection (`detection.csv`)",
         "",
-        markdown_table(result.detection_rows, DETECTION_COLUMNS),
+        markdown_table(result.detection_rows, row_columns(DetectionRow)),
         "",
         "![road map](fig_anomaly_map.png)",
         "",
     ]
 
 
-def _curve_lines(rows: list[dict], key: str, what: str, name: str, alt: str) -> list[str]:
+def _curve_lines(rows: list, key: str, what: str, name: str, alt: str) -> list[str]:
     """One F1 curve of the report: heading, table (``key`` first) and the figure ``fig_{name}.png``."""
     return [f"### F1 vs {what} (`{name}.csv`)", "",
             markdown_table(rows, [key] + _CURVE_REPORT_COLUMNS), "",
@@ -67,26 +65,13 @@ def anomaly_markdown(result) -> str:
     return "\n".join(lines)
 
 
-def _map_rows(map_example: dict) -> list[dict]:
-    """``fig_anomaly_map.csv`` rows: the true anomalies, then every estimator's detections (m)."""
-    rows = []
-    for t in map_example["truth"]:
-        rows.append({"source": "truth", "estimator": "", "position_m": t["center"], "side": t["side"],
-                     "kind": t["kind"], "depth_m": t["depth"], "confidence": 1.0})
-    for name, dets in map_example["detections"].items():
-        for d in dets:
-            rows.append({"source": "detected", "estimator": name, "position_m": d["position"], "side": d["side"],
-                         "kind": d["kind"], "depth_m": d["depth"], "confidence": d["confidence"]})
-    return rows
-
-
 def _write_curves(result, out: Path) -> None:
     """``f1_vs_depth`` and ``f1_vs_noise`` (CSV and figure) for the sweeps the study ran."""
     if result.depth_rows:
-        write_csv(out / "f1_vs_depth.csv", result.depth_rows, ["depth_m"] + DETECTION_COLUMNS)
+        write_rows(out / "f1_vs_depth.csv", result.depth_rows, DepthDetectionRow)
         plotting.plot_f1_vs_depth(result.depth_rows, out / "fig_f1_vs_depth.png")
     if result.noise_rows:
-        write_csv(out / "f1_vs_noise.csv", result.noise_rows, ["sensor_noise_std"] + DETECTION_COLUMNS)
+        write_rows(out / "f1_vs_noise.csv", result.noise_rows, NoiseDetectionRow)
         plotting.plot_f1_vs_noise(result.noise_rows, out / "fig_f1_vs_noise.png")
 
 
@@ -108,10 +93,10 @@ def write_anomalies(result, out, *, command: str, elapsed: float) -> None:
         Wall-clock time of the study, s.
     """
     out = output_dir(out)
-    write_csv(out / "detection.csv", result.detection_rows, DETECTION_COLUMNS)
-    write_csv(out / "detection_per_vehicle.csv", result.vehicle_rows, ["vehicle"] + DETECTION_COLUMNS)
+    write_rows(out / "detection.csv", result.detection_rows, DetectionRow)
+    write_rows(out / "detection_per_vehicle.csv", result.vehicle_rows, VehicleDetectionRow)
     plotting.plot_anomaly_map(result.map_example, out / "fig_anomaly_map.png")
-    write_csv(out / "fig_anomaly_map.csv", _map_rows(result.map_example), _MAP_COLUMNS)
+    write_rows(out / "fig_anomaly_map.csv", result.map_example.to_rows(), MapRow)
     _write_curves(result, out)
     write_config(out / "config.json", command=command, seed=result.seed, config=result.config.to_dict(),
                  extra={"elapsed_s": elapsed})

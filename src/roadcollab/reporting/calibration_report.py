@@ -6,7 +6,7 @@ from pathlib import Path
 
 from ..experiments.anomaly_config import ESTIMATORS
 from ..experiments.calibration_config import EVALUATION_SEEDS, OBJECTIVE_ESTIMATORS
-from ..experiments.calibration_result import AnomalyCalibrationResult
+from ..experiments.calibration_result import AnomalyCalibrationResult, score_column
 from .records import fmt, markdown_table, write_config, write_csv
 
 __all__ = ["calibration_markdown", "write_calibration"]
@@ -87,8 +87,7 @@ def calibration_markdown(result: AnomalyCalibrationResult) -> str:
                               for c in cfg.conditions], ["condition", *ESTIMATORS]),
               "", "## Flatness of the optimum", "", *_flatness_lines(result), "",
               "## Every grid point (`calibration.csv`)", ""]
-    cols = ["snr_threshold", "min_depth_m", "objective", "gap_to_best", "gap_se"] + [
-        f"f1_{c}_{e}" for c in cfg.conditions for e in OBJECTIVE_ESTIMATORS]
+    cols = result.columns()[:5] + [score_column("f1", c, e) for c in cfg.conditions for e in OBJECTIVE_ESTIMATORS]
     lines.append(markdown_table(result.to_rows(), cols))
     return "\n".join(lines) + "\n"
 
@@ -111,7 +110,7 @@ def write_calibration(result: AnomalyCalibrationResult, out, *, command: str) ->
     """
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
-    write_csv(out / "calibration.csv", result.to_rows())
+    write_csv(out / "calibration.csv", result.to_rows(), result.columns())
     write_config(out / "config.json", command=command, seed=None, config=result.config.to_dict(),
                  extra={"seeds": list(result.config.seeds), "elapsed_s": result.elapsed_s})
     (out / "report.md").write_text("\n".join([

@@ -9,10 +9,10 @@ from pathlib import Path
 
 import numpy as np
 
-from ..experiments.drive_estimation import ANOMALY_COLUMNS, ESTIMATORS, DriveEstimates
+from ..experiments.drive_estimation import ESTIMATORS, AnomalyRow, DriveEstimates
 from ..experiments.config import ExperimentConfig
 from . import plotting_drives
-from .records import markdown_table, write_config, write_csv
+from .records import markdown_table, row_columns, write_config, write_csv, write_rows
 
 __all__ = ["ESTIMATE_FILES", "write_estimates"]
 
@@ -61,13 +61,13 @@ def _final_series(est: DriveEstimates) -> list[tuple[str, np.ndarray]]:
     return named
 
 
-def _write_tables(est: DriveEstimates, out: Path, anomaly_rows: list[dict]) -> None:
+def _write_tables(est: DriveEstimates, out: Path, anomaly_rows: list[AnomalyRow]) -> None:
     """``road_estimates.csv``, ``final_estimate.csv`` and ``anomalies.csv`` in ``out``."""
     rows, cols = _table_rows(est, _estimate_series(est))
     write_csv(out / "road_estimates.csv", rows, cols)
     rows, cols = _table_rows(est, _final_series(est))
     write_csv(out / "final_estimate.csv", rows, cols)
-    write_csv(out / "anomalies.csv", anomaly_rows, ANOMALY_COLUMNS)
+    write_rows(out / "anomalies.csv", anomaly_rows, AnomalyRow)
 
 
 # --- figures -------------------------------------------------------------------------------------
@@ -217,14 +217,14 @@ def _figures_section(est: DriveEstimates, zoom: tuple[float, float] | None) -> l
     ]
 
 
-def _anomaly_counts(est: DriveEstimates, anomaly_rows: list[dict]) -> dict[str, list[int]]:
+def _anomaly_counts(est: DriveEstimates, anomaly_rows: list[AnomalyRow]) -> dict[str, list[int]]:
     """``{estimator: [detections in drive 1, drive 2, ...]}``."""
     V = len(est.drives)
-    return {name: [sum(1 for r in anomaly_rows if r["estimator"] == name and r["vehicle"] == j + 1)
+    return {name: [sum(1 for r in anomaly_rows if r.estimator == name and r.vehicle == j + 1)
                    for j in range(V)] for name in ESTIMATORS}
 
 
-def _anomalies_section(est: DriveEstimates, anomalies: list[dict] | None, counts: dict[str, list[int]]
+def _anomalies_section(est: DriveEstimates, anomalies: list[AnomalyRow] | None, counts: dict[str, list[int]]
                        ) -> list[str]:
     """Detections per drive and estimator, and the last drive's collaborative and fused detections."""
     V = len(est.drives)
@@ -232,15 +232,15 @@ def _anomalies_section(est: DriveEstimates, anomalies: list[dict] | None, counts
     if anomalies is None:
         return lines + ["Anomaly detection was not run.", ""]
     count_rows = [{"drive": j + 1, **{name: counts[name][j] for name in ESTIMATORS}} for j in range(V)]
-    final = [r for r in anomalies if r["vehicle"] == V and r["estimator"] in ("collaborative", "fused")]
+    final = [r for r in anomalies if r.vehicle == V and r.estimator in ("collaborative", "fused")]
     lines += ["Detections per drive and estimator:", "", markdown_table(count_rows, ["drive", *ESTIMATORS]), "",
               f"Detections in drive {V}'s collaborative and fused estimates (position = center):", ""]
-    return lines + [markdown_table(final, ANOMALY_COLUMNS) if final else "None.", ""]
+    return lines + [markdown_table(final, row_columns(AnomalyRow)) if final else "None.", ""]
 
 
 # --- everything ----------------------------------------------------------------------------------
 
-def write_estimates(est: DriveEstimates, out, *, command: str, anomalies: list[dict] | None,
+def write_estimates(est: DriveEstimates, out, *, command: str, anomalies: list[AnomalyRow] | None,
                     anomaly_note: str | None = None, elapsed: float | None = None,
                     detector_config: dict | None = None) -> dict:
     """Write every output of ``roadcollab estimate`` to the folder ``out``; returns the summary.
@@ -260,8 +260,8 @@ def write_estimates(est: DriveEstimates, out, *, command: str, anomalies: list[d
         Output folder (created with its parents if missing; files in it are overwritten).
     command : str
         The command line, recorded in ``config.json`` and ``report.md``.
-    anomalies : list of dict or None
-        Rows of :func:`~roadcollab.experiments.drive_estimation.find_anomalies` (``ANOMALY_COLUMNS``);
+    anomalies : list of AnomalyRow or None
+        Rows of :func:`~roadcollab.experiments.drive_estimation.find_anomalies`;
         None if detection was not run (``anomalies.csv`` then holds the header only and the report says so).
     anomaly_note : str, optional
         Note for the report and ``config.json`` (e.g. why detection was not run).

@@ -52,13 +52,13 @@ def _mse_axes(ax, vehicles) -> None:
     ax.legend()
 
 
-def plot_mse(rows: list[dict], path) -> Path:
+def plot_mse(rows: list, path) -> Path:
     """Fig. 4: MSE per vehicle of every estimator (mean over runs; std bars for Algorithm 1 + 2
     and the online observer).
 
     Parameters
     ----------
-    rows : list of dict
+    rows : list of MseRow
         ``mse.csv`` rows.
     path : str or Path
         Output image.
@@ -67,11 +67,11 @@ def plot_mse(rows: list[dict], path) -> Path:
     -------
     Path
     """
-    v = np.array([r["vehicle"] for r in rows])
+    v = np.array([r.vehicle for r in rows])
     fig, ax = plt.subplots(figsize=(8, 4.8))
-    ax.errorbar(v, [r["mse_mean"] for r in rows], yerr=[r["mse_std"] for r in rows], fmt="o-", capsize=4,
+    ax.errorbar(v, [r.mse_mean for r in rows], yerr=[r.mse_std for r in rows], fmt="o-", capsize=4,
                 label="Algorithm 1 + 2 (collaborative, private)")
-    ax.errorbar(v + 0.1, [r["observer_only_mse_mean"] for r in rows], yerr=[r["observer_only_mse_std"] for r in rows],
+    ax.errorbar(v + 0.1, [r.observer_only_mse_mean for r in rows], yerr=[r.observer_only_mse_std for r in rows],
                 fmt="s--", capsize=4, alpha=0.8, label="observer only (own, online)")
     for key, label, style in (("own_inversion_mse_mean", "own inversion (own, offline)", "d:"),
                               ("own_posterior_inversion_mse_mean", "own posterior inversion", "x:"),
@@ -79,20 +79,20 @@ def plot_mse(rows: list[dict], path) -> Path:
                               ("fused_posterior_mse_mean", "fused, posterior inversions (1..j)", "<-"),
                               ("centralized_mse_mean", "centralized linear MMSE (1..j)", "v-."),
                               ("oracle_bound_mse_mean", "oracle bound (true models, 1..j)", "k:")):
-        ax.plot(v, [r[key] for r in rows], style, label=label)
+        ax.plot(v, [getattr(r, key) for r in rows], style, label=label)
     _mse_axes(ax, v)
     ax.legend(fontsize=7, loc="best")
     ax.set_title("MSE per vehicle (mean over runs; bars: std)")
     return save_figure(fig, path)
 
 
-def plot_fusion(rows: list[dict], path) -> Path:
+def plot_fusion(rows: list, path) -> Path:
     """MSE vs vehicle for the fleet estimates: observer only, Algorithm 1, fused, centralized
     and the oracle bound.
 
     Parameters
     ----------
-    rows : list of dict
+    rows : list of MseRow
         ``mse.csv`` rows.
     path : str or Path
         Output image.
@@ -101,7 +101,7 @@ def plot_fusion(rows: list[dict], path) -> Path:
     -------
     Path
     """
-    v = np.array([r["vehicle"] for r in rows])
+    v = np.array([r.vehicle for r in rows])
     fig, ax = plt.subplots(figsize=(7, 4))
     for key, label, style in (("observer_only_mse_mean", "observer only", "s--"),
                               ("mse_mean", "Algorithm 1", "o-"),
@@ -109,7 +109,7 @@ def plot_fusion(rows: list[dict], path) -> Path:
                               ("fused_posterior_mse_mean", "fused (posterior inversions)", "<-"),
                               ("centralized_mse_mean", "centralized linear MMSE", "v-."),
                               ("oracle_bound_mse_mean", "oracle bound", "k:")):
-        ax.plot(v, [r[key] for r in rows], style, label=label)
+        ax.plot(v, [getattr(r, key) for r in rows], style, label=label)
     _mse_axes(ax, v)
     return save_figure(fig, path)
 
@@ -234,25 +234,25 @@ _KIND_COLOR = {"pothole": "tab:red", "bump": "tab:orange"}
 _MAP_ROWS = {"left": (1.0,), "right": (0.0,), "both": (1.0, 0.0)}
 
 
-def _signed_depth_cm(anomaly: dict) -> float:
+def _signed_depth_cm(anomaly) -> float:
     """Depth in cm, negative for potholes and positive for bumps."""
-    sign = -1.0 if anomaly["kind"] == "pothole" else 1.0
-    return sign * 100 * anomaly["depth"]
+    sign = -1.0 if anomaly.kind == "pothole" else 1.0
+    return sign * 100 * anomaly.depth
 
 
-def _draw_true_anomalies(ax, ax2, truth: list[dict]) -> None:
+def _draw_true_anomalies(ax, ax2, truth) -> None:
     """True anomalies: shaded spans on their tracks (``ax``) and signed-depth bars (``ax2``)."""
     for a in truth:
-        for y in _MAP_ROWS[a["side"]]:
-            ax.add_patch(plt.Rectangle((a["start"], y - 0.42), max(a["end"] - a["start"], 0.3), 0.84,
-                                       color=_KIND_COLOR[a["kind"]], alpha=0.35, lw=0))
-        ax.annotate(f"{100 * a['depth']:.1f}", (a["center"], 1.5), ha="center", fontsize=7,
-                    color=_KIND_COLOR[a["kind"]])
-        ax2.bar(a["center"], _signed_depth_cm(a), width=max(a["end"] - a["start"], 0.6),
-                color=_KIND_COLOR[a["kind"]], alpha=0.35)
+        for y in _MAP_ROWS[a.side]:
+            ax.add_patch(plt.Rectangle((a.position, y - 0.42), max(a.end - a.position, 0.3), 0.84,
+                                       color=_KIND_COLOR[a.kind], alpha=0.35, lw=0))
+        ax.annotate(f"{100 * a.depth:.1f}", (a.center, 1.5), ha="center", fontsize=7,
+                    color=_KIND_COLOR[a.kind])
+        ax2.bar(a.center, _signed_depth_cm(a), width=max(a.end - a.position, 0.6),
+                color=_KIND_COLOR[a.kind], alpha=0.35)
 
 
-def _draw_detections(ax, ax2, dets: dict[str, list[dict]]) -> None:
+def _draw_detections(ax, ax2, dets: dict) -> None:
     """Each estimator's detections: markers sized by depth on their tracks (offset per estimator, ``ax``) and
     signed depths (``ax2``)."""
     names = [n for n in _ESTIMATOR_STYLE if n in dets] + [n for n in dets if n not in _ESTIMATOR_STYLE]
@@ -260,27 +260,25 @@ def _draw_detections(ax, ax2, dets: dict[str, list[dict]]) -> None:
         color, _, label = _ESTIMATOR_STYLE.get(name, ("k", "x", name))
         off = 0.25 * (i - (len(names) - 1) / 2)
         for d in dets[name]:
-            marker = "v" if d["kind"] == "pothole" else "^"
-            size = 20 + 1500 * d["depth"]
-            for y in _MAP_ROWS[d["side"]]:
-                ax.scatter(d["position"], y + off, s=size, marker=marker, color=color, edgecolor="k", lw=0.4,
+            marker = "v" if d.kind == "pothole" else "^"
+            size = 20 + 1500 * d.depth
+            for y in _MAP_ROWS[d.side]:
+                ax.scatter(d.position, y + off, s=size, marker=marker, color=color, edgecolor="k", lw=0.4,
                            zorder=3)
-            ax2.plot(d["position"], _signed_depth_cm(d), marker, color=color, mec="k", mew=0.4, ms=6)
+            ax2.plot(d.position, _signed_depth_cm(d), marker, color=color, mec="k", mew=0.4, ms=6)
         ax.scatter([], [], marker="o", color=color, label=label)
 
 
-def _label_map(ax, ax2, map_example: dict) -> None:
+def _label_map(ax, ax2, map_example) -> None:
     """Legend, limits, ticks and titles of the road map."""
     for kind, color in _KIND_COLOR.items():
         ax.add_patch(plt.Rectangle((0, 0), 0, 0, color=color, alpha=0.35, label=f"true {kind} (depth in cm)"))
-    lo, hi = map_example.get("region", (None, None))
-    if lo is not None:
-        ax.set_xlim(lo, hi)
+    ax.set_xlim(*map_example.region)
     ax.set_ylim(-0.6, 1.8)
     ax.set_yticks([0.0, 1.0])
     ax.set_yticklabels(["right track", "left track"])
     ax.legend(fontsize=7, ncol=3, loc="lower center", bbox_to_anchor=(0.5, 1.0))
-    ax.set_title(f"Run {map_example.get('run', 1)}, vehicle {map_example.get('vehicle', '?')}: "
+    ax.set_title(f"Run {map_example.run}, vehicle {map_example.vehicle}: "
                  "true anomalies (spans) and detections (v pothole, ^ bump; size ~ depth)", fontsize=9, pad=36)
     ax2.axhline(0, color="k", lw=0.5)
     ax2.set_ylabel("depth (cm)\npothole < 0 < bump")
@@ -288,7 +286,7 @@ def _label_map(ax, ax2, map_example: dict) -> None:
     ax2.grid(True, alpha=0.3)
 
 
-def plot_anomaly_map(map_example: dict, path) -> Path:
+def plot_anomaly_map(map_example, path) -> Path:
     """Road map of true vs detected anomalies for one run and vehicle.
 
     Top: position along the road (x) against the two wheel tracks (rows); true anomalies are
@@ -299,10 +297,8 @@ def plot_anomaly_map(map_example: dict, path) -> Path:
 
     Parameters
     ----------
-    map_example : dict
-        ``"truth"``: true anomalies (``start``, ``end``, ``center`` in m, ``side``, ``kind``, ``depth`` in m);
-        ``"detections"``: per estimator, its detections (``position`` in m, ``side``, ``kind``, ``depth`` in m);
-        optional ``"region"`` (m, the x range shown), ``"run"`` and ``"vehicle"`` (for the title).
+    map_example : AnomalyMap
+        True anomalies, every estimator's detections, the region shown (m), run and vehicle.
     path : str or Path
         Output image (format from the suffix, 120 dpi).
 
@@ -312,22 +308,22 @@ def plot_anomaly_map(map_example: dict, path) -> Path:
         ``path``.
     """
     fig, (ax, ax2) = plt.subplots(2, 1, figsize=(11, 5.5), sharex=True, gridspec_kw={"height_ratios": [1.2, 1]})
-    _draw_true_anomalies(ax, ax2, map_example["truth"])
-    _draw_detections(ax, ax2, map_example["detections"])
+    _draw_true_anomalies(ax, ax2, map_example.truth)
+    _draw_detections(ax, ax2, map_example.detections)
     _label_map(ax, ax2, map_example)
     return save_figure(fig, path)
 
 
-def _plot_f1_vs(rows: list[dict], key: str, path, xlabel: str, *, scale: float = 1.0, logx: bool = False,
+def _plot_f1_vs(rows: list, key: str, path, xlabel: str, *, scale: float = 1.0, logx: bool = False,
                 title: str = "") -> Path:
     fig, ax = plt.subplots(figsize=(7, 4))
-    names = list(dict.fromkeys(r["estimator"] for r in rows))
+    names = list(dict.fromkeys(r.estimator for r in rows))
     for name in names:
-        sel = sorted((r for r in rows if r["estimator"] == name), key=lambda r: r[key])
-        x = np.array([r[key] for r in sel]) * scale
+        sel = sorted((r for r in rows if r.estimator == name), key=lambda r: getattr(r, key))
+        x = np.array([getattr(r, key) for r in sel]) * scale
         color, marker, label = _ESTIMATOR_STYLE.get(name, (None, "x", name))
-        ax.plot(x, [r["f1"] for r in sel], "-", marker=marker, color=color, label=f"{label}: F1")
-        ax.plot(x, [r["recall"] for r in sel], ":", marker=marker, color=color, alpha=0.6, mfc="none",
+        ax.plot(x, [r.f1 for r in sel], "-", marker=marker, color=color, label=f"{label}: F1")
+        ax.plot(x, [r.recall for r in sel], ":", marker=marker, color=color, alpha=0.6, mfc="none",
                 label=f"{label}: recall")
     ax.axhline(0.9, color="k", ls="--", lw=0.8)
     if logx:
@@ -341,13 +337,13 @@ def _plot_f1_vs(rows: list[dict], key: str, path, xlabel: str, *, scale: float =
     return save_figure(fig, path)
 
 
-def plot_f1_vs_depth(rows: list[dict], path) -> Path:
+def plot_f1_vs_depth(rows: list, path) -> Path:
     """F1 (solid) and recall (dotted) of anomaly detection per estimator vs anomaly depth.
 
     Parameters
     ----------
-    rows : list of dict
-        ``AnomalyStudyResult.depth_rows`` (``depth_m``, ``estimator``, ``f1``, ``recall``).
+    rows : list of DepthDetectionRow
+        ``AnomalyStudyResult.depth_rows``.
     path : str or Path
         Output image.
 
@@ -359,13 +355,13 @@ def plot_f1_vs_depth(rows: list[dict], path) -> Path:
                        title="Anomaly detection vs depth (dashed: F1 = 0.9)")
 
 
-def plot_f1_vs_noise(rows: list[dict], path) -> Path:
+def plot_f1_vs_noise(rows: list, path) -> Path:
     """F1 (solid) and recall (dotted) per estimator vs accelerometer noise std.
 
     Parameters
     ----------
-    rows : list of dict
-        ``AnomalyStudyResult.noise_rows`` (``sensor_noise_std``, ``estimator``, ``f1``, ``recall``).
+    rows : list of NoiseDetectionRow
+        ``AnomalyStudyResult.noise_rows``.
     path : str or Path
         Output image.
 

@@ -1,11 +1,15 @@
 """Run records shared by every report: CSV of every plotted number, ``config.json`` and Markdown tables.
 
-Every run writes its seed, full configuration and the package version next to its outputs.
+Every run writes its seed, full configuration and the package version next to its outputs. A CSV
+with fixed columns is a list of frozen row dataclasses (the fields are the columns, in order)
+written by :func:`write_rows`; tables whose columns depend on the run (one per drive or condition)
+are dicts with the column list their result type computes, written by :func:`write_csv`.
 """
 
 from __future__ import annotations
 
 import csv
+import dataclasses
 import json
 import platform
 import sys
@@ -15,7 +19,7 @@ import numpy as np
 
 from .. import __version__
 
-__all__ = ["write_csv", "write_config", "markdown_table", "fmt", "output_dir", "run_header"]
+__all__ = ["write_rows", "row_columns", "write_csv", "write_config", "markdown_table", "fmt", "output_dir", "run_header"]
 
 
 def _plain(value):
@@ -83,6 +87,49 @@ def write_csv(path, rows: list[dict], columns: list[str] | None = None) -> Path:
     return path
 
 
+def row_columns(row_type: type) -> list[str]:
+    """The CSV columns of a row type: its dataclass fields, in order.
+
+    Parameters
+    ----------
+    row_type : type
+        A dataclass.
+
+    Returns
+    -------
+    list of str
+    """
+    return [f.name for f in dataclasses.fields(row_type)]
+
+
+def write_rows(path, rows, row_type: type) -> Path:
+    """Write typed rows to CSV: the header is ``row_type``'s fields, each row one instance.
+
+    Parameters
+    ----------
+    path : str or Path
+        Output file (overwritten).
+    rows : sequence of row_type
+        Frozen dataclass instances; floats are written as by :func:`write_csv`.
+    row_type : type
+        The rows' dataclass (gives the header even without rows).
+
+    Returns
+    -------
+    Path
+        ``path``.
+
+    Raises
+    ------
+    TypeError
+        A row is not a ``row_type``.
+    """
+    for r in rows:
+        if type(r) is not row_type:
+            raise TypeError(f"rows must be {row_type.__name__}, got {type(r).__name__}")
+    return write_csv(path, [dataclasses.asdict(r) for r in rows], row_columns(row_type))
+
+
 def write_config(path, *, command: str, seed: int | None, config: dict, extra: dict | None = None) -> Path:
     """Write ``config.json``: command, seed, configuration, package and platform versions.
 
@@ -125,10 +172,10 @@ def markdown_table(rows: list[dict], columns: list[str], headers: list[str] | No
 
     Parameters
     ----------
-    rows : list of dict
-        One dict per table row, holding every key of ``columns``.
+    rows : list of dict or of dataclass instances
+        One per table row, holding every key (field) of ``columns``.
     columns : list of str
-        Keys shown, in order; values formatted by :func:`fmt` (numbers to 4 significant digits).
+        Keys (fields) shown, in order; values formatted by :func:`fmt` (numbers to 4 significant digits).
     headers : list of str, optional
         Header text of each column (default: ``columns``).
 
@@ -138,6 +185,7 @@ def markdown_table(rows: list[dict], columns: list[str], headers: list[str] | No
         The table, one line per row, without a trailing newline.
     """
     headers = headers or columns
+    rows = [dataclasses.asdict(r) if dataclasses.is_dataclass(r) else r for r in rows]
     out = ["| " + " | ".join(headers) + " |", "|" + "---|" * len(headers)]
     for r in rows:
         out.append("| " + " | ".join(fmt(r[c]) for c in columns) + " |")

@@ -10,27 +10,18 @@ from pathlib import Path
 import numpy as np
 
 from . import plotting
-from .records import markdown_table, output_dir, write_config, write_csv
+from ..experiments.reproduction_rows import BoundRow, FleetRow, MseRow, RunTraces, TraceRow
+from .records import markdown_table, output_dir, write_config, write_rows
 
-__all__ = ["MSE_COLUMNS", "BOUND_COLUMNS", "HEADLINE_COLUMNS", "reproduction_summary", "write_reproduction"]
+__all__ = ["headline_table", "reproduction_summary", "write_reproduction"]
 
-#: Columns of ``mse.csv`` (and ``mse_measured.csv``): per-vehicle MSEs in (m/s)^2, NMSEs and exactness figures.
-MSE_COLUMNS = ["vehicle", "mse_mean", "mse_std", "mse_no_privacy_mean", "observer_only_mse_mean",
-               "observer_only_mse_std", "own_inversion_mse_mean", "own_posterior_inversion_mse_mean",
-               "fused_mse_mean", "fused_posterior_mse_mean", "centralized_mse_mean", "oracle_bound_mse_mean",
-               "nmse_mean", "observer_only_nmse_mean", "own_inversion_nmse_mean", "own_posterior_inversion_nmse_mean",
-               "fused_nmse_mean", "fused_posterior_nmse_mean", "centralized_nmse_mean", "oracle_bound_nmse_mean",
-               "max_rel_diff_privacy", "theorem1_e_max", "theorem1_wf_max", "theorem1_e_band_max",
-               "theorem1_wf_band_max"]
-#: Columns of ``bound_check.csv``.
-BOUND_COLUMNS = ["estimator", "vehicle", "mean_excess", "stderr", "z"]
-#: Columns of the headline table in the report: (column, header).
-HEADLINE_COLUMNS = [("vehicle", "vehicle"), ("observer_only_mse_mean", "observer only"),
-                    ("own_inversion_mse_mean", "own inversion"),
-                    ("own_posterior_inversion_mse_mean", "own posterior inv."), ("mse_mean", "Alg. 1+2"),
-                    ("mse_no_privacy_mean", "Alg. 1"), ("fused_mse_mean", "fused"),
-                    ("fused_posterior_mse_mean", "fused (posterior)"), ("centralized_mse_mean", "centralized"),
-                    ("oracle_bound_mse_mean", "oracle bound"), ("max_rel_diff_privacy", "max rel diff privacy")]
+#: The headline table of the report and the CLI: (:class:`MseRow` field, header).
+_HEADLINE = (("vehicle", "vehicle"), ("observer_only_mse_mean", "observer only"),
+             ("own_inversion_mse_mean", "own inversion"),
+             ("own_posterior_inversion_mse_mean", "own posterior inv."), ("mse_mean", "Alg. 1+2"),
+             ("mse_no_privacy_mean", "Alg. 1"), ("fused_mse_mean", "fused"),
+             ("fused_posterior_mse_mean", "fused (posterior)"), ("centralized_mse_mean", "centralized"),
+             ("oracle_bound_mse_mean", "oracle bound"), ("max_rel_diff_privacy", "max rel diff privacy"))
 #: Fleet columns shown in the report (``fleet.csv`` holds every parameter).
 _FLEET_REPORT_COLUMNS = ["vehicle", "true_sprung_mass", "estimated_sprung_mass", "true_stiffness",
                          "estimated_stiffness", "true_damping", "estimated_damping"]
@@ -38,19 +29,37 @@ _FLEET_REPORT_COLUMNS = ["vehicle", "true_sprung_mass", "estimated_sprung_mass",
 _N_TRACE_FIGURES = 3
 
 
-def _mean_over(key: str, rows: list[dict]) -> float:
-    """Mean of ``row[key]`` over ``rows`` (NaN without rows)."""
-    return float(np.mean([r[key] for r in rows])) if rows else float("nan")
+def _mean_over(key: str, rows: list[MseRow]) -> float:
+    """Mean of the field ``key`` over ``rows`` (NaN without rows)."""
+    return float(np.mean([getattr(r, key) for r in rows])) if rows else float("nan")
 
 
-def reproduction_summary(rows: list[dict], bound_rows: list[dict] | None = None) -> dict:
+def headline_table(rows: list[MseRow]) -> tuple[list[str], list[tuple]]:
+    """The headline columns of ``mse.csv`` rows, for the report and the command line.
+
+    Parameters
+    ----------
+    rows : list of MseRow
+        :meth:`~roadcollab.experiments.reproduction.ReproductionResult.table` rows.
+
+    Returns
+    -------
+    headers : list of str
+        Column headers.
+    values : list of tuple
+        Per row, the vehicle number then the MSEs ((m/s)^2) and the privacy figure.
+    """
+    return [h for _, h in _HEADLINE], [tuple(getattr(r, name) for name, _ in _HEADLINE) for r in rows]
+
+
+def reproduction_summary(rows: list[MseRow], bound_rows: list[BoundRow] | None = None) -> dict:
     """Headline numbers of a reproduction (used by the report and the CLI).
 
     Parameters
     ----------
-    rows : list of dict
+    rows : list of MseRow
         :meth:`~roadcollab.experiments.reproduction.ReproductionResult.table` rows.
-    bound_rows : list of dict, optional
+    bound_rows : list of BoundRow, optional
         :meth:`~roadcollab.experiments.reproduction.ReproductionResult.bound_check` rows.
 
     Returns
@@ -63,34 +72,34 @@ def reproduction_summary(rows: list[dict], bound_rows: list[dict] | None = None)
     later = rows[1:]
     k5 = min(5, V) - 1
     out = {
-        "vehicle1_observer_mse": v1["observer_only_mse_mean"],
-        "vehicle1_observer_over_own_inversion": v1["observer_only_mse_mean"] / v1["own_inversion_mse_mean"],
+        "vehicle1_observer_mse": v1.observer_only_mse_mean,
+        "vehicle1_observer_over_own_inversion": v1.observer_only_mse_mean / v1.own_inversion_mse_mean,
         "algorithm1_mean_mse": _mean_over("mse_mean", later),
-        "vehicle1_observer_over_algorithm1": v1["observer_only_mse_mean"] / _mean_over("mse_mean", later),
+        "vehicle1_observer_over_algorithm1": v1.observer_only_mse_mean / _mean_over("mse_mean", later),
         "observer_over_algorithm1_same_vehicles":
             _mean_over("observer_only_mse_mean", later) / _mean_over("mse_mean", later),
         "own_inversion_over_algorithm1_same_vehicles":
             _mean_over("own_inversion_mse_mean", later) / _mean_over("mse_mean", later),
         "own_posterior_inversion_over_algorithm1_same_vehicles":
             _mean_over("own_posterior_inversion_mse_mean", later) / _mean_over("mse_mean", later),
-        "max_rel_diff_privacy": max(r["max_rel_diff_privacy"] for r in rows),
-        "theorem1_e_max": max(r["theorem1_e_max"] for r in rows),
-        "theorem1_wf_max": max(r["theorem1_wf_max"] for r in rows),
-        "theorem1_e_band_max": max(r["theorem1_e_band_max"] for r in rows),
-        "theorem1_wf_band_max": max(r["theorem1_wf_band_max"] for r in rows),
-        "fused_over_centralized_last": rows[-1]["fused_mse_mean"] / rows[-1]["centralized_mse_mean"],
-        "algorithm1_over_fused_last": rows[-1]["mse_mean"] / rows[-1]["fused_mse_mean"],
-        "fused_posterior_over_centralized_last": rows[-1]["fused_posterior_mse_mean"] / rows[-1]["centralized_mse_mean"],
-        "algorithm1_over_fused_posterior_last": rows[-1]["mse_mean"] / rows[-1]["fused_posterior_mse_mean"],
-        "vehicle1_observer_over_fused5": v1["observer_only_mse_mean"] / rows[k5]["fused_mse_mean"],
-        "vehicle1_observer_over_fused_posterior5": v1["observer_only_mse_mean"] / rows[k5]["fused_posterior_mse_mean"],
+        "max_rel_diff_privacy": max(r.max_rel_diff_privacy for r in rows),
+        "theorem1_e_max": max(r.theorem1_e_max for r in rows),
+        "theorem1_wf_max": max(r.theorem1_wf_max for r in rows),
+        "theorem1_e_band_max": max(r.theorem1_e_band_max for r in rows),
+        "theorem1_wf_band_max": max(r.theorem1_wf_band_max for r in rows),
+        "fused_over_centralized_last": rows[-1].fused_mse_mean / rows[-1].centralized_mse_mean,
+        "algorithm1_over_fused_last": rows[-1].mse_mean / rows[-1].fused_mse_mean,
+        "fused_posterior_over_centralized_last": rows[-1].fused_posterior_mse_mean / rows[-1].centralized_mse_mean,
+        "algorithm1_over_fused_posterior_last": rows[-1].mse_mean / rows[-1].fused_posterior_mse_mean,
+        "vehicle1_observer_over_fused5": v1.observer_only_mse_mean / rows[k5].fused_mse_mean,
+        "vehicle1_observer_over_fused_posterior5": v1.observer_only_mse_mean / rows[k5].fused_posterior_mse_mean,
         "fused5_vehicles": k5 + 1,
-        "oracle_over_fused_last": rows[-1]["oracle_bound_mse_mean"] / rows[-1]["fused_mse_mean"],
+        "oracle_over_fused_last": rows[-1].oracle_bound_mse_mean / rows[-1].fused_mse_mean,
     }
     if bound_rows:
-        worst = min(bound_rows, key=lambda r: r["z"])
-        out.update(bound_min_z=worst["z"], bound_min_z_estimator=worst["estimator"],
-                   bound_min_z_vehicle=worst["vehicle"], bound_beaten=bool(worst["z"] < -3))
+        worst = min(bound_rows, key=lambda r: r.z)
+        out.update(bound_min_z=worst.z, bound_min_z_estimator=worst.estimator,
+                   bound_min_z_vehicle=worst.vehicle, bound_beaten=bool(worst.z < -3))
     return out
 
 
@@ -132,44 +141,23 @@ def _summary_lines(summary: dict, n_vehicles: int) -> list[str]:
         if "bound_min_z" in s else [])
 
 
-def _headline_table(rows: list[dict]) -> str:
-    """The report's MSE table: :data:`HEADLINE_COLUMNS` of ``mse.csv`` rows."""
-    return markdown_table(rows, [c for c, _ in HEADLINE_COLUMNS], [h for _, h in HEADLINE_COLUMNS])
+def _headline_table(rows: list[MseRow]) -> str:
+    """The report's MSE table: the :func:`headline_table` of ``mse.csv`` rows."""
+    headers, values = headline_table(rows)
+    return markdown_table([dict(zip(headers, v)) for v in values], headers)
 
 
-def _trace_rows(traces: dict, j: int) -> list[dict]:
-    """CSV rows of Fig. ``5 + j``: time (s), band-limited truth and vehicle ``j``'s estimates (m/s) per track."""
-    t = traces["time"]
-    truth, plain, private = traces["truth"], traces["plain"][j], traces["private"][j]
-    return [{"time_s": float(t[k]), "actual_left": truth[k, 0], "actual_right": truth[k, 1],
-             "no_privacy_left": plain[k, 0], "no_privacy_right": plain[k, 1],
-             "privacy_left": private[k, 0], "privacy_right": private[k, 1]}
-            for k in range(t.size)]
-
-
-def _write_trace_figures(traces: dict, out: Path) -> list[str]:
+def _write_trace_figures(traces: RunTraces, out: Path) -> list[str]:
     """Figs. 5-7 (a 3 s window of run 1) with their CSVs; returns the file stems written."""
     names = []
-    for j in range(min(_N_TRACE_FIGURES, len(traces["plain"]))):
+    for j in range(min(_N_TRACE_FIGURES, len(traces.plain))):
         name = f"fig{5 + j}_vehicle{j + 1}"
-        write_csv(out / f"{name}.csv", _trace_rows(traces, j))
-        t = traces["time"]
-        t0 = float(t[0])
-        plotting.plot_estimates(t, traces["truth"], traces["plain"][j], traces["private"][j], j + 1,
+        write_rows(out / f"{name}.csv", traces.to_rows(j), TraceRow)
+        t0 = float(traces.time[0])
+        plotting.plot_estimates(traces.time, traces.truth, traces.plain[j], traces.private[j], j + 1,
                                 out / f"{name}.png", window=(t0 + 5.0, t0 + 8.0))
         names.append(name)
     return names
-
-
-def _fleet_rows(fleet) -> list[dict]:
-    """``fleet.csv`` rows: vehicle number, true and estimated suspension parameters."""
-    rows = []
-    for v in fleet:
-        row = {"vehicle": v.index + 1}
-        row.update({f"true_{k}": x for k, x in v.true_params.as_dict().items()})
-        row.update({f"estimated_{k}": x for k, x in v.estimated_params.as_dict().items()})
-        rows.append(row)
-    return rows
 
 
 def _intro_lines(result, command: str, elapsed: float) -> list[str]:
@@ -203,7 +191,7 @@ def _intro_lines(result, command: str, elapsed: float) -> list[str]:
     ]
 
 
-def _results_lines(summary: dict, rows: list[dict], n_vehicles: int, trace_figures: list[str]) -> list[str]:
+def _results_lines(summary: dict, rows: list[MseRow], n_vehicles: int, trace_figures: list[str]) -> list[str]:
     """Summary bullets, the MSE table and Figs. 4-7."""
     lines = [
         "## Summary",
@@ -234,7 +222,7 @@ def _measured_section(measured, out: Path) -> list[str]:
     """The run on the shipped measured profile: writes ``mse_measured.csv`` and its figure, returns report lines."""
     mres, mel = measured
     mrows = mres.table()
-    write_csv(out / "mse_measured.csv", mrows, MSE_COLUMNS)
+    write_rows(out / "mse_measured.csv", mrows, MseRow)
     plotting.plot_fusion(mrows, out / "fig_measured_mse.png")
     ms = reproduction_summary(mrows, mres.bound_check())
     mc = mres.config
@@ -255,7 +243,7 @@ def _measured_section(measured, out: Path) -> list[str]:
     ]
 
 
-def _fleet_lines(fleet_rows: list[dict]) -> list[str]:
+def _fleet_lines(fleet_rows: list[FleetRow]) -> list[str]:
     """The fleet table of the report."""
     return ["## Fleet (`fleet.csv`)", "", markdown_table(fleet_rows, _FLEET_REPORT_COLUMNS), ""]
 
@@ -288,13 +276,13 @@ def write_reproduction(result, out, *, command: str, elapsed: float, measured=No
     out = output_dir(out)
     rows = result.table()
     bound = result.bound_check()
-    write_csv(out / "mse.csv", rows, MSE_COLUMNS)
-    write_csv(out / "bound_check.csv", bound, BOUND_COLUMNS)
+    write_rows(out / "mse.csv", rows, MseRow)
+    write_rows(out / "bound_check.csv", bound, BoundRow)
     plotting.plot_mse(rows, out / "fig4_mse.png")
     plotting.plot_fusion(rows, out / "fig_fusion.png")
     trace_figures = _write_trace_figures(result.runs[0].traces, out)
-    fleet_rows = _fleet_rows(result.fleet)
-    write_csv(out / "fleet.csv", fleet_rows)
+    fleet_rows = result.fleet_rows()
+    write_rows(out / "fleet.csv", fleet_rows, FleetRow)
     summary = reproduction_summary(rows, bound)
     write_config(out / "config.json", command=command, seed=result.seed, config=result.config.to_dict(),
                  extra={"elapsed_s": elapsed, "summary": summary})

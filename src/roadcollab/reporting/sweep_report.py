@@ -9,9 +9,9 @@ from __future__ import annotations
 import dataclasses
 
 from ..experiments.sweep_findings import SweepFinding
-from ..experiments.sweep_result import SweepResult
+from ..experiments.sweep_result import SweepResult, SweepRow
 from .plotting_sweep import plot_sweep
-from .records import markdown_table, output_dir, write_config, write_csv
+from .records import markdown_table, output_dir, write_config, write_rows
 
 __all__ = ["write_sweep", "findings_markdown"]
 
@@ -164,7 +164,7 @@ def _answer_lines(findings: list[SweepFinding], n_vehicles: int) -> list[str]:
     ]
 
 
-def _table_lines(rows: list[dict], n_vehicles: int) -> list[str]:
+def _table_lines(rows: list[SweepRow], n_vehicles: int) -> list[str]:
     """The report's copy of ``sweep.csv`` (the columns of :data:`_TABLE_COLUMNS`)."""
     return [
         "## Table (`sweep.csv`)",
@@ -221,9 +221,9 @@ def write_sweep(result: SweepResult, out, *, command: str, elapsed: float) -> li
     """
     out = output_dir(out)
     cfg = result.config
-    rows = result.to_rows()
-    write_csv(out / "sweep.csv", rows)
-    plot_sweep(result.table(), out / "sweep.png")
+    rows = result.table()
+    write_rows(out / "sweep.csv", rows, SweepRow)
+    plot_sweep(rows, out / "sweep.png")
     findings = result.findings(threshold=THRESHOLD)
     write_config(out / "config.json", command=command, seed=result.seed, config=cfg.to_dict(),
                  extra={"elapsed_s": elapsed, "n_grid_points": len(rows),
