@@ -30,7 +30,6 @@ Vehicle 1 has ``w^f = 0``.
 from __future__ import annotations
 
 import functools
-from dataclasses import dataclass
 
 import numpy as np
 
@@ -45,6 +44,7 @@ from ..estimation.grid import SegmentGrid
 from ..lti.batch2x2 import inv2x2, matvec, receiver_z
 from ..lti.response import FrequencyResponseCache
 from ..models.vehicle import FleetSpec, Vehicle
+from .vehicle_estimate import VehicleEstimate
 
 __all__ = ["VehicleEstimate", "CollaborativeEstimator", "learning_filters"]
 
@@ -65,47 +65,6 @@ def learning_filters(T_j, S_j, T_prev, S_prev, weight):
     """
     G = -(inv2x2(S_j) @ T_j @ inv2x2(T_prev)) * weight[:, None, None]   # = L2
     return -(G @ S_prev), G
-
-
-@dataclass(frozen=True, eq=False)
-class VehicleEstimate:
-    """Vehicle ``j``'s results on one segment.
-
-    Attributes
-    ----------
-    observer_only : (N, 2) ndarray
-        ``D_j y_j``, m/s: the vehicle alone.
-    W_obs : (K, 2) complex ndarray
-        Spectrum of ``D_j y_j``.
-    estimate : (N, 2) ndarray
-        ``w_hat_j = D_j y_j + w^f_j``, m/s: Algorithm 1.
-    W_hat, E, Wf : (K, 2) complex ndarray
-        Spectra of ``w_hat_j``, ``e_j`` and ``w^f_j`` on the grid (all bins).
-    Y : (K, 2) complex ndarray
-        Spectrum of the measurement ``y_j``.
-    """
-
-    W_obs: np.ndarray
-    W_hat: np.ndarray
-    Wf: np.ndarray
-    Y: np.ndarray
-    P_f: np.ndarray
-    grid: SegmentGrid
-    offset: np.ndarray
-
-    # Time signals and the residual are computed on first use: a car that only forwards a
-    # message needs neither (saves two inverse FFTs per segment).
-    @functools.cached_property
-    def observer_only(self) -> np.ndarray:
-        return self.grid.irfft(self.W_obs, self.grid.n_samples) + self.offset
-
-    @functools.cached_property
-    def estimate(self) -> np.ndarray:
-        return self.grid.irfft(self.W_hat, self.grid.n_samples) + self.offset
-
-    @functools.cached_property
-    def E(self) -> np.ndarray:
-        return self.Y - matvec(self.P_f, self.W_hat)
 
 
 class CollaborativeEstimator:
