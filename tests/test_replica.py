@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 from roadcollab.errors import ParameterError
+from roadcollab.experiments.config import ExperimentConfig
 from roadcollab.experiments.replica_study import ReplicaRow, run_replica_study
 from roadcollab.experiments.security_segment import target_poles
 from roadcollab.experiments.security_study import AttackStudyConfig, _study_pipeline
@@ -127,8 +128,8 @@ def test_composition_rejects_bad_arguments():
 
 
 def test_replica_study_rows():
-    res = run_replica_study(AttackStudyConfig(), 0, n_runs=2, n_targets=1, epsilons=(10.0,), linked_segments=(2,),
-                            max_nfev=40)
+    small = AttackStudyConfig(experiment=ExperimentConfig(n_vehicles=3, segment_length=100.0))
+    res = run_replica_study(small, 0, n_runs=2, n_targets=1, epsilons=(10.0,), linked_segments=(2,), max_nfev=3)
     rows = res.to_rows()
     assert {(r["mechanism"], r["road"], r["segments"]) for r in rows} == {
         (m, road, s) for m in ("hardened", "dp(eps=10)") for road in ("true", "fused") for s in (1, 2)}
