@@ -156,8 +156,9 @@ def replica_fit(segments, grid: SegmentGrid, nominal: HalfCarParameters, *, max_
     nominal : HalfCarParameters
         The fleet's nominal parameters: the starting point of both parameter sets.
     max_nfev : int
-        Budget of residual evaluations of :func:`scipy.optimize.least_squares` (>= 1; a Jacobian
-        by finite differences costs 11).
+        Budget of :func:`scipy.optimize.least_squares` (>= 1): residual evaluations not counting
+        the 10 extra ones of each finite-difference Jacobian (scipy's ``trf`` convention), so a
+        fit costs up to about ``11 * max_nfev`` evaluations.
     x_scale : float
         Characteristic step of the log-parameters (> 0).
     whiten : bool
