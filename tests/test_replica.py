@@ -1,0 +1,140 @@
+"""The replica attack (privacy.replica) and the composition of the Gaussian mechanism
+(privacy.baselines.dp_composition)."""
+
+import math
+
+import numpy as np
+import pytest
+
+from roadcollab.errors import ParameterError
+from roadcollab.experiments.config import ExperimentConfig
+from roadcollab.experiments.replica_study import ReplicaRow, run_replica_study
+from roadcollab.experiments.security_segment import target_poles
+from roadcollab.experiments.security_study import AttackStudyConfig, _study_pipeline
+from roadcollab.models.simulation import simulate_response
+from roadcollab.privacy.attacks import pole_errors
+from roadcollab.privacy.baselines.dp import DPSpec, gaussian_sigma
+from roadcollab.privacy.baselines.dp_composition import composed_epsilon, composition_table, gaussian_epsilon
+from roadcollab.privacy.replica import attack_replica, attack_replica_linked, replica_fit, replica_z
+from roadcollab.privacy.physical_fit import _log_ratios
+
+
+@pytest.fixture(scope="module")
+def study():
+    cfg = AttackStudyConfig()
+    pipe = _study_pipeline(cfg, 0)
+    return cfg, pipe, target_poles(pipe)
+
+
+def _hardened_z(pipe, j, w, noise=None):
+    est, g = pipe.estimators[j], pipe.grid
+    y = simulate_response(est.true_plant, w)
+    if noise is not None:
+        y = y + noise
+    return g.irfft(est.invert(g.rfft(y)))
+
+
+def test_replica_z_reproduces_the_receivers_inversion(study):
+    """Re-running the pipeline with the vehicle's own parameters gives its z to round-off."""
+    cfg, pipe, _ = study
+    g, est = pipe.grid, pipe.estimators[1]
+    w = pipe.road(np.random.default_rng(3)).velocity
+    Z = replica_z(w, g, _log_ratios(est.vehicle.true_params), _log_ratios(est.vehicle.estimated_params))
+    z = _hardened_z(pipe, 1, w)
+    assert np.max(np.abs(g.irfft(Z) - z)) < 1e-9 * np.max(np.abs(z))
+
+
+def test_replica_recovers_noiseless_hardened_poles(study):
+    cfg, pipe, targets = study
+    w = pipe.road(np.random.default_rng(11)).velocity
+    for j in (0, 2):
+        poles = attack_replica(_hardened_z(pipe, j, w), w, pipe.grid, cfg.experiment.fleet.nominal)
+        assert np.max(pole_errors(poles, targets[j])) < 1e-3
+
+
+def test_replica_linked_recovers_noisy_poles(study):
+    cfg, pipe, targets = study
+    rng = np.random.default_rng(12)
+    segs = []
+    for _ in range(2):
+        w = pipe.road(rng).velocity
+        n = cfg.experiment.sensor_noise_std * rng.standard_normal(w.shape)
+        segs.append((_hardened_z(pipe, 1, w, n), w))
+    poles = attack_replica_linked(segs, pipe.grid, cfg.experiment.fleet.nominal)
+    assert np.max(pole_errors(poles, targets[1])) < 1e-2
+
+
+def test_replica_on_pure_noise_is_finite(study):
+    cfg, pipe, _ = study
+    rng = np.random.default_rng(13)
+    g = pipe.grid
+    fit = replica_fit([(rng.standard_normal((g.nfft, 2)), rng.standard_normal((g.n_samples, 2)))], g,
+                      cfg.experiment.fleet.nominal, max_nfev=30)
+    assert fit.poles.size in (0, 4)
+    assert np.all(np.isfinite(fit.poles))
+    assert np.all(np.isfinite(pole_errors(fit.poles, study[2][0]))) or fit.poles.size == 0
+
+
+def test_replica_rejects_bad_arguments(study):
+    cfg, pipe, _ = study
+    g, nom = pipe.grid, cfg.experiment.fleet.nominal
+    with pytest.raises(ParameterError, match="segments must not be empty"):
+        replica_fit([], g, nom)
+    with pytest.raises(ParameterError, match="grid must be a SegmentGrid"):
+        attack_replica(np.zeros((10, 2)), np.zeros((10, 2)), "grid", nom)
+    with pytest.raises(ParameterError, match=r"road_w must have at most"):
+        attack_replica(np.zeros((10, 2)), np.zeros((g.nfft + 1, 2)), g, nom)
+    with pytest.raises(ParameterError, match="nominal must be a HalfCarParameters"):
+        attack_replica(np.zeros((10, 2)), np.zeros((10, 2)), g, None)
+
+
+@pytest.mark.parametrize("eps", [0.5, 2.0, 10.0])
+def test_single_gaussian_matches_balle_wang(eps):
+    """n = 1: the accountant's epsilon of the noise gaussian_sigma calibrates is eps back."""
+    m = gaussian_sigma(eps, 1e-5, 1.0)
+    assert gaussian_epsilon(m, 1e-5) == pytest.approx(eps, rel=1e-9)
+    assert composed_epsilon(m, 1, 1e-5) == pytest.approx(eps, rel=1e-4)
+    assert composed_epsilon(m, 1, 1e-5, accountant="rdp") >= eps
+
+
+@pytest.mark.parametrize("m, n", [(2.0, 10), (0.9, 4)])
+def test_composition_is_one_gaussian_at_sigma_over_sqrt_n(m, n):
+    """n Gaussians of multiplier m compose exactly to one of multiplier m / sqrt(n)."""
+    pld = composed_epsilon(m, n, 1e-5)
+    eps_exact = gaussian_epsilon(m / math.sqrt(n), 1e-5)
+    assert pld == pytest.approx(eps_exact, rel=1e-4)
+    # gaussian_sigma inverted at the composed level gives sigma / sqrt(n) back.
+    assert gaussian_sigma(pld, 1e-5, 1.0) == pytest.approx(m / math.sqrt(n), rel=1e-4)
+    assert composed_epsilon(m, n, 1e-5, accountant="exact") == pytest.approx(eps_exact, rel=1e-12)
+
+
+def test_composition_grows_with_n():
+    rows = composition_table(DPSpec(epsilons=(1.0, 10.0)), (1, 10, 100), accountant="exact")
+    for eps in (1.0, 10.0):
+        tot = [r["epsilon_total"] for r in rows if r["epsilon_per_message"] == eps]
+        assert tot[0] == pytest.approx(eps, rel=1e-9)
+        assert tot[0] < tot[1] < tot[2] <= 100 * eps
+        # Advanced composition: growth about sqrt(n) for small per-message epsilon, never more than n.
+        assert tot[2] > 3 * tot[0]
+
+
+def test_composition_rejects_bad_arguments():
+    with pytest.raises(ParameterError, match="n_messages"):
+        composed_epsilon(1.0, 0, 1e-5)
+    with pytest.raises(ParameterError, match="accountant must be one of"):
+        composed_epsilon(1.0, 1, 1e-5, accountant="moments")
+    with pytest.raises(ParameterError, match="delta"):
+        composed_epsilon(1.0, 1, 1.5)
+
+
+def test_replica_study_rows():
+    small = AttackStudyConfig(experiment=ExperimentConfig(n_vehicles=3, segment_length=100.0))
+    res = run_replica_study(small, 0, n_runs=2, n_targets=1, epsilons=(10.0,), linked_segments=(2,), max_nfev=3)
+    rows = res.to_rows()
+    assert {(r["mechanism"], r["road"], r["segments"]) for r in rows} == {
+        (m, road, s) for m in ("hardened", "dp(eps=10)") for road in ("true", "fused") for s in (1, 2)}
+    keys = {"mechanism", "attack", "road", "segments", "median_rel_pole_error", "success_rate", "n_messages"}
+    assert all(keys <= set(r) for r in rows)
+    assert all(isinstance(r, ReplicaRow) for r in res.rows)
+    dp2 = [r for r in rows if r["mechanism"] == "dp(eps=10)" and r["segments"] == 2][0]
+    assert dp2["epsilon_total"] > 10.0
