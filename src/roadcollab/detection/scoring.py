@@ -19,7 +19,8 @@ from ..errors import ParameterError
 from ..models.anomaly import Anomaly
 from .detector import Detection
 
-__all__ = ["DetectionScores", "MatchResult", "MatchTally", "match_detections"]
+__all__ = ["DetectionScores", "MatchResult", "MatchTally", "match_detections", "new_false_detections",
+           "lost_anomalies"]
 
 
 def _precision_recall_f1(n_matched: int, n_detected: int, n_true: int) -> tuple[float, float, float]:
@@ -308,3 +309,46 @@ class MatchTally:
             The fields of :class:`DetectionScores`.
         """
         return asdict(self.scores())
+
+
+def new_false_detections(attacked, honest, truth, *, tolerance: float = 1.0) -> int:
+    """Detections under attack that match neither a true anomaly nor an honest detection.
+
+    Parameters
+    ----------
+    attacked, honest : sequence of Detection
+        Detections of the same estimator on the same record, with and without the attack.
+    truth : sequence of Anomaly
+        The true anomalies.
+    tolerance : float
+        Largest center distance of a match (same kind), m.
+
+    Returns
+    -------
+    int
+    """
+    tolerance = check_positive("tolerance", tolerance)
+    known = [(a.kind, a.center) for a in truth] + [(h.kind, h.position) for h in honest]
+    return sum(not any(d.kind == k and abs(d.position - c) <= tolerance for k, c in known) for d in attacked)
+
+
+def lost_anomalies(attacked, honest, truth, *, tolerance: float = 1.0) -> int:
+    """True anomalies the honest detections found and the attacked ones do not.
+
+    Parameters
+    ----------
+    attacked, honest : sequence of Detection
+        Detections of the same estimator on the same record, with and without the attack.
+    truth : sequence of Anomaly
+        The true anomalies.
+    tolerance : float
+        Largest center distance of a match, m (as :func:`match_detections`).
+
+    Returns
+    -------
+    int
+    """
+    found = {t for _, t in match_detections(honest, truth, tolerance=tolerance).pairs}
+    kept = {t for _, t in match_detections(attacked, truth, tolerance=tolerance).pairs}
+    return len(found - kept)
+

@@ -29,7 +29,7 @@ from .._validation import check_int
 from ..collaboration.robust_fusion import RobustFusion, fuse_inversions
 from ..detection.corroboration import DEFAULT_MIN_VOTES, corroborate
 from ..detection.detector import Detection, detect_anomalies
-from ..detection.scoring import match_detections
+from ..detection.scoring import lost_anomalies, new_false_detections
 from ..errors import ParameterError
 from ..models.anomaly import Anomaly
 from ..wire.message import InversionMessage
@@ -37,7 +37,7 @@ from .anomaly_config import AnomalyStudyConfig
 from .pipeline import FleetPipeline, fleet_and_run_seeds, record_run
 from .seeds import SeedPlan, run_stream
 
-__all__ = ["FUSION_STRATEGIES", "FUSION_TARGETS", "PoisoningRow", "fusion_poisoning_rows"]
+__all__ = ["FUSION_STRATEGIES", "FUSION_TARGETS", "PoisoningSummary", "fusion_poisoning_rows"]
 
 FUSION_STRATEGIES = ("scale_10", "scale_1e3", "negate", "tone", "noise_3x", "extreme", "count", "fake_pothole",
                      "erase_potholes")
@@ -48,8 +48,9 @@ _TOLERANCE = 1.0         # m, as the anomaly study
 
 
 @dataclass(frozen=True)
-class PoisoningRow:
-    """One row of ``poisoning.csv``: an attack strategy against one target, over the runs.
+class PoisoningSummary:
+    """One row of ``poisoning.csv``: an attack strategy against one target, over the runs (fusion
+    nodes here; receivers from :func:`roadcollab.experiments.poisoning.summarize`).
 
     Attributes
     ----------
@@ -60,6 +61,9 @@ class PoisoningRow:
         Mean over runs of the target's MSE, (m/s)^2.
     ratio : float
         Mean over runs of attacked / honest MSE.
+    max_ratio_to_observer : float
+        Receiver targets: largest over runs of the receiver's MSE over its own observer-only MSE
+        (the target is <= 2); NaN for fusion targets.
     fake_anomalies_reported : int
         Reported anomalies under attack that match neither a true anomaly nor an honest report.
     real_anomalies_lost : int
@@ -74,6 +78,7 @@ class PoisoningRow:
     honest_mse: float
     attacked_mse: float
     ratio: float
+    max_ratio_to_observer: float
     fake_anomalies_reported: int
     real_anomalies_lost: int
     refused: int
@@ -208,22 +213,8 @@ def _score(run: _Run, zf: np.ndarray) -> float:
         return float(np.mean((zf[:n][cfg.scored] - run.truth[cfg.scored]) ** 2))
 
 
-def _new_false(attacked: list[Detection], honest: list[Detection], truth) -> int:
-    def near(d: Detection, centers: list[tuple[str, float]]) -> bool:
-        return any(d.kind == kind and abs(d.position - c) <= _TOLERANCE for kind, c in centers)
-
-    known = [(a.kind, a.center) for a in truth] + [(h.kind, h.position) for h in honest]
-    return sum(not near(d, known) for d in attacked)
-
-
-def _lost(attacked: list[Detection], honest: list[Detection], truth) -> int:
-    found = match_detections(honest, truth, tolerance=_TOLERANCE).pairs
-    kept = {t for _, t in match_detections(attacked, truth, tolerance=_TOLERANCE).pairs}
-    return sum(t not in kept for _, t in found)
-
-
 def fusion_poisoning_rows(config: AnomalyStudyConfig, seed: int, *, n_runs: int = 4, malicious: int = 4,
-                          strategies=FUSION_STRATEGIES) -> list[PoisoningRow]:
+                          strategies=FUSION_STRATEGIES) -> list[PoisoningSummary]:
     """Measure every strategy of one malicious vehicle against both fusion nodes.
 
     Parameters
@@ -241,7 +232,7 @@ def fusion_poisoning_rows(config: AnomalyStudyConfig, seed: int, *, n_runs: int 
 
     Returns
     -------
-    list of PoisoningRow
+    list of PoisoningSummary
         Targets ``fused_mean`` and ``fused_robust`` per strategy.
     """
     n_runs = check_int("n_runs", n_runs, low=1)
@@ -268,17 +259,17 @@ def fusion_poisoning_rows(config: AnomalyStudyConfig, seed: int, *, n_runs: int 
                 own = run.own[:malicious] + [run.detect(z_m)] + run.own[malicious + 1:]
                 zf, refused = node(run, msgs)
                 rep = _reported(target, run, zf, own)
-                acc[s, target].append((mse_h, _score(run, zf), _new_false(rep, rep_h, run.road.anomalies),
-                                       _lost(rep, rep_h, run.road.anomalies), refused))
+                acc[s, target].append((mse_h, _score(run, zf), new_false_detections(rep, rep_h, run.road.anomalies, tolerance=_TOLERANCE),
+                                       lost_anomalies(rep, rep_h, run.road.anomalies, tolerance=_TOLERANCE), refused))
     return [_row(s, t, v) for (s, t), v in acc.items()]
 
 
-def _row(strategy: str, target: str, vals: list[tuple]) -> PoisoningRow:
+def _row(strategy: str, target: str, vals: list[tuple]) -> PoisoningSummary:
     a = np.array([v[:2] for v in vals], float)
     with np.errstate(over="ignore", invalid="ignore"):
         ratio = float(np.mean(a[:, 1] / a[:, 0]))
-    return PoisoningRow(strategy=strategy, target=f"fused_{target}", honest_mse=float(a[:, 0].mean()),
-                        attacked_mse=float(np.mean(a[:, 1])), ratio=ratio,
+    return PoisoningSummary(strategy=strategy, target=f"fused_{target}", honest_mse=float(a[:, 0].mean()),
+                        attacked_mse=float(np.mean(a[:, 1])), ratio=ratio, max_ratio_to_observer=float("nan"),
                         fake_anomalies_reported=int(sum(v[2] for v in vals)),
                         real_anomalies_lost=int(sum(v[3] for v in vals)), refused=int(sum(v[4] for v in vals)),
                         runs=len(vals))

@@ -18,7 +18,12 @@ shapes and limits (issue 9, section 1):
 ``extreme``         every 50th sample of ``e`` (or ``z``) set to 1e300
 ``fake_pothole``    ``(I - D P_hat)^-1 W p`` added to ``z``: a 5 cm x 0.5 m pothole signature ``p`` in
                     the middle of the segment, with the fleet's nominal model (the attacker's
-                    knowledge)
+                    knowledge), so that the receiver's estimate shows it at full depth
+``fake_pothole_direct`` ``W p`` added to ``z`` (small enough to pass as plausible)
+``subtle``          band-limited noise added to ``z``, scaled per guard band to 0.8 x the guard's
+                    threshold of that band's expected honest discrepancy: the largest change the
+                    guard lets through unnoticed (built with the receiver's own guard statistics,
+                    i.e. an attacker who knows them exactly)
 =================== ==========================================================================
 
 Each row gives the receiver's MSE over its own observer-only MSE (target <= 2) with the guard and
@@ -37,6 +42,8 @@ import numpy as np
 from ..collaboration.algorithm1 import CollaborativeEstimator
 from ..collaboration.guard import ReceiverGuard
 from ..collaboration.relay import Exchange, Relay
+from ..detection.detector import detect_anomalies
+from ..detection.scoring import lost_anomalies, new_false_detections
 from ..errors import MessageError, ParameterError
 from ..lti.batch2x2 import inv2x2, matvec
 from ..lti.realisation import StateSpaceData
@@ -44,16 +51,19 @@ from ..models.vehicle import Vehicle
 from ..wire.message import ExchangeMessage, InversionMessage
 from ..wire.protocol import decode, encode
 from .config import ExperimentConfig
+from .fusion_poisoning import PoisoningSummary
 from .pipeline import pipeline_for, record_run
 from .seeds import SeedPlan, run_stream
 
-__all__ = ["CONSTRUCTIONS", "PoisoningRow", "PoisoningResult", "hostile_message", "poisoning_rows"]
+__all__ = ["CONSTRUCTIONS", "PoisoningRow", "PoisoningResult", "hostile_message", "poisoning_rows", "summarize"]
 
 #: Hostile constructions per mechanism.
 CONSTRUCTIONS = {
     "none": ("honest", "scale_z_10", "scale_z_1e3", "scale_e_10", "scale_e_1e3", "tone", "zero_z",
-             "near_singular_T", "static_T", "static_T_tiny", "jordan_trap", "extreme", "fake_pothole"),
-    "hardened": ("honest", "scale_z_10", "scale_z_1e3", "tone", "zero_z", "extreme", "fake_pothole"),
+             "near_singular_T", "static_T", "static_T_tiny", "jordan_trap", "extreme", "fake_pothole",
+             "fake_pothole_direct", "subtle"),
+    "hardened": ("honest", "scale_z_10", "scale_z_1e3", "tone", "zero_z", "extreme", "fake_pothole",
+                 "fake_pothole_direct", "subtle"),
 }
 
 
@@ -74,6 +84,10 @@ class PoisoningRow:
         or ``"accepted"``.
     refused_bands : int
         Bands the guard refused.
+    mse : float
+        Receiver MSE with the guard, (m/s)^2.
+    observer_mse : float
+        Its observer-only MSE, (m/s)^2.
     ratio : float
         Receiver MSE with the guard over its observer-only MSE.
     ratio_unguarded : float
@@ -84,6 +98,11 @@ class PoisoningRow:
         The receiver's next message encodes and decodes.
     reason : str
         The decode error or the guard's first reason ("" if accepted).
+    fake_anomalies : int
+        Detections in the receiver's estimate that match neither a true anomaly nor a detection
+        with the honest message.
+    lost_anomalies : int
+        True anomalies detected with the honest message and not with this one.
     """
 
     mechanism: str
@@ -91,11 +110,15 @@ class PoisoningRow:
     run: int
     outcome: str
     refused_bands: int
+    mse: float
+    observer_mse: float
     ratio: float
     ratio_unguarded: float
     finite: bool
     next_message_encodes: bool
     reason: str
+    fake_anomalies: int
+    lost_anomalies: int
 
 
 @dataclass(frozen=True)
@@ -150,8 +173,9 @@ def _jordan_trap(dt: float) -> StateSpaceData:
     return StateSpaceData(A, B, C, np.eye(2), dt)
 
 
-def _pothole_dz(nominal: CollaborativeEstimator, config: ExperimentConfig) -> np.ndarray:
-    """``(I - D P_hat)^-1 W p``: what adds a pothole's velocity signature ``p`` to the estimate."""
+def _pothole_dz(nominal: CollaborativeEstimator, config: ExperimentConfig) -> tuple[np.ndarray, np.ndarray]:
+    """``(I - D P_hat)^-1 W p`` (what adds a pothole's velocity signature ``p`` to the estimate) and
+    ``W p`` (the signature itself in ``z``), on the padded grid, m/s."""
     g = nominal.grid
     fs, v = config.sample_rate, config.speed
     x = np.arange(g.nfft) * v / fs
@@ -163,12 +187,28 @@ def _pothole_dz(nominal: CollaborativeEstimator, config: ExperimentConfig) -> np
     p[:, 0] = np.gradient(h, 1.0 / fs)                             # left track, m/s
     act = g.active
     M = np.eye(2) - nominal.D_f[act] @ nominal.P_f[act]
+    Wp = g.reg_weight[act][:, None] * g.rfft(p)[act]
     dZ = np.zeros((g.n_bins, 2), complex)
-    dZ[act] = matvec(inv2x2(M), g.reg_weight[act][:, None] * g.rfft(p)[act])
+    dZ[act] = matvec(inv2x2(M), Wp)
+    direct = np.zeros((g.n_bins, 2), complex)
+    direct[act] = Wp
+    return g.irfft(dZ), g.irfft(direct)
+
+
+def _subtle_dz(guard: ReceiverGuard, rng: np.random.Generator, fraction: float = 0.8) -> np.ndarray:
+    """Noise in ``z`` whose power per guard band is ``fraction`` x threshold x the band's expected
+    honest discrepancy: the largest change the guard accepts (m/s, padded grid)."""
+    g = guard.estimator.grid
+    act_idx = np.flatnonzero(g.active)
+    dZ = np.zeros((g.n_bins, 2), complex)
+    for b, expected in zip(guard.bands, guard.band_expected):
+        noise = rng.standard_normal((b.size, 2)) + 1j * rng.standard_normal((b.size, 2))
+        dZ[act_idx[b]] = noise * np.sqrt(fraction * guard.threshold * expected / np.sum(np.abs(noise) ** 2))
     return g.irfft(dZ)
 
 
-def hostile_message(name: str, honest, sender: CollaborativeEstimator, pothole_dz: np.ndarray, z_rms: float):
+def hostile_message(name: str, honest, sender: CollaborativeEstimator, pothole_dz: np.ndarray, z_rms: float,
+                    extra_dz: np.ndarray | None = None):
     """Build one hostile construction from an honest message.
 
     Parameters
@@ -183,6 +223,8 @@ def hostile_message(name: str, honest, sender: CollaborativeEstimator, pothole_d
         The fake pothole's ``z`` perturbation (m/s).
     z_rms : float
         RMS of the honest ``z`` (m/s); the tone has three times this amplitude.
+    extra_dz : (nfft, 2) ndarray, optional
+        The perturbation of ``z`` (m/s) for ``fake_pothole_direct`` and ``subtle``.
 
     Returns
     -------
@@ -214,6 +256,10 @@ def hostile_message(name: str, honest, sender: CollaborativeEstimator, pothole_d
         return _with(honest, **{field: arr})
     if name == "fake_pothole":
         return _add_to_z(honest, pothole_dz, sender)
+    if name in ("fake_pothole_direct", "subtle"):
+        if extra_dz is None:
+            raise ParameterError(f"{name} needs extra_dz (the perturbation of z)")
+        return _add_to_z(honest, extra_dz, sender)
     dt = g.dt
     if name == "near_singular_T":
         T = honest.T
@@ -234,10 +280,10 @@ def _nominal_estimator(config: ExperimentConfig, grid) -> CollaborativeEstimator
     return CollaborativeEstimator(Vehicle(-1, nom, nom), config.noise_model(), grid, gamma=config.gamma)
 
 
-def _attempt(name, honest, sender, dz, z_rms):
+def _attempt(name, honest, sender, dz, z_rms, extra):
     """(message as the receiver decodes it, None) or (None, the decode error)."""
     try:
-        return decode(encode(hostile_message(name, honest, sender, dz, z_rms))), ""
+        return decode(encode(hostile_message(name, honest, sender, dz, z_rms, extra.get(name)))), ""
     except MessageError as err:
         return None, str(err)
 
@@ -250,34 +296,41 @@ def _encodes(message) -> bool:
     return True
 
 
-def _run_constructions(pipe, guard, mech, run, ys, Ys, mse, dz) -> list[PoisoningRow]:
-    """Every construction of ``mech`` against the guard's receiver on one run's records."""
+# Long: one receiver's reaction to every construction, with and without the guard, scored alike.
+def _run_constructions(pipe, guard, mech, run, ys, Ys, score, dz, anomalies) -> list[PoisoningRow]:
+    """Every construction of ``mech`` against the guard's receiver on one run's records
+    (``score(W) -> (mse, detections)``; ``dz``: the amplified and the direct fake pothole)."""
     j = pipe.estimators.index(guard.estimator)
     sender = pipe.estimators[j - 1]
     honest = Relay(pipe.estimators[j - 1:j], Exchange(mech)).step(0, ys[j - 1], Y=Ys[j - 1]).message
     z_rms = float(np.sqrt(np.mean(pipe.grid.irfft(sender.invert(Ys[j - 1])) ** 2)))
+    extra = {"fake_pothole_direct": dz[1], "subtle": _subtle_dz(guard, np.random.default_rng([run, j]))}
     plain = Relay([guard.estimator], Exchange(mech))
     guarded = Relay([guard.estimator], Exchange(mech), guard=[guard])
-    obs = mse(plain.step(0, ys[j], None, Y=Ys[j]).result.W_obs)
-    rows = []
+    obs, _ = score(plain.step(0, ys[j], None, Y=Ys[j]).result.W_obs)
+    rows, honest_dets = [], None
     for name in CONSTRUCTIONS[mech]:
-        msg, err = _attempt(name, honest, sender, dz, z_rms)
+        msg, err = _attempt(name, honest, sender, dz[0], z_rms, extra)
         if msg is None:           # refused at decode: the receiver runs on its own (w^f = 0)
             step, ratio_u, outcome = plain.step(0, ys[j], None, Y=Ys[j]), 1.0, "decode_refused"
         else:
             step = guarded.step(0, ys[j], msg, Y=Ys[j])
             with np.errstate(all="ignore"):     # unguarded: Algorithm 1 as it is (may be NaN)
-                ratio_u = mse(guard.estimator.estimate(None, msg, Y=Ys[j]).W_hat) / obs
+                ratio_u = score(guard.estimator.estimate(None, msg, Y=Ys[j]).W_hat)[0] / obs
             rep = step.guard
             outcome = ("guard_refused" if rep.whole_message_refused else
                        "guard_partial" if rep.refused_bands else "accepted")
             err = rep.reasons[0] if rep.reasons else ""
         est = step.result.W_hat
+        m, dets = score(est)
+        honest_dets = dets if name == "honest" else honest_dets
         rows.append(PoisoningRow(
             mechanism=mech, construction=name, run=run, outcome=outcome,
-            refused_bands=0 if step.guard is None else len(step.guard.refused_bands),
-            ratio=mse(est) / obs, ratio_unguarded=float(ratio_u) if np.isfinite(ratio_u) else float("nan"),
-            finite=bool(np.isfinite(est).all()), next_message_encodes=_encodes(step.message), reason=err))
+            refused_bands=0 if step.guard is None else len(step.guard.refused_bands), mse=m, observer_mse=obs,
+            ratio=m / obs, ratio_unguarded=float(ratio_u) if np.isfinite(ratio_u) else float("nan"),
+            finite=bool(np.isfinite(est).all()), next_message_encodes=_encodes(step.message), reason=err,
+            fake_anomalies=new_false_detections(dets, honest_dets, anomalies),
+            lost_anomalies=lost_anomalies(dets, honest_dets, anomalies)))
     return rows
 
 
@@ -321,10 +374,46 @@ def poisoning_rows(config: ExperimentConfig | None = None, *, seed: int = 0, n_r
         road, ys, Ys = record_run(pipe, run_stream(ss, "road"), run_stream(ss, "noise"), config.sensor_noise_std)
         truth = grid.band_limited(grid.rfft(road.velocity), n)[sl]
 
-        def mse(X):
+        def score(X, road=road):
+            """MSE on the scored stretch and anomaly detections of a spectrum (none if not a road)."""
+            w = grid.band_limited(X, n)
             with np.errstate(all="ignore"):
-                return float(np.mean((grid.band_limited(X, n)[sl] - truth) ** 2))
+                m = float(np.mean((w[sl] - truth) ** 2))
+            if not np.all(np.abs(w) < 1e6):
+                return m, []
+            return m, detect_anomalies(w, positions=road.positions[:n], speed=config.speed,
+                                       sample_rate=config.sample_rate)
 
         for mech in mechanisms:
-            rows.extend(_run_constructions(pipe, guard, mech, run, ys, Ys, mse, dz))
+            rows.extend(_run_constructions(pipe, guard, mech, run, ys, Ys, score, dz, road.anomalies))
     return PoisoningResult(tuple(rows))
+
+
+def summarize(result: PoisoningResult) -> list[PoisoningSummary]:
+    """``poisoning.csv`` rows of a receiver measurement: one per mechanism and construction.
+
+    Parameters
+    ----------
+    result : PoisoningResult
+
+    Returns
+    -------
+    list of PoisoningSummary
+        Target ``receiver_{mechanism}``; ``honest_mse`` is the receiver's MSE with the honest
+        message, ``refused`` counts runs whose message was refused (at decode or by the guard).
+    """
+    out = []
+    keys = list(dict.fromkeys((r.mechanism, r.construction) for r in result.rows))
+    for mech, name in keys:
+        rows = [r for r in result.rows if r.mechanism == mech and r.construction == name]
+        honest = {r.run: r.mse for r in result.rows if r.mechanism == mech and r.construction == "honest"}
+        h = np.array([honest[r.run] for r in rows])
+        a = np.array([r.mse for r in rows])
+        out.append(PoisoningSummary(
+            strategy=name, target=f"receiver_{mech}", honest_mse=float(h.mean()), attacked_mse=float(a.mean()),
+            ratio=float(np.mean(a / h)), max_ratio_to_observer=float(max(r.ratio for r in rows)),
+            fake_anomalies_reported=sum(r.fake_anomalies for r in rows),
+            real_anomalies_lost=sum(r.lost_anomalies for r in rows),
+            refused=sum(r.outcome in ("decode_refused", "guard_refused") for r in rows), runs=len(rows)))
+    return out
+
