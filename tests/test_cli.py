@@ -42,11 +42,21 @@ def test_bad_run_count_is_refused_by_the_parser(tmp_path):
         main(["reproduce", "--runs", "0", "--out", str(tmp_path)])
 
 
-@pytest.mark.parametrize("mechanism", ["none", "paper", "hardened", "fused"])
+@pytest.mark.parametrize("mechanism", ["none", "paper", "hardened", "fused", "secure_aggregation"])
 def test_message_example_decodes(tmp_path, mechanism):
     path = tmp_path / f"{mechanism}.bin"
     assert main(["message", "example", "--mechanism", mechanism, "--out", str(path)]) == 0
     assert protocol.decode(path.read_bytes()).mechanism == mechanism
+
+
+def test_message_example_secure_aggregation_is_a_masked_input(tmp_path, capsys):
+    path = tmp_path / "secagg.bin"
+    assert main(["message", "example", "--mechanism", "secure_aggregation", "--out", str(path), "--seed", "3"]) == 0
+    data = path.read_bytes()
+    msg = protocol.decode(data)
+    assert type(msg).__name__ == "MaskedInput" and msg.vehicle == 1 and msg.y.shape == (600, 2)
+    assert len(data) == 48 + 16 * 600 and protocol.encode(msg) == data
+    assert "MaskedInput" in capsys.readouterr().out
 
 
 def test_readme_api_example_runs():

@@ -12,6 +12,7 @@ from hypothesis import strategies as st
 from roadcollab.wire import protocol
 from roadcollab.errors import MessageError
 from roadcollab.wire.message import ExchangeMessage, InversionMessage
+from roadcollab.wire.secagg import KeyAdvert, MaskedInput, Reveal, SealedShares
 from roadcollab.lti.realisation import StateSpaceData
 from roadcollab.wire.protocol import (
     FORMAT_VERSION,
@@ -219,14 +220,14 @@ def test_version_2_refused():
         decode(bytes(data))
 
 
-@pytest.mark.parametrize("msg_type", [0, 3, 255])
+@pytest.mark.parametrize("msg_type", [0, 7, 255])
 def test_unknown_message_type(msg_type):
     T, S, e, wf = small_parts()
     with pytest.raises(MessageError, match=f"unknown message type {msg_type}"):
         decode(raw_exchange(T, S, e, wf, msg_type=msg_type))
 
 
-@pytest.mark.parametrize("code", [0, 5, 200])
+@pytest.mark.parametrize("code", [0, 6, 200])
 def test_unknown_mechanism(code):
     T, S, e, wf = small_parts()
     with pytest.raises(MessageError, match=f"unknown mechanism code {code}"):
@@ -509,7 +510,14 @@ def _decode_only_message_error(data):
         return None
 
 
+SECAGG = (KeyAdvert, SealedShares, MaskedInput, Reveal)
+
+
 def _check_decoded(msg, data):
+    if isinstance(msg, SECAGG):
+        assert msg.mechanism == "secure_aggregation"
+        assert encode(msg) == bytes(data)
+        return
     for name, arr in arrays_of(msg).items():
         assert np.isfinite(arr).all(), name
     # Whatever decode accepts, encode accepts too, and reproduces the very same bytes.
@@ -563,8 +571,50 @@ def test_fuzz_structured_headers(data):
         _check_decoded(msg, data)
 
 
+@st.composite
+def plausible_secagg(draw):
+    """A secure-aggregation header (types 3-6) with random fields, then a payload of about the right size."""
+    msg_type = draw(st.sampled_from([3, 4, 5, 6]))
+    mech = draw(st.sampled_from([5, 5, 5, 5, 4, 0, 6]))
+    vehicle = draw(st.sampled_from([1, 2, 7]) | st.integers(0, 2**32 - 1))
+    small = st.integers(0, 4) | st.integers(0, 2**32 - 1)
+    n1 = {3: 0, 4: draw(st.sampled_from([2, 3]) | small), 5: draw(st.integers(1, 4) | small)}.get(msg_type)
+    n1 = draw(st.integers(0, 3) | small) if n1 is None else n1
+    n2 = draw(st.integers(0, 3) | small) if msg_type == 6 else draw(st.sampled_from([0, 0, 0, 1]))
+    size = {3: 64, 4: 156, 5: 16 * n1, 6: 70 * (n1 + n2)}[msg_type]
+    size = min(size, 600) + draw(st.sampled_from([0, 0, 0, -1, 1, 70]))
+    declared = max(0, size + draw(st.sampled_from([0, 0, 0, 8, -8])))
+    head = struct.pack("<4sBBBB16sQIIII", MAGIC, 1, msg_type, mech, 0, draw(st.binary(min_size=16, max_size=16)),
+                       declared, vehicle, n1, n2, draw(st.sampled_from([0, 0, 0, 1])))
+    if msg_type == 6 and size > 0:
+        # Entries drawn as values: owners near each other, shares around the field size 2^521 - 1.
+        owners = draw(st.lists(st.integers(0, 6), min_size=n1 + n2, max_size=n1 + n2)) if n1 + n2 <= 8 else []
+        shares = st.integers(0, 2**521) | st.integers(0, 2**528 - 1)
+        body = b"".join(struct.pack("<I", o) + draw(shares).to_bytes(66, "little") for o in owners)
+        if len(body) == size:
+            return head + body
+    return head + draw(st.binary(min_size=max(0, size), max_size=max(0, size)))
+
+
+@FUZZ
+@given(plausible_secagg())
+def test_fuzz_structured_secagg_headers(data):
+    msg = _decode_only_message_error(data)
+    if msg is not None:
+        _check_decoded(msg, data)
+
+
+def _secagg_valid():
+    """One encoded message of each secure-aggregation type (small, fixed content)."""
+    keys = bytes(range(32))
+    y = np.arange(6, dtype=np.uint64).reshape(3, 2) * np.uint64(0x9E3779B97F4A7C15)
+    msgs = [KeyAdvert(2, keys, keys[::-1]), SealedShares(2, 5, bytes(range(156))), MaskedInput(3, y),
+            Reveal(4, {1: 5, 4: 2**520}, {2: 0, 6: 2**521 - 2})]
+    return [encode(m) for m in msgs]
+
+
 VALID = [encode(small_exchange(1)), encode(small_exchange(2, mechanism="none", nT=0, nS=3, L=6)),
-         encode(small_inversion(3)), encode(small_inversion(4, mechanism="hardened", L=8, count=1))]
+         encode(small_inversion(3)), encode(small_inversion(4, mechanism="hardened", L=8, count=1))] + _secagg_valid()
 
 
 @st.composite

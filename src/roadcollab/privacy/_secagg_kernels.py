@@ -28,14 +28,14 @@ from cryptography.hazmat.primitives.ciphers import Cipher, algorithms
 from cryptography.hazmat.primitives.kdf.hkdf import HKDF
 
 from ..errors import MessageError
+from ..wire.layout import KEY_NBYTES, SHARE_NBYTES
+from ..wire.limits import SHARE_MODULUS
 
 __all__ = ["RING_BITS", "SHAMIR_PRIME", "SHARE_NBYTES", "KEY_NBYTES", "DOMAIN", "encode_fixed", "decode_sum",
            "prg_ring", "derive", "expand", "shamir_split", "shamir_combine", "x25519_keypair", "x25519_agree"]
 
 RING_BITS = 64
-SHAMIR_PRIME = 2 ** 521 - 1
-SHARE_NBYTES = 66          # ceil(521 / 8)
-KEY_NBYTES = 32
+SHAMIR_PRIME = SHARE_MODULUS   # 2^521 - 1; a share takes SHARE_NBYTES = ceil(521 / 8) = 66 bytes on the wire
 DOMAIN = b"roadcollab/secagg/v1"
 _CHACHA_NONCE = bytes(16)  # every seed keys exactly one stream (seeds are derived per purpose and session)
 _ID = struct.Struct("<I")

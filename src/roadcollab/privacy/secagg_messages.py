@@ -1,24 +1,26 @@
 """Parameters and messages of secure aggregation (:mod:`.secure_aggregation` runs the protocol).
 
-Every message a vehicle or the aggregator receives is untrusted: construction checks its shape and
-raises :class:`roadcollab.errors.MessageError`. Wire sizes (``nbytes``) count the fields that would travel.
+The messages that travel (:class:`KeyAdvert`, :class:`SealedShares`, :class:`MaskedInput`,
+:class:`Reveal`) live in the wire layer, :mod:`roadcollab.wire.secagg`, with their binary encoding
+(:func:`roadcollab.wire.protocol.encode` / ``decode``); they are re-exported here. Every message a
+vehicle or the aggregator receives is untrusted: construction runs the codec's checks and raises
+:class:`roadcollab.errors.MessageError`. ``nbytes`` counts the fields that travel (without the 48-byte
+header). This module holds what never travels: the public parameters, a vehicle's secrets, the result.
 """
 
 from __future__ import annotations
 
 import struct
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 
 from .._validation import check_int, check_real
 from ..errors import MessageError, ParameterError
-from ._secagg_kernels import KEY_NBYTES, SHARE_NBYTES
+from ..wire.secagg import KeyAdvert, MaskedInput, Reveal, SealedShares
 
-__all__ = ["AggregationRefused", "SecAggSpec", "session_id", "VehicleSecrets", "KeyAdvert", "MaskedInput",
-           "Reveal", "AggregateResult"]
-
-_ID = struct.Struct("<I")
+__all__ = ["AggregationRefused", "SecAggSpec", "session_id", "VehicleSecrets", "KeyAdvert", "SealedShares",
+           "MaskedInput", "Reveal", "AggregateResult"]
 
 
 class AggregationRefused(MessageError):
@@ -120,61 +122,6 @@ class VehicleSecrets:
 
     def __repr__(self) -> str:
         return f"VehicleSecrets(vehicle={self.vehicle}, <secret>)"
-
-
-@dataclass(frozen=True)
-class KeyAdvert:
-    """Round 0 message: ``vehicle`` (id) and its public keys ``c_pk``, ``s_pk`` (32 bytes each)."""
-
-    vehicle: int
-    c_pk: bytes
-    s_pk: bytes
-
-    @property
-    def nbytes(self) -> int:
-        """Wire size: id (4) and two keys (64) = 68."""
-        return _ID.size + 2 * KEY_NBYTES
-
-
-@dataclass(frozen=True)
-class MaskedInput:
-    """Round 2 message (untrusted at the aggregator): ``vehicle`` and its masked ring vector ``y``.
-
-    Raises
-    ------
-    MessageError
-        If ``y`` is not a 2-D ``uint64`` array with 2 columns or ``vehicle`` is not a positive int.
-    """
-
-    vehicle: int
-    y: np.ndarray
-
-    def __post_init__(self) -> None:
-        if not isinstance(self.vehicle, int) or self.vehicle < 1:
-            raise MessageError(f"masked input: vehicle must be a positive int, got {self.vehicle!r}")
-        if not isinstance(self.y, np.ndarray) or self.y.dtype != np.uint64 or self.y.ndim != 2 \
-                or self.y.shape[1] != 2:
-            raise MessageError(f"masked input of vehicle {self.vehicle}: y must be a (L, 2) uint64 array, got "
-                               f"{getattr(self.y, 'dtype', type(self.y).__name__)} {getattr(self.y, 'shape', '')}")
-
-    @property
-    def nbytes(self) -> int:
-        """Wire size: id (4) and 8 bytes per ring element."""
-        return _ID.size + self.y.nbytes
-
-
-@dataclass(frozen=True)
-class Reveal:
-    """Round 3 message of ``vehicle``: its shares ``{i: y}`` of ``b_i`` (survivors) and of ``s_i`` (dropped)."""
-
-    vehicle: int
-    self_mask_shares: dict = field(default_factory=dict)
-    key_shares: dict = field(default_factory=dict)
-
-    @property
-    def nbytes(self) -> int:
-        """Wire size: id (4), then per share an id (4) and 66 bytes."""
-        return _ID.size + (len(self.self_mask_shares) + len(self.key_shares)) * (_ID.size + SHARE_NBYTES)
 
 
 @dataclass(frozen=True)

@@ -24,8 +24,9 @@ from ..errors import MessageError, ParameterError
 from ..wire.message import InversionMessage
 from ._secagg_kernels import KEY_NBYTES, decode_sum, derive, encode_fixed, prg_ring, shamir_combine
 # The protocol's private helpers are shared with this module only (same concept, split for size).
-from .secure_aggregation import (_SEALED_NBYTES, AggregateResult, SecAggSpec, _collect, _open_share, _pair_mask,
-                                 advertise_keys, mask_input, reveal_shares, session_id, share_keys, unmask)
+from .secure_aggregation import (_SEALED_NBYTES, AggregateResult, KeyAdvert, MaskedInput, Reveal, SealedShares,
+                                 SecAggSpec, _collect, _open_share, _pair_mask, advertise_keys, mask_input,
+                                 reveal_shares, session_id, share_keys, unmask)
 
 __all__ = ["ROUNDS", "AggregatorView", "SecAggRun", "CollusionView", "run_secure_aggregation", "aggregator_view",
            "collusion_view", "secure_aggregation_cost"]
@@ -129,6 +130,24 @@ def _timed(fn, *args):
     return out, (time.perf_counter() - t0) * 1e3
 
 
+def _deliver(transport, message, kind: type):
+    """``message`` as its recipient gets it: through ``transport`` (if any), still of type ``kind``."""
+    if transport is None:
+        return message
+    out = transport(message)
+    if not isinstance(out, kind):
+        raise MessageError(f"a {kind.__name__} arrived as a {type(out).__name__}")
+    return out
+
+
+def _forward_sealed(transport, sender: int, recipient: int, ciphertext: bytes, session: bytes) -> bytes:
+    """Sealed shares ``sender -> recipient`` as forwarded by the aggregator (through ``transport``)."""
+    out = _deliver(transport, SealedShares(sender, recipient, ciphertext, session=session), SealedShares)
+    if (out.sender, out.recipient, out.session) != (sender, recipient, session):
+        raise MessageError(f"sealed shares {sender} -> {recipient} arrived with another route or session")
+    return out.ciphertext
+
+
 def _check_ids(name: str, ids, n: int) -> frozenset:
     """A set of vehicle ids in ``1..n``."""
     out = frozenset(check_int(name, i, low=1, high=n) for i in ids)
@@ -146,7 +165,8 @@ def _check_inputs(inputs) -> tuple:
 
 
 def run_secure_aggregation(inputs, spec: SecAggSpec = SecAggSpec(), *, session: bytes | None = None,
-                           dropped_before_masking=(), silent_in_unmasking=(), rng=None) -> SecAggRun:
+                           dropped_before_masking=(), silent_in_unmasking=(), rng=None,
+                           transport=None) -> SecAggRun:
     """Run one session with every vehicle and the aggregator in-process.
 
     Parameters
@@ -165,6 +185,10 @@ def run_secure_aggregation(inputs, spec: SecAggSpec = SecAggSpec(), *, session: 
     rng : None, int or numpy.random.Generator
         None: every vehicle's root secret from :func:`os.urandom` (as deployed). Otherwise the roots
         are drawn from ``np.random.default_rng(rng)``: reproducible, for simulation and tests only.
+    transport : callable, optional
+        Applied to every message on its way (KeyAdvert, SealedShares, MaskedInput, Reveal); it returns
+        what the recipient gets, e.g. ``lambda m: decode(encode(m))`` to send each one over the wire
+        format of :mod:`roadcollab.wire.protocol`. Default: delivered as is.
 
     Returns
     -------
@@ -188,25 +212,27 @@ def run_secure_aggregation(inputs, spec: SecAggSpec = SecAggSpec(), *, session: 
     secrets, roster = {}, {}
     for i in ids:
         root = os.urandom(KEY_NBYTES) if gen is None else gen.bytes(KEY_NBYTES)
-        (secrets[i], roster[i]), ms[i - 1, 0] = _timed(lambda v, r: advertise_keys(v, session, root=r), i, root)
-        sent[i - 1, 0] = roster[i].nbytes
+        (secrets[i], advert), ms[i - 1, 0] = _timed(lambda v, r: advertise_keys(v, session, root=r), i, root)
+        roster[i] = _deliver(transport, advert, KeyAdvert)
+        sent[i - 1, 0] = advert.nbytes
     sealed = {}
     for i in ids:
         out, ms[i - 1, 1] = _timed(share_keys, secrets[i], roster, spec)
-        sealed.update({(i, j): c for j, c in out.items()})
+        sealed.update({(i, j): _forward_sealed(transport, i, j, c, session) for j, c in out.items()})
         sent[i - 1, 1] = sum(len(c) + _ROUTE_NBYTES for c in out.values())
     masked = {}
     for i in ids:
         if i not in gone:
-            masked[i], ms[i - 1, 2] = _timed(mask_input, secrets[i], zs[i - 1], roster, spec)
-            sent[i - 1, 2] = masked[i].nbytes
+            mine, ms[i - 1, 2] = _timed(mask_input, secrets[i], zs[i - 1], roster, spec)
+            masked[i] = _deliver(transport, mine, MaskedInput)
+            sent[i - 1, 2] = mine.nbytes
     survivors = sorted(masked)
     reveals = []
     for j in survivors:
         if j not in silent:
             mine = {i: sealed[(i, j)] for i in ids if i != j}
             rev, ms[j - 1, 3] = _timed(reveal_shares, secrets[j], mine, roster, survivors, spec)
-            reveals.append(rev)
+            reveals.append(_deliver(transport, rev, Reveal))
             sent[j - 1, 3] = rev.nbytes
     # Each vehicle receives the roster, the n - 1 shares sealed for it and the survivor list.
     recv[:] = n * roster[1].nbytes + (n - 1) * (_SEALED_NBYTES + _ROUTE_NBYTES) + _ROUTE_NBYTES * len(survivors)

@@ -49,16 +49,17 @@ from cryptography.hazmat.primitives.ciphers.aead import ChaCha20Poly1305
 
 from .._validation import check_int
 from ..errors import MessageError, ParameterError
+from ..wire.layout import SEALED_NBYTES
 from ._secagg_kernels import (KEY_NBYTES, SHARE_NBYTES, decode_sum, derive, encode_fixed, prg_ring, shamir_combine,
                               shamir_split, x25519_agree, x25519_keypair)
-from .secagg_messages import (AggregateResult, AggregationRefused, KeyAdvert, MaskedInput, Reveal, SecAggSpec,
-                              VehicleSecrets, session_id)
+from .secagg_messages import (AggregateResult, AggregationRefused, KeyAdvert, MaskedInput, Reveal, SealedShares,
+                              SecAggSpec, VehicleSecrets, session_id)
 
-__all__ = ["AggregationRefused", "SecAggSpec", "session_id", "VehicleSecrets", "KeyAdvert", "MaskedInput",
+__all__ = ["AggregationRefused", "SecAggSpec", "session_id", "VehicleSecrets", "KeyAdvert", "SealedShares", "MaskedInput",
            "Reveal", "AggregateResult", "advertise_keys", "share_keys", "mask_input", "reveal_shares", "unmask"]
 
 _PAIR = struct.Struct("<II")
-_SEALED_NBYTES = _PAIR.size + 2 * SHARE_NBYTES + 16   # ids, two shares, Poly1305 tag: 156
+_SEALED_NBYTES = SEALED_NBYTES   # ids, two shares, Poly1305 tag: 156 (wire.layout)
 _NONCE = bytes(12)   # every sealing key (per session, sender, recipient) seals exactly one message
 
 
@@ -81,8 +82,8 @@ def advertise_keys(vehicle: int, session: bytes, *, root: bytes | None = None) -
     (VehicleSecrets, KeyAdvert)
     """
     vehicle = check_int("vehicle", vehicle, low=1, high=2 ** 32 - 1)
-    if not isinstance(session, bytes):
-        raise ParameterError(f"session must be bytes, got {type(session).__name__}")
+    if not isinstance(session, bytes) or len(session) != len(session_id(0, 0)):
+        raise ParameterError(f"session must be the 16 bytes of session_id(segment, round), got {session!r:.40}")
     root = os.urandom(KEY_NBYTES) if root is None else root
     if not isinstance(root, bytes) or len(root) != KEY_NBYTES:
         raise ParameterError(f"root must be {KEY_NBYTES} bytes, got {root!r:.40}")
@@ -90,19 +91,28 @@ def advertise_keys(vehicle: int, session: bytes, *, root: bytes | None = None) -
     c_sk, c_pk = x25519_keypair(keys[b"c_sk"])
     s_sk, s_pk = x25519_keypair(keys[b"s_sk"])
     secrets = VehicleSecrets(vehicle, session, c_sk, s_sk, keys[b"b"], keys[b"shamir"])
-    return secrets, KeyAdvert(vehicle, c_pk, s_pk)
+    return secrets, KeyAdvert(vehicle, c_pk, s_pk, session=session)
 
 
-def _check_roster(roster: dict, spec: SecAggSpec, vehicle: int) -> list[int]:
+def _check_roster(roster: dict, spec: SecAggSpec, secrets: VehicleSecrets) -> list[int]:
     """Sorted ids of the roster ``U_1`` (untrusted broadcast); refused if it is smaller than ``k``."""
     if not isinstance(roster, dict) or not all(isinstance(a, KeyAdvert) and a.vehicle == i for i, a in roster.items()):
         raise MessageError("roster must map each vehicle id to its KeyAdvert")
+    _check_session(roster.values(), secrets.session)
+    vehicle = secrets.vehicle
     if vehicle not in roster:
         raise MessageError(f"roster does not contain vehicle {vehicle}")
     if len(roster) < spec.min_inputs:
         raise AggregationRefused(f"roster has {len(roster)} vehicles, at least k = {spec.min_inputs} required")
     spec.check_fleet(len(roster))
     return sorted(roster)
+
+
+def _check_session(messages, session: bytes) -> None:
+    """MessageError if one of ``messages`` (untrusted) belongs to another session (segment, round)."""
+    for m in messages:
+        if m.session != session:
+            raise MessageError(f"{type(m).__name__} of vehicle {m.vehicle} belongs to another session")
 
 
 def _seal_key(secrets: VehicleSecrets, peer_pk: bytes, sender: int, recipient: int) -> bytes:
@@ -128,7 +138,7 @@ def share_keys(secrets: VehicleSecrets, roster: dict, spec: SecAggSpec) -> dict[
     dict of int to bytes
         Recipient id -> sealed shares (156 bytes); the vehicle keeps its own shares in ``secrets``.
     """
-    ids = _check_roster(roster, spec, secrets.vehicle)
+    ids = _check_roster(roster, spec, secrets)
     s_sh = shamir_split(secrets.s_sk, ids, spec.threshold, derive(secrets.share_seed, b"s", secrets.session))
     b_sh = shamir_split(secrets.b_seed, ids, spec.threshold, derive(secrets.share_seed, b"b", secrets.session))
     out = {}
@@ -181,7 +191,7 @@ def mask_input(secrets: VehicleSecrets, z, roster: dict, spec: SecAggSpec) -> Ma
     -------
     MaskedInput
     """
-    ids = _check_roster(roster, spec, secrets.vehicle)
+    ids = _check_roster(roster, spec, secrets)
     z = np.asarray(z, dtype=float)
     if z.ndim != 2 or z.shape[1] != 2 or z.shape[0] < 1 or not np.all(np.isfinite(z)):
         raise ParameterError(f"z must be a finite (L, 2) array, got shape {z.shape}")
@@ -190,7 +200,7 @@ def mask_input(secrets: VehicleSecrets, z, roster: dict, spec: SecAggSpec) -> Ma
     for j in ids:
         if j != secrets.vehicle:
             y = y + _pair_mask(secrets.s_sk, secrets.vehicle, j, roster[j].s_pk, secrets.session, z.shape)
-    return MaskedInput(secrets.vehicle, y)
+    return MaskedInput(secrets.vehicle, y, session=secrets.session)
 
 
 def reveal_shares(secrets: VehicleSecrets, sealed: dict, roster: dict, survivors, spec: SecAggSpec) -> Reveal:
@@ -218,7 +228,7 @@ def reveal_shares(secrets: VehicleSecrets, sealed: dict, roster: dict, survivors
     MessageError
         For a malformed announcement or sealed share.
     """
-    ids = _check_roster(roster, spec, secrets.vehicle)
+    ids = _check_roster(roster, spec, secrets)
     u2 = set(survivors)
     if not u2 <= set(ids):
         raise MessageError(f"announced survivors {sorted(u2 - set(ids))} are not in the roster")
@@ -235,7 +245,7 @@ def reveal_shares(secrets: VehicleSecrets, sealed: dict, roster: dict, survivors
             shares[i] = _open_share(secrets, i, sealed[i], roster)
     b = {i: sh[1] for i, sh in shares.items() if i in u2}
     s = {i: sh[0] for i, sh in shares.items() if i not in u2}
-    return Reveal(me, b, s)
+    return Reveal(me, b, s, session=secrets.session)
 
 
 def _collect(reveals, field_name: str, owner: int) -> dict[int, int]:
@@ -267,11 +277,12 @@ def unmask(roster: dict, masked, reveals, spec: SecAggSpec, session: bytes) -> A
     AggregationRefused
         Fewer than ``k`` masked inputs, or fewer than ``t`` reveals.
     MessageError
-        Inputs of different shapes or from outside the roster, inconsistent shares, or a reconstructed
-        key that does not match its advertised public key.
+        Inputs of different shapes, from another session or from outside the roster, inconsistent
+        shares, or a reconstructed key that does not match its advertised public key.
     """
     masked = {m.vehicle: m for m in masked}
     reveals = list(reveals)
+    _check_session([*masked.values(), *reveals], session)
     u2 = sorted(masked)
     if len(u2) < spec.min_inputs:
         raise AggregationRefused(f"{len(u2)} masked inputs, at least k = {spec.min_inputs} required")

@@ -15,7 +15,9 @@ import numpy as np
 
 from ..errors import MessageError
 from ..lti.realisation import StateSpaceData
-from .layout import CHANNELS, FLOAT_NBYTES, MESSAGE_TYPE_EXCHANGE, MESSAGE_TYPE_INVERSION, Header
+from .layout import (CHANNELS, FLOAT_NBYTES, KEY_NBYTES, MESSAGE_TYPE_EXCHANGE, MESSAGE_TYPE_INVERSION,
+                     MESSAGE_TYPE_KEY_ADVERT, MESSAGE_TYPE_MASKED_INPUT, MESSAGE_TYPE_SEALED_SHARES, SEALED_NBYTES,
+                     SECAGG_TYPES, TYPE_NAMES, Header, SecAggHeader)
 from .limits import check_header, check_mechanism, check_payload
 
 __all__ = ["message_fields", "validate_message"]
@@ -77,22 +79,66 @@ def _inversion_fields(message, base: Header) -> tuple[Header, dict[str, np.ndarr
     return base._replace(length=z.shape[0], count=_as_int("count", message.count)), {"z": z}
 
 
-def message_fields(message) -> tuple[Header, dict[str, np.ndarray]]:
+def _as_bytes(name: str, value, nbytes: int) -> bytes:
+    """``value`` if it is ``bytes`` of exactly ``nbytes``."""
+    if not isinstance(value, bytes) or len(value) != nbytes:
+        got = f"{len(value)} bytes" if isinstance(value, bytes) else type(value).__name__
+        raise MessageError(f"{name} must be {nbytes} bytes, got {got}")
+    return value
+
+
+def _as_shares(name: str, value) -> list[tuple[int, int]]:
+    """A dict ``{owner: share}`` of ints as ``(owner, share)`` pairs sorted by owner (the wire order)."""
+    if not isinstance(value, dict):
+        raise MessageError(f"{name} must be a dict of owner id to share, got {type(value).__name__}")
+    pairs = [(_as_int(f"{name}: owner", o), _as_int(f"{name}: share", y)) for o, y in value.items()]
+    return sorted(pairs)
+
+
+def _secagg_fields(message, msg_type: int) -> tuple[SecAggHeader, dict]:
+    """Header and payload fields of a secure-aggregation message, with types and lengths checked."""
+    kind = TYPE_NAMES[msg_type]
+    session = _as_bytes(f"{kind}: session", message.session, 16)
+    if msg_type == MESSAGE_TYPE_KEY_ADVERT:
+        h = SecAggHeader(msg_type, session, 0, _as_int("vehicle", message.vehicle))
+        fields = {"c_pk": _as_bytes("c_pk", message.c_pk, KEY_NBYTES),
+                  "s_pk": _as_bytes("s_pk", message.s_pk, KEY_NBYTES)}
+    elif msg_type == MESSAGE_TYPE_SEALED_SHARES:
+        h = SecAggHeader(msg_type, session, 0, _as_int("sender", message.sender),
+                         _as_int("recipient", message.recipient))
+        fields = {"ciphertext": _as_bytes("ciphertext", message.ciphertext, SEALED_NBYTES)}
+    elif msg_type == MESSAGE_TYPE_MASKED_INPUT:
+        vehicle, y = _as_int("vehicle", message.vehicle), message.y
+        if not isinstance(y, np.ndarray) or y.dtype != np.uint64 or y.ndim != 2 or y.shape[1] != CHANNELS:
+            raise MessageError(f"masked input of vehicle {vehicle}: y must be a (L, 2) uint64 array, got "
+                               f"{getattr(y, 'dtype', type(y).__name__)} {getattr(y, 'shape', '')}")
+        h, fields = SecAggHeader(msg_type, session, 0, vehicle, y.shape[0]), {"y": y}
+    else:
+        fields = {"self_mask_shares": _as_shares("self_mask_shares", message.self_mask_shares),
+                  "key_shares": _as_shares("key_shares", message.key_shares)}
+        h = SecAggHeader(msg_type, session, 0, _as_int("vehicle", message.vehicle),
+                         len(fields["self_mask_shares"]), len(fields["key_shares"]))
+    return h._replace(payload_nbytes=h.expected_payload_nbytes()), fields
+
+
+def message_fields(message) -> tuple[Header | SecAggHeader, dict]:
     """Header and arrays of an in-memory message, with types and shapes checked.
 
     Parameters
     ----------
-    message : ExchangeMessage | InversionMessage
+    message : ExchangeMessage | InversionMessage | KeyAdvert | SealedShares | MaskedInput | Reveal
         Any object; everything but a well-typed message is refused.
 
     Returns
     -------
-    header : Header
+    header : Header | SecAggHeader
         With ``payload_nbytes`` the size the dimensions imply. The values are not yet
         checked against the limits (:func:`~.limits.check_header`).
-    arrays : dict of str to numpy.ndarray
+    arrays : dict
         float64 arrays by wire name (see :func:`~.layout.payload_shapes`); (L, 2) signals and
-        the A, B, C, D matrices of ``T`` and ``S``.
+        the A, B, C, D matrices of ``T`` and ``S``. For secure aggregation: ``c_pk``, ``s_pk``
+        (key advert), ``ciphertext`` (sealed shares), ``y`` (masked input, uint64), or
+        ``self_mask_shares`` and ``key_shares`` as ``(owner, share)`` lists sorted by owner (reveal).
 
     Raises
     ------
@@ -100,8 +146,11 @@ def message_fields(message) -> tuple[Header, dict[str, np.ndarray]]:
         If ``message`` is not a message or a field has a wrong type or shape.
     """
     msg_type = getattr(type(message), "WIRE_TYPE", None)
+    if msg_type in SECAGG_TYPES:
+        return _secagg_fields(message, msg_type)
     if msg_type not in (MESSAGE_TYPE_EXCHANGE, MESSAGE_TYPE_INVERSION):
-        raise MessageError(f"message must be an ExchangeMessage or InversionMessage, got {type(message).__name__}")
+        raise MessageError(f"message must be an ExchangeMessage or InversionMessage (or a secure-aggregation "
+                           f"message), got {type(message).__name__}")
     mechanism = check_mechanism(message.mechanism)
     sample_rate = _as_float("sample_rate", message.sample_rate)
     n_samples = _as_int("n_samples", message.n_samples)
@@ -113,17 +162,17 @@ def message_fields(message) -> tuple[Header, dict[str, np.ndarray]]:
     return h._replace(payload_nbytes=h.expected_payload_nbytes()), arrays
 
 
-def validate_message(message) -> tuple[Header, dict[str, np.ndarray]]:
+def validate_message(message) -> tuple[Header | SecAggHeader, dict]:
     """Every check :func:`~roadcollab.wire.protocol.decode` applies, on an in-memory message.
 
     Parameters
     ----------
-    message : ExchangeMessage | InversionMessage
+    message : ExchangeMessage | InversionMessage | KeyAdvert | SealedShares | MaskedInput | Reveal
 
     Returns
     -------
-    header : Header
-    arrays : dict of str to numpy.ndarray
+    header : Header | SecAggHeader
+    arrays : dict
         As :func:`message_fields`.
 
     Raises

@@ -6,9 +6,10 @@ import numpy as np
 
 from ..lti.realisation import StateSpaceData
 from .fields import Message
-from .layout import CHANNELS, MECHANISM_TYPE, MESSAGE_TYPE_INVERSION
+from .layout import CHANNELS, MECHANISM_TYPE, MESSAGE_TYPE_INVERSION, SECAGG_MECHANISM
 from .limits import check_mechanism
 from .message import ExchangeMessage, InversionMessage
+from .secagg import DEFAULT_SESSION, MaskedInput
 
 __all__ = ["example_message"]
 
@@ -32,20 +33,25 @@ def example_message(mechanism: str = "paper", *, rng=None) -> Message:
 
     Parameters
     ----------
-    mechanism : {"none", "paper", "hardened", "fused"}
+    mechanism : {"none", "paper", "hardened", "fused", "secure_aggregation"}
     rng : numpy.random.Generator | int | None
         Random source or seed (None: fresh entropy).
 
     Returns
     -------
-    ExchangeMessage | InversionMessage
+    ExchangeMessage | InversionMessage | MaskedInput
         ``sample_rate`` 200 Hz, ``n_samples`` 400, signals of 600 rows; for exchange
         mechanisms ``T`` of order 4 and ``S`` of order 6 with spectral radius 0.9; for
-        "fused" ``count`` 3.
+        "fused" ``count`` 3. For "secure_aggregation" the masked input of vehicle 1 in session
+        (segment 0, round 0): 600 x 2 uniform ``uint64`` ring elements, which is what a masked
+        ``z`` looks like to anyone without the masks.
     """
     check_mechanism(mechanism)
     rng = np.random.default_rng(rng)
     fs, n, L = _EXAMPLE_SAMPLE_RATE, _EXAMPLE_N_SAMPLES, _EXAMPLE_LENGTH
+    if mechanism == SECAGG_MECHANISM:
+        y = rng.integers(0, 2 ** 64, size=(L, CHANNELS), dtype=np.uint64)
+        return MaskedInput(1, y, session=DEFAULT_SESSION)
     if MECHANISM_TYPE[mechanism] == MESSAGE_TYPE_INVERSION:
         return InversionMessage(mechanism=mechanism, sample_rate=fs, n_samples=n,
                                 z=rng.standard_normal((L, CHANNELS)), count=1 if mechanism == "hardened" else 3)

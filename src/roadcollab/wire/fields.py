@@ -11,28 +11,43 @@ from typing import Union
 import numpy as np
 
 from ..lti.realisation import StateSpaceData
-from .layout import MESSAGE_TYPE_INVERSION, Header
+from .layout import (MESSAGE_TYPE_INVERSION, MESSAGE_TYPE_KEY_ADVERT, MESSAGE_TYPE_MASKED_INPUT,
+                     MESSAGE_TYPE_SEALED_SHARES, Header, SecAggHeader)
 from .message import ExchangeMessage, InversionMessage
+from .secagg import KeyAdvert, MaskedInput, Reveal, SealedShares
 
 __all__ = ["Message", "build_message"]
 
-Message = Union[ExchangeMessage, InversionMessage]
+Message = Union[ExchangeMessage, InversionMessage, KeyAdvert, SealedShares, MaskedInput, Reveal]
 
 
-def build_message(h: Header, arrays: dict[str, np.ndarray]) -> Message:
+def _build_secagg(h: SecAggHeader, fields: dict) -> Message:
+    """The secure-aggregation message of a checked header and its payload fields."""
+    if h.msg_type == MESSAGE_TYPE_KEY_ADVERT:
+        return KeyAdvert(h.vehicle, fields["c_pk"], fields["s_pk"], session=h.session)
+    if h.msg_type == MESSAGE_TYPE_SEALED_SHARES:
+        return SealedShares(h.vehicle, h.n1, fields["ciphertext"], session=h.session)
+    if h.msg_type == MESSAGE_TYPE_MASKED_INPUT:
+        return MaskedInput(h.vehicle, fields["y"], session=h.session)
+    return Reveal(h.vehicle, dict(fields["self_mask_shares"]), dict(fields["key_shares"]), session=h.session)
+
+
+def build_message(h: Header | SecAggHeader, arrays: dict) -> Message:
     """The message described by a checked header and its payload arrays.
 
     Parameters
     ----------
-    h : Header
-    arrays : dict of str to numpy.ndarray
-        Payload arrays by wire name, as read from the bytes.
+    h : Header | SecAggHeader
+    arrays : dict
+        Payload arrays (or secure-aggregation fields) by wire name, as read from the bytes.
 
     Returns
     -------
-    ExchangeMessage | InversionMessage
+    ExchangeMessage | InversionMessage | KeyAdvert | SealedShares | MaskedInput | Reveal
         Holding the given arrays (not copies).
     """
+    if isinstance(h, SecAggHeader):
+        return _build_secagg(h, arrays)
     if h.msg_type == MESSAGE_TYPE_INVERSION:
         return InversionMessage(mechanism=h.mechanism, sample_rate=h.sample_rate, n_samples=h.n_samples,
                                 z=arrays["z"], count=h.count)

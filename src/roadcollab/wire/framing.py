@@ -11,9 +11,10 @@ import numpy as np
 
 from ..errors import MessageError
 from .layout import (COMMON_HEADER_NBYTES, COMMON_STRUCT, EXCHANGE_EXT_STRUCT, F8, FORMAT_VERSION,
-                     INVERSION_EXT_STRUCT, MAGIC, MECHANISM_CODES, MECHANISM_NAMES, MESSAGE_TYPE_EXCHANGE, TYPE_NAMES,
-                     Header, payload_shapes)
+                     INVERSION_EXT_STRUCT, MAGIC, MECHANISM_CODES, MECHANISM_NAMES, MESSAGE_TYPE_EXCHANGE,
+                     PREFIX_STRUCT, SECAGG_TYPES, TYPE_NAMES, Header, SecAggHeader, payload_shapes)
 from .limits import MAX_MESSAGE_BYTES
+from .secagg_framing import pack_secagg, read_secagg_header
 
 __all__ = ["as_buffer", "read_header", "check_frame_size", "read_array", "pack_message"]
 
@@ -44,8 +45,9 @@ def as_buffer(data) -> memoryview:
     return view.cast("B")
 
 
-def _read_common(buf: memoryview) -> Header:
-    """The common 32-byte header: magic, sizes, version, message type, mechanism, reserved byte."""
+def _read_prefix(buf: memoryview) -> tuple[int, str]:
+    """The 8-byte prefix common to every message type (magic, version, type, mechanism, reserved byte),
+    after the size checks: ``(message type, mechanism name)``."""
     size = len(buf)
     if bytes(buf[:len(MAGIC)]) != MAGIC[:min(size, len(MAGIC))]:
         raise MessageError(f"wrong magic: expected {MAGIC!r}, got {bytes(buf[:len(MAGIC)])!r}")
@@ -53,8 +55,7 @@ def _read_common(buf: memoryview) -> Header:
         raise MessageError(f"truncated: the header needs {COMMON_HEADER_NBYTES} bytes, got {size}")
     if size > MAX_MESSAGE_BYTES:
         raise MessageError(f"oversized: {size} bytes exceeds MAX_MESSAGE_BYTES = {MAX_MESSAGE_BYTES}")
-    _, version, msg_type, mech_code, reserved, sample_rate, n_samples, length, payload_nbytes = \
-        COMMON_STRUCT.unpack_from(buf, 0)
+    _, version, msg_type, mech_code, reserved = PREFIX_STRUCT.unpack_from(buf, 0)
     if version != FORMAT_VERSION:
         raise MessageError(f"unsupported format version {version}, expected {FORMAT_VERSION}")
     if msg_type not in TYPE_NAMES:
@@ -65,7 +66,13 @@ def _read_common(buf: memoryview) -> Header:
                            + ", ".join(f"{k} ({v!r})" for k, v in MECHANISM_NAMES.items()))
     if reserved != 0:
         raise MessageError(f"reserved header byte 7 must be 0, got {reserved}")
-    return Header(msg_type, MECHANISM_NAMES[mech_code], sample_rate, n_samples, length, payload_nbytes)
+    return msg_type, MECHANISM_NAMES[mech_code]
+
+
+def _read_common(buf: memoryview, msg_type: int, mechanism: str) -> Header:
+    """The common 32-byte header of an exchange or inversion message whose prefix passed."""
+    *_, sample_rate, n_samples, length, payload_nbytes = COMMON_STRUCT.unpack_from(buf, 0)
+    return Header(msg_type, mechanism, sample_rate, n_samples, length, payload_nbytes)
 
 
 def _read_extension(buf: memoryview, h: Header) -> Header:
@@ -82,7 +89,7 @@ def _read_extension(buf: memoryview, h: Header) -> Header:
     return h._replace(count=count)
 
 
-def read_header(buf: memoryview) -> Header:
+def read_header(buf: memoryview) -> Header | SecAggHeader:
     """Parse the full header, refusing whatever the bytes alone show to be malformed.
 
     Parameters
@@ -92,25 +99,30 @@ def read_header(buf: memoryview) -> Header:
 
     Returns
     -------
-    Header
-        As declared; its values are not yet checked against the limits.
+    Header | SecAggHeader
+        As declared (a SecAggHeader for the secure-aggregation types); its values are not yet
+        checked against the limits.
 
     Raises
     ------
     MessageError
         Wrong magic, unsupported version, unknown message type or mechanism code, non-zero
-        reserved fields, a byte string shorter than the header or longer than
-        ``MAX_MESSAGE_BYTES``.
+        reserved fields (of exchange and inversion headers; a secure-aggregation header's are
+        checked by :func:`~.limits.check_header`), a byte string shorter than the header or
+        longer than ``MAX_MESSAGE_BYTES``.
     """
-    return _read_extension(buf, _read_common(buf))
+    msg_type, mechanism = _read_prefix(buf)
+    if msg_type in SECAGG_TYPES:
+        return read_secagg_header(buf, mechanism)
+    return _read_extension(buf, _read_common(buf, msg_type, mechanism))
 
 
-def check_frame_size(h: Header, size: int) -> None:
+def check_frame_size(h: Header | SecAggHeader, size: int) -> None:
     """Refuse a byte string that is not exactly header plus declared payload long.
 
     Parameters
     ----------
-    h : Header
+    h : Header | SecAggHeader
         A header that passed :func:`~.limits.check_header`.
     size : int
         Length of the received byte string, bytes.
@@ -153,21 +165,23 @@ def read_array(buf: memoryview, offset: int, shape: tuple[int, int]) -> np.ndarr
     return arr
 
 
-def pack_message(h: Header, arrays: dict[str, np.ndarray]) -> bytes:
+def pack_message(h: Header | SecAggHeader, arrays: dict) -> bytes:
     """The bytes of a checked message: header, extension, then the arrays in wire order.
 
     Parameters
     ----------
-    h : Header
+    h : Header | SecAggHeader
         With ``payload_nbytes`` set; checked by :func:`~.limits.check_header`.
-    arrays : dict of str to numpy.ndarray
-        Payload arrays by wire name, as from :func:`~.fields.message_fields`.
+    arrays : dict
+        Payload arrays by wire name, as from :func:`~.describe.message_fields`.
 
     Returns
     -------
     bytes
         ``h.header_nbytes + h.payload_nbytes`` bytes.
     """
+    if isinstance(h, SecAggHeader):
+        return pack_secagg(h, arrays)
     head = COMMON_STRUCT.pack(MAGIC, FORMAT_VERSION, h.msg_type, MECHANISM_CODES[h.mechanism], 0,
                               h.sample_rate, h.n_samples, h.length, h.payload_nbytes)
     if h.msg_type == MESSAGE_TYPE_EXCHANGE:

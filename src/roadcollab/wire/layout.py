@@ -33,6 +33,22 @@ __all__ = [
     "inversion_nbytes",
     "Header",
     "payload_shapes",
+    "PREFIX_STRUCT",
+    "MESSAGE_TYPE_KEY_ADVERT",
+    "MESSAGE_TYPE_SEALED_SHARES",
+    "MESSAGE_TYPE_MASKED_INPUT",
+    "MESSAGE_TYPE_REVEAL",
+    "SECAGG_TYPES",
+    "SECAGG_MECHANISM",
+    "SECAGG_STRUCT",
+    "SECAGG_HEADER_NBYTES",
+    "KEY_NBYTES",
+    "SHARE_NBYTES",
+    "AEAD_TAG_NBYTES",
+    "SEALED_NBYTES",
+    "SHARE_ENTRY_NBYTES",
+    "U8",
+    "SecAggHeader",
 ]
 
 MAGIC = b"RCOL"
@@ -40,14 +56,27 @@ FORMAT_VERSION = 1
 
 MESSAGE_TYPE_EXCHANGE = 1
 MESSAGE_TYPE_INVERSION = 2
-TYPE_NAMES = {MESSAGE_TYPE_EXCHANGE: "exchange", MESSAGE_TYPE_INVERSION: "inversion"}
+# Secure aggregation (roadcollab.privacy.secure_aggregation), vehicle <-> aggregator, one type per round.
+MESSAGE_TYPE_KEY_ADVERT = 3       # round 0: two X25519 public keys
+MESSAGE_TYPE_SEALED_SHARES = 4    # round 1: AEAD-sealed Shamir shares for one recipient
+MESSAGE_TYPE_MASKED_INPUT = 5     # round 2: the masked ring vector y
+MESSAGE_TYPE_REVEAL = 6           # round 3: shares of b_i (survivors) and s_i (dropped)
+SECAGG_TYPES = (MESSAGE_TYPE_KEY_ADVERT, MESSAGE_TYPE_SEALED_SHARES, MESSAGE_TYPE_MASKED_INPUT, MESSAGE_TYPE_REVEAL)
+TYPE_NAMES = {MESSAGE_TYPE_EXCHANGE: "exchange", MESSAGE_TYPE_INVERSION: "inversion",
+              MESSAGE_TYPE_KEY_ADVERT: "key_advert", MESSAGE_TYPE_SEALED_SHARES: "sealed_shares",
+              MESSAGE_TYPE_MASKED_INPUT: "masked_input", MESSAGE_TYPE_REVEAL: "reveal"}
 
 # Codes start at 1 so that an all-zero header can never be a valid message.
-MECHANISM_CODES = {"none": 1, "paper": 2, "hardened": 3, "fused": 4}
+SECAGG_MECHANISM = "secure_aggregation"
+MECHANISM_CODES = {"none": 1, "paper": 2, "hardened": 3, "fused": 4, SECAGG_MECHANISM: 5}
 MECHANISM_NAMES = {code: name for name, code in MECHANISM_CODES.items()}
+# The message type of each mechanism; secure_aggregation has four (SECAGG_TYPES), its example is a masked input.
 MECHANISM_TYPE = {"none": MESSAGE_TYPE_EXCHANGE, "paper": MESSAGE_TYPE_EXCHANGE,
-                  "hardened": MESSAGE_TYPE_INVERSION, "fused": MESSAGE_TYPE_INVERSION}
+                  "hardened": MESSAGE_TYPE_INVERSION, "fused": MESSAGE_TYPE_INVERSION,
+                  SECAGG_MECHANISM: MESSAGE_TYPE_MASKED_INPUT}
 
+# The first 8 bytes (magic, version, type, mechanism, reserved) are common to every message type.
+PREFIX_STRUCT = struct.Struct("<4sBBBB")
 COMMON_STRUCT = struct.Struct("<4sBBBBdIIQ")
 EXCHANGE_EXT_STRUCT = struct.Struct("<IIdd")
 INVERSION_EXT_STRUCT = struct.Struct("<II")
@@ -170,3 +199,72 @@ def payload_shapes(h: Header) -> list[tuple[str, tuple[int, int]]]:
         shapes += [(f"{name}.A", (n, n)), (f"{name}.B", (n, CHANNELS)),
                    (f"{name}.C", (CHANNELS, n)), (f"{name}.D", (CHANNELS, CHANNELS))]
     return shapes + [("e", (h.length, CHANNELS)), ("wf", (h.length, CHANNELS))]
+
+
+# --- secure aggregation ------------------------------------------------------------------------
+# prefix, session (segment, round), payload byte count, sender, two type-dependent counts, reserved.
+SECAGG_STRUCT = struct.Struct("<4sBBBB16sQIIII")
+SECAGG_HEADER_NBYTES = SECAGG_STRUCT.size   # 48
+KEY_NBYTES = 32               # a raw X25519 public key
+SHARE_NBYTES = 66             # a Shamir share y in GF(2^521 - 1): ceil(521 / 8) bytes, little-endian
+AEAD_TAG_NBYTES = 16          # Poly1305 tag of ChaCha20-Poly1305
+_ID_NBYTES = 4
+# Sealed plaintext: sender and recipient ids, the share of s_i and the share of b_i; then the tag.
+SEALED_NBYTES = 2 * _ID_NBYTES + 2 * SHARE_NBYTES + AEAD_TAG_NBYTES   # 156
+SHARE_ENTRY_NBYTES = _ID_NBYTES + SHARE_NBYTES                        # owner id, share: 70
+U8 = np.dtype("<u8")
+
+
+class SecAggHeader(NamedTuple):
+    """The 48-byte header of a secure-aggregation message (``struct`` format ``"<4sBBBB16sQIIII"``).
+
+    Parameters
+    ----------
+    msg_type : int
+        One of ``SECAGG_TYPES``.
+    session : bytes
+        16 bytes: segment and round, two little-endian uint64 (``privacy.secagg_messages.session_id``).
+    payload_nbytes : int
+        As declared (decode) or implied by the counts (encode).
+    vehicle : int
+        Sender id (>= 1).
+    n1 : int
+        Recipient id (sealed shares), rows ``L`` of ``y`` (masked input), entries of
+        ``self_mask_shares`` (reveal); 0 for a key advert.
+    n2 : int
+        Entries of ``key_shares`` (reveal); 0 otherwise.
+    reserved : int
+        Must be 0.
+    mechanism : str
+        As named by the mechanism byte; must be ``"secure_aggregation"``.
+    """
+
+    msg_type: int
+    session: bytes
+    payload_nbytes: int
+    vehicle: int
+    n1: int = 0
+    n2: int = 0
+    reserved: int = 0
+    mechanism: str = SECAGG_MECHANISM
+
+    @property
+    def header_nbytes(self) -> int:
+        """Size of the header, bytes (48)."""
+        return SECAGG_HEADER_NBYTES
+
+    def expected_payload_nbytes(self) -> int:
+        """Payload size implied by the type and counts, bytes.
+
+        Returns
+        -------
+        int
+            64 (key advert), 156 (sealed shares), ``16 * L`` (masked input) or ``70 * (n1 + n2)`` (reveal).
+        """
+        if self.msg_type == MESSAGE_TYPE_KEY_ADVERT:
+            return 2 * KEY_NBYTES
+        if self.msg_type == MESSAGE_TYPE_SEALED_SHARES:
+            return SEALED_NBYTES
+        if self.msg_type == MESSAGE_TYPE_MASKED_INPUT:
+            return U8.itemsize * CHANNELS * self.n1
+        return SHARE_ENTRY_NBYTES * (self.n1 + self.n2)

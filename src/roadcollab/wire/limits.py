@@ -15,7 +15,9 @@ import numpy as np
 import scipy.linalg
 
 from ..errors import MessageError
-from .layout import MECHANISM_CODES, MECHANISM_TYPE, MESSAGE_TYPE_EXCHANGE, TYPE_NAMES, Header, exchange_nbytes, inversion_nbytes
+from .layout import (MECHANISM_CODES, MECHANISM_TYPE, MESSAGE_TYPE_EXCHANGE, MESSAGE_TYPE_KEY_ADVERT,
+                     MESSAGE_TYPE_MASKED_INPUT, MESSAGE_TYPE_REVEAL, MESSAGE_TYPE_SEALED_SHARES, SECAGG_MECHANISM,
+                     TYPE_NAMES, Header, SecAggHeader, exchange_nbytes, inversion_nbytes)
 
 __all__ = [
     "MAX_ORDER",
@@ -30,6 +32,9 @@ __all__ = [
     "check_mechanism",
     "check_header",
     "check_payload",
+    "MAX_VEHICLES",
+    "MAX_VEHICLE_ID",
+    "SHARE_MODULUS",
 ]
 
 MAX_ORDER = 64
@@ -44,9 +49,19 @@ MAX_TRANSIENT_GAIN = 1e8
 #: Largest relative residual of the Lyapunov solution ``A^T X A - X + I``.
 LYAPUNOV_RTOL = 1e-8
 
+#: Secure aggregation: most vehicles in one session, so most shares in one reveal.
+MAX_VEHICLES = 10_000
+#: Vehicle ids are uint32 on the wire; 0 is never an id (it is a Shamir evaluation point: the secret).
+MAX_VEHICLE_ID = 2 ** 32 - 1
+#: A Shamir share is an element of GF(p), p = 2^521 - 1: 0 <= share < SHARE_MODULUS.
+SHARE_MODULUS = 2 ** 521 - 1
+
+_SECAGG_MAX = (SecAggHeader(MESSAGE_TYPE_MASKED_INPUT, bytes(16), 0, 1, MAX_SIGNAL_LENGTH),
+               SecAggHeader(MESSAGE_TYPE_REVEAL, bytes(16), 0, 1, MAX_VEHICLES))
 # The largest valid message bounds what decode will even look at.
 MAX_MESSAGE_BYTES = max(exchange_nbytes(MAX_ORDER, MAX_ORDER, MAX_SIGNAL_LENGTH),
-                        inversion_nbytes(MAX_SIGNAL_LENGTH))
+                        inversion_nbytes(MAX_SIGNAL_LENGTH),
+                        *(h.header_nbytes + h.expected_payload_nbytes() for h in _SECAGG_MAX))
 
 
 def check_mechanism(mechanism) -> str:
@@ -55,7 +70,7 @@ def check_mechanism(mechanism) -> str:
     Parameters
     ----------
     mechanism : object
-        ``"none"``, ``"paper"``, ``"hardened"`` or ``"fused"``.
+        ``"none"``, ``"paper"``, ``"hardened"``, ``"fused"`` or ``"secure_aggregation"``.
 
     Returns
     -------
@@ -100,7 +115,7 @@ def check_header(h: Header) -> None:
 
     Parameters
     ----------
-    h : Header
+    h : Header | SecAggHeader
         Fields of a message, with ``mechanism`` a key of ``MECHANISM_CODES`` and
         ``msg_type`` a key of ``TYPE_NAMES``.
 
@@ -110,7 +125,13 @@ def check_header(h: Header) -> None:
         If a field is out of its limits, the mechanism does not fit the message type, or
         ``payload_nbytes`` differs from the size the dimensions imply.
     """
+    if isinstance(h, SecAggHeader):
+        _check_secagg_header(h)
+        return
     expected_type = MECHANISM_TYPE[h.mechanism]
+    if h.mechanism == SECAGG_MECHANISM:
+        raise MessageError(f"mechanism {SECAGG_MECHANISM!r} requires a secure-aggregation message (types 3-6), "
+                           f"got an {TYPE_NAMES[h.msg_type]} message")
     if h.msg_type != expected_type:
         raise MessageError(
             f"mechanism {h.mechanism!r} requires an {TYPE_NAMES[expected_type]} message, "
@@ -198,17 +219,22 @@ def check_payload(h: Header, arrays: dict[str, np.ndarray]) -> None:
 
     Parameters
     ----------
-    h : Header
+    h : Header | SecAggHeader
     arrays : dict of str to numpy.ndarray
-        The payload arrays by wire name (see :func:`~.layout.payload_shapes`), float64.
+        The payload arrays by wire name (see :func:`~.layout.payload_shapes`), float64; for secure
+        aggregation the fields of :func:`~.describe.message_fields`.
 
     Raises
     ------
     MessageError
         If an entry is NaN or infinite, or ``T`` or ``S`` is not discrete-time stable: computed
         spectral radius not below ``1 - RADIUS_MARGIN``, or no Lyapunov certificate bounding
-        ``sup_k ||A^k||`` by ``MAX_TRANSIENT_GAIN``.
+        ``sup_k ||A^k||`` by ``MAX_TRANSIENT_GAIN``. For secure aggregation, a reveal with shares
+        out of order, duplicated across its two lists or outside ``GF(2^521 - 1)``.
     """
+    if isinstance(h, SecAggHeader):
+        _check_secagg_payload(h, arrays)
+        return
     if h.msg_type == MESSAGE_TYPE_EXCHANGE:
         for name in ("T", "S"):
             _check_system(name, *(arrays[f"{name}.{p}"] for p in "ABCD"))
@@ -216,3 +242,72 @@ def check_payload(h: Header, arrays: dict[str, np.ndarray]) -> None:
         _check_finite("wf", arrays["wf"])
     else:
         _check_finite("z", arrays["z"])
+
+
+def _check_id(name: str, value: int) -> None:
+    """A vehicle id in ``[1, MAX_VEHICLE_ID]``."""
+    if not 1 <= value <= MAX_VEHICLE_ID:
+        raise MessageError(f"{name} must be a positive int vehicle id <= {MAX_VEHICLE_ID}, got {value}")
+
+
+def _check_secagg_header(h: SecAggHeader) -> None:
+    """:func:`check_header` of a secure-aggregation message.
+
+    Refused: the mechanism is not ``"secure_aggregation"``, the session is not 16 bytes, an id is
+        out of ``[1, MAX_VEHICLE_ID]``, a sealed share is addressed to its sender, ``L`` is out of
+        ``[1, MAX_SIGNAL_LENGTH]``, a reveal carries no share or more than ``MAX_VEHICLES``, an
+    unused or reserved field is not 0, or ``payload_nbytes`` differs from the size implied.
+    """
+    kind = TYPE_NAMES[h.msg_type]
+    if h.mechanism != SECAGG_MECHANISM:
+        raise MessageError(f"a {kind} message requires mechanism {SECAGG_MECHANISM!r}, got {h.mechanism!r}")
+    if not isinstance(h.session, bytes) or len(h.session) != 16:
+        raise MessageError(f"session must be 16 bytes (segment, round), got {h.session!r:.40}")
+    if h.reserved != 0:
+        raise MessageError(f"reserved secure-aggregation header field must be 0, got {h.reserved}")
+    _check_id("vehicle", h.vehicle)
+    unused = {MESSAGE_TYPE_KEY_ADVERT: (h.n1, h.n2), MESSAGE_TYPE_REVEAL: ()}.get(h.msg_type, (h.n2,))
+    if any(unused):
+        raise MessageError(f"unused {kind} header fields must be 0, got {unused}")
+    if h.msg_type == MESSAGE_TYPE_SEALED_SHARES:
+        _check_id("recipient", h.n1)
+        if h.n1 == h.vehicle:
+            raise MessageError(f"sealed shares of vehicle {h.vehicle} are addressed to itself")
+    elif h.msg_type == MESSAGE_TYPE_MASKED_INPUT and not 1 <= h.n1 <= MAX_SIGNAL_LENGTH:
+        raise MessageError(f"oversized or empty: masked input length must be in [1, {MAX_SIGNAL_LENGTH}] "
+                           f"(MAX_SIGNAL_LENGTH), got {h.n1}")
+    elif h.msg_type == MESSAGE_TYPE_REVEAL and not 1 <= h.n1 + h.n2 <= MAX_VEHICLES:
+        raise MessageError(f"oversized or empty: a reveal must carry 1 to {MAX_VEHICLES} shares (MAX_VEHICLES), "
+                           f"got {h.n1} + {h.n2}")
+    expected = h.expected_payload_nbytes()
+    if h.payload_nbytes != expected:
+        raise MessageError(f"header declares {h.payload_nbytes} payload bytes but its dimensions imply {expected}")
+
+
+def _check_shares(name: str, entries: list) -> None:
+    """Owner ids strictly increasing (the canonical order) and shares in ``[0, SHARE_MODULUS)``."""
+    previous = 0
+    for owner, share in entries:
+        _check_id(f"{name}: owner", owner)
+        if owner <= previous:
+            raise MessageError(f"{name}: owner ids must be strictly increasing, got {owner} after {previous}")
+        if not 0 <= share < SHARE_MODULUS:
+            raise MessageError(f"{name}: share of owner {owner} lies outside GF(2^521 - 1)")
+        previous = owner
+
+
+def _check_secagg_payload(h: SecAggHeader, fields: dict) -> None:
+    """:func:`check_payload` of a secure-aggregation message.
+
+    ``fields`` as from :func:`~.describe.message_fields`, a reveal's ``self_mask_shares`` and
+    ``key_shares`` as lists of ``(owner, share)`` in wire order. Refused: a reveal whose owner ids are not strictly increasing within a list, not vehicle ids, or
+    appear in both lists (a vehicle reveals ``b_i`` or ``s_i``, never both), or whose shares lie
+    outside ``GF(2^521 - 1)``. Keys, ciphertexts and ring elements take any value.
+    """
+    if h.msg_type != MESSAGE_TYPE_REVEAL:
+        return
+    _check_shares("self_mask_shares", fields["self_mask_shares"])
+    _check_shares("key_shares", fields["key_shares"])
+    both = {o for o, _ in fields["self_mask_shares"]} & {o for o, _ in fields["key_shares"]}
+    if both:
+        raise MessageError(f"reveal of vehicle {h.vehicle} carries both shares of owners {sorted(both)[:5]}")

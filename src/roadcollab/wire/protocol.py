@@ -16,8 +16,10 @@ Common header (32 bytes, ``struct`` format ``"<4sBBBBdIIQ"``)::
     ------  ----  --------  -----------------------------------------------------------
          0     4  bytes     magic, b"RCOL"
          4     1  uint8     format version, FORMAT_VERSION (= 1)
-         5     1  uint8     message type: 1 = ExchangeMessage, 2 = InversionMessage
-         6     1  uint8     mechanism: 1 = "none", 2 = "paper", 3 = "hardened", 4 = "fused"
+         5     1  uint8     message type: 1 = ExchangeMessage, 2 = InversionMessage,
+                            3-6 = secure aggregation (own 48-byte header, below)
+         6     1  uint8     mechanism: 1 = "none", 2 = "paper", 3 = "hardened", 4 = "fused",
+                            5 = "secure_aggregation" (only with types 3-6, below)
          7     1  uint8     reserved, must be 0
          8     8  float64   sample_rate, Hz
         16     4  uint32    n_samples, samples in the recorded window N
@@ -79,12 +81,47 @@ refused too.
 :func:`encode` runs exactly the same checks, so it never produces a message that
 :func:`decode` would refuse.
 
+Secure aggregation
+------------------
+The four rounds of :mod:`roadcollab.privacy.secure_aggregation` (vehicle <-> aggregator) share
+the first 8 bytes above (magic, version, type, mechanism 5 = "secure_aggregation", reserved 0)
+and then have their own 48-byte header (``"<4sBBBB16sQIIII"``)::
+
+    offset  size  type      field
+    ------  ----  --------  -----------------------------------------------------------
+         0     8            prefix as above; type 3, 4, 5 or 6; mechanism 5
+         8    16  2 uint64  session: segment, round (``session_id``)
+        24     8  uint64    payload byte count (everything after the 48-byte header)
+        32     4  uint32    vehicle: the sender's id, >= 1
+        36     4  uint32    n1: type 4 recipient id; type 5 L; type 6 entries of b shares; else 0
+        40     4  uint32    n2: type 6 entries of s shares; else 0
+        44     4  uint32    reserved, must be 0
+        48        payload   by type:
+
+    type  message       payload                                                   bytes
+    ----  ------------  --------------------------------------------------------  ---------------
+       3  KeyAdvert     c_pk (32), s_pk (32): raw X25519 public keys               64
+       4  SealedShares  ChaCha20-Poly1305 ciphertext of (sender u32, recipient     156
+                        u32, share of s_sk 66, share of b 66) + 16-byte tag
+       5  MaskedInput   y (L, 2) '<u8', row-major: ring elements mod 2^64          16 L
+       6  Reveal        n1 + n2 entries (owner u32, share 66 bytes little-endian):  70 (n1 + n2)
+                        first the shares of b_i (survivors), then of s_i
+                        (dropped), each list by strictly increasing owner id
+
+Limits: ids in ``[1, 2**32 - 1]``, a sealed share not addressed to its sender, ``1 <= L <=
+MAX_SIGNAL_LENGTH``, ``1 <= n1 + n2 <= MAX_VEHICLES`` (10,000), unused counts 0, shares in
+``[0, 2**521 - 1)`` and no owner in both lists of a reveal. Keys, ciphertexts and ring elements
+take any value: their validity is cryptographic and checked by the protocol (X25519, the AEAD
+tag, Shamir consistency), which raises ``MessageError`` too. The encoding is canonical:
+whatever :func:`decode` accepts, :func:`encode` reproduces byte for byte.
+
 Modules
 -------
 This module is the public entry point. The layout (codes, ``struct`` headers, sizes) is
 stated in :mod:`.layout`, the limits and the checks above in :mod:`.limits`, the byte-level
-framing in :mod:`.framing`, and the conversion between message objects and header plus
-arrays in :mod:`.fields`.
+framing in :mod:`.framing` (secure aggregation: :mod:`.secagg_framing`), the message objects in
+:mod:`.message` and :mod:`.secagg`, and the conversion between message objects and header plus
+arrays in :mod:`.describe` and :mod:`.fields`.
 """
 
 from __future__ import annotations
@@ -105,9 +142,10 @@ from .framing import as_buffer, check_frame_size, pack_message, read_header
 from .framing import read_array as _read_array
 from .layout import (COMMON_HEADER_NBYTES, EXCHANGE_HEADER_NBYTES, FLOAT_NBYTES, FORMAT_VERSION,
                      INVERSION_HEADER_NBYTES, MAGIC, MECHANISM_CODES, MESSAGE_TYPE_EXCHANGE, MESSAGE_TYPE_INVERSION,
-                     exchange_nbytes, inversion_nbytes, payload_shapes)
+                     SECAGG_HEADER_NBYTES, SecAggHeader, exchange_nbytes, inversion_nbytes, payload_shapes)
 from .limits import (DT_RTOL, MAX_COUNT, MAX_MESSAGE_BYTES, MAX_ORDER, MAX_SAMPLE_RATE, MAX_SIGNAL_LENGTH,
-                     check_header, check_payload)
+                     MAX_VEHICLES, check_header, check_payload)
+from .secagg_framing import read_secagg_fields
 
 __all__ = [
     "MAGIC",
@@ -124,6 +162,8 @@ __all__ = [
     "COMMON_HEADER_NBYTES",
     "EXCHANGE_HEADER_NBYTES",
     "INVERSION_HEADER_NBYTES",
+    "SECAGG_HEADER_NBYTES",
+    "MAX_VEHICLES",
     "encode",
     "decode",
     "exchange_nbytes",
@@ -139,7 +179,7 @@ def message_nbytes(message: Message) -> int:
 
     Parameters
     ----------
-    message : ExchangeMessage | InversionMessage
+    message : ExchangeMessage | InversionMessage | KeyAdvert | SealedShares | MaskedInput | Reveal
 
     Returns
     -------
@@ -160,7 +200,7 @@ def encode(message: Message) -> bytes:
 
     Parameters
     ----------
-    message : ExchangeMessage | InversionMessage
+    message : ExchangeMessage | InversionMessage | KeyAdvert | SealedShares | MaskedInput | Reveal
 
     Returns
     -------
@@ -196,6 +236,10 @@ def _decode(data) -> Message:
     h = read_header(buf)
     check_header(h)
     check_frame_size(h, len(buf))
+    if isinstance(h, SecAggHeader):
+        fields = read_secagg_fields(buf, h)
+        check_payload(h, fields)     # the wire order of a reveal's shares, before they become dicts
+        return build_message(h, fields)
     arrays: dict[str, np.ndarray] = {}
     offset = h.header_nbytes
     for name, shape in payload_shapes(h):
@@ -216,8 +260,9 @@ def decode(data: bytes | bytearray | memoryview) -> Message:
 
     Returns
     -------
-    ExchangeMessage | InversionMessage
-        Arrays are owned, read-only float64 copies (never views into ``data``).
+    ExchangeMessage | InversionMessage | KeyAdvert | SealedShares | MaskedInput | Reveal
+        Arrays are owned, read-only float64 (``y``: uint64) copies (never views into ``data``).
+        A receiver that expects one type checks it (``isinstance``): every type decodes here.
 
     Raises
     ------
@@ -244,7 +289,8 @@ def write_example(path: str | PathLike, mechanism: str = "paper", seed: int = 0)
     ----------
     path : str | os.PathLike
         Output file (overwritten).
-    mechanism : {"none", "paper", "hardened", "fused"}
+    mechanism : {"none", "paper", "hardened", "fused", "secure_aggregation"}
+        ``"secure_aggregation"`` writes a masked input (:class:`~.secagg.MaskedInput`).
     seed : int
         Seed of the random content.
 
