@@ -85,6 +85,20 @@ def _read_text(path, name: str, limits: FileLimits) -> str:
         raise FileFormatError(f"{name}: cannot read profile file: {err.strerror or err}") from None
 
 
+def _expected(tokens: list[str]) -> str:
+    """What a line whose ``tokens`` :func:`parse_ascii_number` refused should have held."""
+    want = "2 numbers 'distance_m elevation_m'"
+    try:
+        values = [float(t) for t in tokens]
+    except (ValueError, OverflowError):
+        return want
+    if len(values) != 2:
+        return want
+    if not all(t.isascii() and "_" not in t for t in tokens):
+        return want + " written with ASCII digits 0-9"
+    return "finite numbers" if not all(map(math.isfinite, values)) else want + " in plain decimal notation"
+
+
 def _parse_line(raw: str, lineno: int, name: str) -> list[float] | None:
     """``[distance, elevation]`` of one line, None for a blank or comment line; FileFormatError otherwise."""
     line = raw.split("#", 1)[0].strip()
@@ -93,8 +107,7 @@ def _parse_line(raw: str, lineno: int, name: str) -> list[float] | None:
     tokens = [t.strip() for t in line.split(",")] if "," in line else line.split()
     values = [parse_ascii_number(t) for t in tokens]
     if len(values) != 2 or None in values:
-        raise FileFormatError(f"{name}: line {lineno}: expected 2 finite numbers 'distance_m elevation_m' in ASCII "
-                              f"digits, got {short_repr(raw)}")
+        raise FileFormatError(f"{name}: line {lineno}: expected {_expected(tokens)}, got {short_repr(raw)}")
     if abs(values[0]) > MAX_DISTANCE:
         raise FileFormatError(f"{name}: line {lineno}: expected a distance within +-{MAX_DISTANCE:g} m, got "
                               f"{values[0]:g}")
