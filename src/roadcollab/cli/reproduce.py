@@ -98,7 +98,9 @@ def run(args: argparse.Namespace, command_line: str) -> int:
     print_table(f"MSE per vehicle ((m/s)^2), {cfg.n_runs} runs, {elapsed:.1f} s",
                 [header for _, header in HEADLINE_COLUMNS],
                 [(str(r["vehicle"]), *(f"{r[k]:.3g}" for k, _ in HEADLINE_COLUMNS[1:])) for r in result.table()])
-    Console().print(f"vehicle 1 online / Algorithm 1 (vehicles 2..{cfg.n_vehicles}): "
-                    f"{summary['vehicle1_observer_over_algorithm1']:.2f}x; fused / centralized at vehicle "
-                    f"{cfg.n_vehicles}: {summary['fused_over_centralized_last']:.2f}x; wrote {args.out}/report.md")
+    ratio = summary["vehicle1_observer_over_algorithm1"]
+    alg1 = ("Algorithm 1 needs at least 2 vehicles" if ratio is None else
+            f"vehicle 1 online / Algorithm 1 (vehicles 2..{cfg.n_vehicles}): {ratio:.2f}x")
+    Console().print(f"{alg1}; fused / centralized at vehicle {cfg.n_vehicles}: "
+                    f"{summary['fused_over_centralized_last']:.2f}x; wrote {args.out}/report.md")
     return 0
