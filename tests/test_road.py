@@ -282,7 +282,7 @@ def test_load_profile_too_short_or_missing(tmp_path):
     path.write_text("".join(f"{i} 0\n" for i in range(7)))
     with pytest.raises(ParameterError, match=r"short\.txt: expected at least 8 data rows, got 7"):
         load_profile(path)
-    with pytest.raises(ParameterError, match=r"cannot read profile file .*missing\.txt"):
+    with pytest.raises(ParameterError, match=r"missing\.txt: profile file not found"):
         load_profile(tmp_path / "missing.txt")
 
 

@@ -10,7 +10,7 @@ from .wire import protocol
 from .detection.detector import Detection, DetectorSpec, detect_anomalies
 from .detection.scoring import MatchResult, match_detections
 from .collaboration.algorithm1 import CollaborativeEstimator, VehicleEstimate, learning_filters
-from .errors import MessageError, ParameterError
+from .errors import FileFormatError, MessageError, ParameterError
 from .estimation.estimator import JDPNoise, RoadInputEstimator, build_road_input_estimator, jdp_estimator_gain
 from .experiments.config import ExperimentConfig
 from .experiments.pipeline import FleetPipeline
@@ -34,7 +34,7 @@ except _metadata.PackageNotFoundError:  # running from a source tree without ins
 __all__ = [
     "Detection", "DetectorSpec", "detect_anomalies", "MatchResult", "match_detections",
     "CollaborativeEstimator", "VehicleEstimate", "learning_filters",
-    "MessageError", "ParameterError",
+    "FileFormatError", "MessageError", "ParameterError",
     "JDPNoise", "RoadInputEstimator", "build_road_input_estimator", "jdp_estimator_gain",
     "ExperimentConfig", "FleetPipeline", "ReproductionResult", "run_reproduction", "LinearMMSE",
     "Exchange", "Relay", "simulate_measurements",

@@ -1,11 +1,11 @@
 """Exception types of roadcollab.
 
-Both subclass :class:`ValueError`, so callers that already catch ``ValueError`` keep working.
+Every type subclasses :class:`ValueError`, so callers that already catch ``ValueError`` keep working.
 """
 
 from __future__ import annotations
 
-__all__ = ["MessageError", "ParameterError"]
+__all__ = ["FileFormatError", "MessageError", "ParameterError"]
 
 
 class ParameterError(ValueError):
@@ -17,3 +17,11 @@ class ParameterError(ValueError):
 
 class MessageError(ValueError):
     """A received (untrusted) message is malformed, truncated, oversized or unsafe to use."""
+
+
+class FileFormatError(ParameterError):
+    """An input file (drive CSV, parameters file, road profile) is missing, too large or malformed.
+
+    The message starts with the file's path and, where there is one, the line and the field.
+    A :class:`ParameterError` (so a ``ValueError``), so callers catching either keep working.
+    """

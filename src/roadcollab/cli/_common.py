@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import shlex
+import textwrap
 import time
 from pathlib import Path
 from typing import Callable, Sequence
@@ -13,13 +14,23 @@ from rich.console import Console
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 from rich.table import Table
 
+import re
+
 from ..errors import ParameterError
 from ..experiments.config import ExperimentConfig
+from ..io.limits import DEFAULT_MAX_FILE_MB, DEFAULT_MAX_ROWS, FileLimits
 from ..io.profiles import measured_road
 from ..models.vehicle import FleetSpec
 
-__all__ = ["positive_int", "nonneg_int", "positive_float", "add_out_option", "add_dask_options", "add_road_options",
-           "dask_options", "command_line", "progress", "run_with_progress", "print_table", "config_from_args"]
+__all__ = ["positive_int", "nonneg_int", "positive_float", "paillier_bits", "add_out_option", "add_dask_options",
+           "add_road_options", "add_limit_options", "file_limits", "dask_options", "check_dask_options",
+           "command_line", "progress", "run_with_progress", "print_table", "config_from_args"]
+
+#: The shortest measured profile a simulated command accepts: lead-in + lead-out (15 m each), one metre
+#: of slack and a scored segment of at least 20 m.
+MIN_SCORED_M = 20.0
+_MARGIN_M = 15.0
+_ADDRESS = re.compile(r"(tcp|tls|inproc|ucx|ws|wss)://[^\s]+|[A-Za-z0-9_.\-]+:\d{1,5}")
 
 
 # --- argument types ------------------------------------------------------------------------------
@@ -67,6 +78,62 @@ def positive_float(text: str) -> float:
     return v
 
 
+def paillier_bits(text: str) -> int:
+    """argparse type: a Paillier modulus size, a multiple of 64 from 512 to 8192 bits.
+
+    Parameters
+    ----------
+    text : str
+        The option's value as typed.
+
+    Returns
+    -------
+    int
+
+    Raises
+    ------
+    argparse.ArgumentTypeError
+        Not an integer, out of range or not a multiple of 64.
+    """
+    v = positive_int(text)
+    if not (512 <= v <= 8192 and v % 64 == 0):
+        raise argparse.ArgumentTypeError(f"expected a key size from 512 to 8192 bits in steps of 64, got {v}")
+    return v
+
+
+def command_parser(subparsers, name: str, *, summary: str, does: str, writes: str, example: str
+                   ) -> argparse.ArgumentParser:
+    """A subcommand parser whose ``--help`` says what it does, what it writes and one example.
+
+    Parameters
+    ----------
+    subparsers : argparse._SubParsersAction
+        From ``ArgumentParser.add_subparsers``.
+    name : str
+        The subcommand.
+    summary : str
+        One line for ``roadcollab --help``.
+    does, writes : str
+        What the command does and what it writes (paragraphs of the description).
+    example : str
+        One example command line.
+
+    Returns
+    -------
+    argparse.ArgumentParser
+    """
+    return subparsers.add_parser(name, help=summary, description=f"{does}\n\nWrites: {writes}",
+                                 epilog=f"example:\n  {example}", formatter_class=_HelpFormatter)
+
+
+class _HelpFormatter(argparse.RawDescriptionHelpFormatter):
+    """Keeps the description's paragraphs (each wrapped at 100 columns) and the example as written."""
+
+    def _fill_text(self, text, width, indent):
+        return "\n\n".join(textwrap.fill(par, min(width, 100), initial_indent=indent, subsequent_indent=indent)
+                            for par in text.split("\n\n")) if not text.startswith("example:") else text
+
+
 # --- common options ------------------------------------------------------------------------------
 
 def add_out_option(p: argparse.ArgumentParser) -> None:
@@ -101,15 +168,76 @@ def add_dask_options(p: argparse.ArgumentParser) -> None:
 
 
 def add_road_options(p: argparse.ArgumentParser) -> None:
-    """``--road-profile FILE`` and ``--speed`` (m/s): the road the simulated fleet drives."""
+    """``--road-profile FILE``, ``--speed`` (m/s) and the file limits: the road the simulated fleet drives."""
     p.add_argument("--road-profile", metavar="FILE", default=None,
-                   help="measured profile (rows 'distance_m elevation_m'); 'packaged' for the shipped one")
+                   help="measured profile (rows 'distance_m elevation_m', uniform spacing, at least "
+                        f"{2 * _MARGIN_M + 1 + MIN_SCORED_M:g} m long); 'packaged' for the shipped one")
     p.add_argument("--speed", type=positive_float, default=15.0, help="vehicle speed, m/s (default 15)")
+    add_limit_options(p, "the --road-profile file")
+
+
+def add_limit_options(p: argparse.ArgumentParser, what: str) -> None:
+    """``--max-rows`` and ``--max-file-mb``: the largest input file read (checked before reading).
+
+    Parameters
+    ----------
+    p : argparse.ArgumentParser
+    what : str
+        The files the limits apply to, for the help text.
+    """
+    p.add_argument("--max-rows", type=positive_int, default=DEFAULT_MAX_ROWS, metavar="N",
+                   help=f"most data rows accepted in {what} (default {DEFAULT_MAX_ROWS:,})")
+    p.add_argument("--max-file-mb", type=positive_float, default=DEFAULT_MAX_FILE_MB, metavar="MB",
+                   help=f"size limit of {what} in MB, checked before reading (default {DEFAULT_MAX_FILE_MB:g})")
+
+
+def file_limits(args: argparse.Namespace) -> FileLimits:
+    """The :class:`~roadcollab.io.limits.FileLimits` of :func:`add_limit_options` (defaults if absent).
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+
+    Returns
+    -------
+    FileLimits
+    """
+    return FileLimits(max_rows=getattr(args, "max_rows", DEFAULT_MAX_ROWS),
+                      max_file_mb=getattr(args, "max_file_mb", DEFAULT_MAX_FILE_MB))
 
 
 def dask_options(args: argparse.Namespace) -> dict:
     """``{"workers": ..., "scheduler": ...}`` from :func:`add_dask_options`, for the study runners."""
     return {"workers": args.workers, "scheduler": args.scheduler}
+
+
+def check_dask_options(args: argparse.Namespace, timeout: float = 5.0) -> None:
+    """Refuse an unreachable ``--scheduler`` before any compute (a connection attempt of ``timeout`` s).
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        With ``scheduler`` (None: nothing to check).
+    timeout : float
+        Seconds to wait for the scheduler.
+
+    Raises
+    ------
+    ParameterError
+        The address is malformed or no scheduler answers there.
+    """
+    address = getattr(args, "scheduler", None)
+    if address is None:
+        return
+    if not _ADDRESS.fullmatch(address):
+        raise ParameterError(f"--scheduler must be an address such as tcp://host:8786, got {address!r}")
+    from dask.distributed import Client
+
+    try:
+        Client(address, timeout=timeout).close()
+    except (OSError, TimeoutError) as err:
+        raise ParameterError(f"--scheduler {address}: no Dask scheduler answered within {timeout:g} s "
+                             f"({type(err).__name__}: {err})") from None
 
 
 # --- running -------------------------------------------------------------------------------------
@@ -210,7 +338,8 @@ def config_from_args(args: argparse.Namespace) -> ExperimentConfig:
         ``--road-profile`` names no existing file, or a value the configuration rejects.
     """
     kw = dict(n_runs=args.runs, n_vehicles=args.vehicles, speed=args.speed, oracle=args.oracle,
-              road_profile=args.road_profile, redraw_fleet=getattr(args, "redraw_fleet", False))
+              road_profile=args.road_profile, redraw_fleet=getattr(args, "redraw_fleet", False),
+              profile_limits=file_limits(args))
     if args.noise is not None:
         kw["sensor_noise_std"] = args.noise
     if args.iso_class is not None:
@@ -223,6 +352,12 @@ def config_from_args(args: argparse.Namespace) -> ExperimentConfig:
         raise ParameterError(f"--road-profile must be an existing file, got {args.road_profile!r}")
     if args.road_profile is not None:
         # A measured profile covers a fixed stretch: score as much of it as fits.
-        length = measured_road(None if args.road_profile == "packaged" else args.road_profile, rng=0).length
-        kw["segment_length"] = min(300.0, length - 2 * 15.0 - 1.0)
+        length = measured_road(None if args.road_profile == "packaged" else args.road_profile, rng=0,
+                               limits=kw["profile_limits"]).length
+        need = 2 * _MARGIN_M + 1.0 + MIN_SCORED_M
+        if length < need:
+            raise ParameterError(f"{args.road_profile}: the profile covers {length:.4g} m; a simulated run needs at "
+                                 f"least {need:g} m ({_MARGIN_M:g} m lead-in, {MIN_SCORED_M:g} m scored, "
+                                 f"{_MARGIN_M:g} m lead-out, 1 m slack)")
+        kw["segment_length"] = min(300.0, length - 2 * _MARGIN_M - 1.0)
     return ExperimentConfig(**kw)

@@ -7,8 +7,9 @@ import argparse
 from ..experiments.anomaly_config import AnomalyStudyConfig
 from ..experiments.anomaly_study import run_anomaly_study
 from ..reporting.anomaly_report import write_anomalies
-from ._common import (add_dask_options, add_road_options, add_study_options, config_from_args, dask_options,
-                      print_table, run_with_progress)
+from ..reporting.records import staged_output
+from ._common import (command_parser, add_dask_options, add_road_options, add_study_options, check_dask_options, config_from_args,
+                      dask_options, print_table, run_with_progress)
 
 __all__ = ["NAME", "add_parser", "run"]
 
@@ -28,7 +29,13 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
     argparse.ArgumentParser
         The subcommand's parser.
     """
-    p = subparsers.add_parser(NAME, help="road anomaly detection study (F1, position error, sweeps)")
+    p = command_parser(
+        subparsers, NAME, summary="road anomaly detection study (F1, position error, sweeps)",
+        does="Simulates roads with potholes and bumps, detects them in every estimator's road estimate and scores "
+             "precision, recall, F1 and position error, with sweeps over anomaly depth and sensor noise.",
+        writes="into --out (replaced as a whole at the end): detection.csv, the road map, F1 vs depth, F1 vs "
+               "noise (each figure with its CSV), config.json, report.md.",
+        example="roadcollab anomalies --runs 5 --no-sweeps --out results/anomalies")
     add_study_options(p, runs=20, runs_help="roads (default 20)", vehicles_help="fleet size (default 10, at least 2)")
     p.add_argument("--noise", type=float, default=None, help="accelerometer noise std, m/s^2 (default 0.05)")
     p.add_argument("--iso-class", default=None, help="ISO 8608 roughness class (default C)")
@@ -56,14 +63,15 @@ def run(args: argparse.Namespace, command_line: str) -> int:
     # The study draws one road per run itself: the experiment describes a single run.
     ns = argparse.Namespace(runs=1, vehicles=args.vehicles, speed=args.speed, oracle=False,
                             road_profile=args.road_profile, noise=args.noise, iso_class=args.iso_class,
-                            uncertainty=None)
-    exp = config_from_args(ns)
-    kw = {"depths": (), "noise_levels": ()} if args.no_sweeps else {}
-    cfg = AnomalyStudyConfig(experiment=exp, n_runs=args.runs, **kw)
-    result, elapsed = run_with_progress(cfg.n_runs, NAME,
-                                        lambda cb: run_anomaly_study(cfg, args.seed, progress=cb,
-                                                                     **dask_options(args)))
-    write_anomalies(result, args.out, command=command_line, elapsed=elapsed)
+                            uncertainty=None, max_rows=args.max_rows, max_file_mb=args.max_file_mb)
+    check_dask_options(args)
+    with staged_output(args.out) as out:
+        exp = config_from_args(ns)
+        kw = {"depths": (), "noise_levels": ()} if args.no_sweeps else {}
+        cfg = AnomalyStudyConfig(experiment=exp, n_runs=args.runs, **kw)
+        result, elapsed = run_with_progress(cfg.n_runs, NAME, lambda cb: run_anomaly_study(
+            cfg, args.seed, progress=cb, **dask_options(args)))
+        write_anomalies(result, out, command=command_line, elapsed=elapsed)
     print_table(f"Anomaly detection, {cfg.n_runs} runs, {elapsed:.1f} s",
                 ("estimator", "precision", "recall", "F1", "median position error (m)"),
                 [(r.estimator, f"{r.precision:.3f}", f"{r.recall:.3f}", f"{r.f1:.3f}",

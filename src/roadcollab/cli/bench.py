@@ -6,7 +6,7 @@ import argparse
 import json
 
 from ..experiments.bench import run_bench
-from ._common import positive_int, print_table
+from ._common import command_parser, positive_int, print_table
 
 __all__ = ["NAME", "add_parser", "run"]
 
@@ -28,7 +28,12 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
     argparse.ArgumentParser
         The subcommand's parser.
     """
-    p = subparsers.add_parser(NAME, help="per-segment cost of one vehicle, and its scaling with segment length")
+    p = command_parser(
+        subparsers, NAME, summary="per-segment cost of one vehicle, and its scaling with segment length",
+        does="Times one vehicle's work per road segment for every privacy mechanism (single-threaded) and how the "
+             "cost grows with the segment length.",
+        writes="nothing: tables (or one JSON line with --json) on stdout.",
+        example="roadcollab bench --quick --json")
     p.add_argument("--json", action="store_true", help="print one JSON line")
     p.add_argument("--repeats", type=positive_int, default=30, help="timed segments per point (default 30)")
     p.add_argument("--quick", action="store_true", help="only up to 16k samples")

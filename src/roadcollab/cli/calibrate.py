@@ -7,8 +7,10 @@ import argparse
 from ..experiments.calibration_config import AnomalyCalibrationConfig, parse_seeds
 from ..experiments.anomaly_calibration import calibrate_anomalies
 from ..reporting.calibration_report import write_calibration
+from ..reporting.records import staged_output
 from ..experiments.config import ExperimentConfig
-from ._common import add_dask_options, add_out_option, dask_options, positive_float, positive_int, progress
+from ._common import (command_parser, add_dask_options, add_out_option, check_dask_options, dask_options, positive_float, positive_int,
+                      progress)
 
 __all__ = ["NAME", "add_parser", "run"]
 
@@ -28,8 +30,12 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
     argparse.ArgumentParser
         The subcommand's parser.
     """
-    p = subparsers.add_parser(NAME,
-                              help="grid search of the anomaly detector's threshold and depth floor on training seeds")
+    p = command_parser(
+        subparsers, NAME, summary="grid search of the anomaly detector's threshold and depth floor on training seeds",
+        does="Runs the anomaly study on training seeds only (evaluation seeds are refused) for every pair of SNR "
+             "threshold and minimum depth, and picks the best point.",
+        writes="into --out (replaced as a whole at the end): calibration.csv, config.json, report.md.",
+        example="roadcollab calibrate-anomalies --seeds 1000-1002 --runs-per-seed 4 --out results/calibration")
     add_out_option(p)
     p.add_argument("--seeds", nargs="+", default=["1000-1004"],
                    help="training root seeds, integers or ranges a-b (default 1000-1004; evaluation seed 0 refused)")
@@ -66,10 +72,12 @@ def run(args: argparse.Namespace, command_line: str) -> int:
     cfg = AnomalyCalibrationConfig(seeds=parse_seeds(args.seeds), runs_per_seed=args.runs_per_seed,
                                    experiment=ExperimentConfig(n_vehicles=args.vehicles, n_runs=1), **kw)
     n = len(cfg.seeds) * cfg.runs_per_seed
-    prog, cb = progress(n, NAME)
-    with prog:
-        result = calibrate_anomalies(cfg, progress=cb, **dask_options(args))
-    write_calibration(result, args.out, command=command_line)
+    check_dask_options(args)
+    with staged_output(args.out) as out:
+        prog, cb = progress(n, NAME)
+        with prog:
+            result = calibrate_anomalies(cfg, progress=cb, **dask_options(args))
+        write_calibration(result, out, command=command_line)
     best = result.best
     print(f"best point: snr_threshold {best.snr_threshold:g}, min_depth {1000 * best.min_depth:g} mm, objective "
           f"{best.objective:.4f} ({n} runs, {result.elapsed_s:.1f} s); wrote {args.out}/report.md")

@@ -15,7 +15,10 @@ from ..errors import ParameterError
 from ..detection.detector import DetectorSpec
 from ..experiments.drive_estimation import estimate_drives, find_anomalies
 from ..io.drives import load_drives
+from ..io.limits import FileLimits
 from ..reporting.drives_report import write_estimates
+from ..reporting.records import staged_output
+from ._common import add_limit_options, command_parser, file_limits
 
 __all__ = ["NAME", "add_estimate_arguments", "estimate_command", "add_parser", "run"]
 
@@ -27,7 +30,7 @@ def _detector_config() -> dict | None:
     return asdict(DetectorSpec())
 
 
-def estimate_command(drive_paths: list[str], out_dir, *, command: str) -> dict:
+def estimate_command(drive_paths: list[str], out_dir, *, command: str, limits: FileLimits | None = None) -> dict:
     """Everything ``roadcollab estimate`` does: read, estimate, detect, write.
 
     Parameters
@@ -38,6 +41,8 @@ def estimate_command(drive_paths: list[str], out_dir, *, command: str) -> dict:
         Output folder (created).
     command : str
         The command line, recorded in ``config.json`` and ``report.md``.
+    limits : FileLimits, optional
+        Largest drive CSV (MB) and most rows (default ``FileLimits()``).
 
     Returns
     -------
@@ -50,18 +55,21 @@ def estimate_command(drive_paths: list[str], out_dir, *, command: str) -> dict:
     Raises
     ------
     ParameterError
-        Bad input files (nothing is written then).
+        An unusable ``out_dir`` (before anything is read) or bad input files
+        (:class:`~roadcollab.errors.FileFormatError`); ``out_dir`` is untouched then.
     """
     t0 = time.perf_counter()
-    drives = load_drives(drive_paths)
-    est = estimate_drives(drives)
-    note = None
-    try:
-        anomalies = find_anomalies(est)
-    except ParameterError as err:  # e.g. a window shorter than the longest template
-        anomalies, note = None, f"Anomaly detection was not run: {err}."
-    return write_estimates(est, out_dir, command=command, anomalies=anomalies, anomaly_note=note,
-                           elapsed=time.perf_counter() - t0, detector_config=_detector_config())
+    with staged_output(out_dir) as out:
+        drives = load_drives(drive_paths, limits=limits)
+        est = estimate_drives(drives)
+        note = None
+        try:
+            anomalies = find_anomalies(est)
+        except ParameterError as err:  # e.g. a window shorter than the longest template
+            anomalies, note = None, f"Anomaly detection was not run: {err}."
+        summary = write_estimates(est, out, command=command, anomalies=anomalies, anomaly_note=note,
+                                  elapsed=time.perf_counter() - t0, detector_config=_detector_config())
+    return {**summary, "out_dir": str(out_dir)}
 
 
 def add_estimate_arguments(parser: argparse.ArgumentParser) -> None:
@@ -75,7 +83,9 @@ def add_estimate_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--drive", action="append", required=True, metavar="FILE",
                         help="drive CSV 'time_s,accel_left,accel_right' (m/s^2) with FILE's stem + .toml or .json "
                              "beside it (speed_mps, [vehicle] estimated parameters); repeat in driving order")
-    parser.add_argument("--out", required=True, metavar="DIR", help="output folder")
+    parser.add_argument("--out", required=True, metavar="DIR",
+                        help="output folder (written as a whole at the end; a failed run leaves it untouched)")
+    add_limit_options(parser, "each drive CSV")
 
 
 def add_parser(subparsers) -> argparse.ArgumentParser:
@@ -91,7 +101,14 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
     argparse.ArgumentParser
         The subcommand's parser.
     """
-    p = subparsers.add_parser(NAME, help="estimate the road from recorded drives (CSV + parameters)")
+    p = command_parser(
+        subparsers, NAME, summary="estimate the road from recorded drives (CSV + parameters)",
+        does="Reads recorded drives (an acceleration CSV per drive with a .toml or .json parameters file beside "
+             "it), relays Algorithm 1 down them in the order given, fuses the estimates and looks for anomalies. "
+             "A bad file is refused with one line naming the file, the line and the field.",
+        writes="into --out (replaced as a whole at the end): road_estimates.csv, final_estimate.csv, "
+               "anomalies.csv, figures, config.json, report.md.",
+        example="roadcollab estimate --drive d1.csv --drive d2.csv --out results/road")
     add_estimate_arguments(p)
     return p
 
@@ -111,7 +128,7 @@ def run(args: argparse.Namespace, command_line: str) -> int:
     int
         Exit status 0.
     """
-    summary = estimate_command(args.drive, args.out, command=command_line)
+    summary = estimate_command(args.drive, args.out, command=command_line, limits=file_limits(args))
     for note in summary.get("notes", []):
         print(f"note: {note}")
     print(f"estimated {summary['n_drives']} drives over {summary['length_m']:.1f} m; wrote {args.out}/report.md")

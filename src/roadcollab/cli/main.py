@@ -22,6 +22,16 @@ __all__ = ["main", "build_parser"]
 # In the order of ``roadcollab --help``.
 COMMANDS = (reproduce, attack, anomalies, calibrate, sweep, bench, estimate, iri, message)
 _RUN = {module.NAME: module.run for module in COMMANDS}
+_DESCRIPTION = """Privacy-preserving collaborative road estimation by networked vehicles (Gao, Li and Wang).
+
+Vehicles drive the same road one after another; each estimates the road input from its accelerometers
+and its own suspension model, and passes an obfuscated message to the next (Algorithm 1 with
+Algorithm 2). The commands reproduce the paper's figures, study attacks and anomaly detection, and
+estimate the road from recorded drives. Every command that writes takes --out and writes all its
+results at once; 'roadcollab COMMAND --help' says what it writes."""
+_EPILOG = """examples:
+  roadcollab reproduce --runs 20 --out results/repro
+  roadcollab estimate --drive d1.csv --drive d2.csv --out results/road"""
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -34,7 +44,8 @@ def build_parser() -> argparse.ArgumentParser:
     -------
     argparse.ArgumentParser
     """
-    parser = argparse.ArgumentParser(prog="roadcollab", description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(prog="roadcollab", description=_DESCRIPTION, epilog=_EPILOG,
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--version", action="version", version=f"roadcollab {__version__}")
     sub = parser.add_subparsers(dest="command", required=True)
     for module in COMMANDS:
@@ -54,7 +65,8 @@ def main(argv: list[str] | None = None) -> int:
     -------
     int
         Exit status: 0 on success, 2 if the command rejects its input (a ``ValueError`` such as
-        ``ParameterError``; the message is printed to stderr, without a traceback).
+        ``ParameterError`` or ``FileFormatError``) or the system refuses a file operation
+        (``OSError``); the message is printed to stderr on one line, without a traceback.
 
     Raises
     ------
@@ -70,9 +82,19 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     try:
         return run(args, command_line(argv))
-    except ValueError as err:  # ParameterError / MessageError: a clear message, no traceback
-        print(f"roadcollab {args.command}: error: {err}", file=sys.stderr)
+    except ValueError as err:  # ParameterError / FileFormatError / MessageError: a clear message, no traceback
+        print(f"roadcollab {args.command}: error: {_one_line(str(err))}", file=sys.stderr)
         return 2
+    except OSError as err:  # e.g. the disk filled up while writing the results
+        where = f"{err.filename}: " if getattr(err, "filename", None) else ""
+        print(f"roadcollab {args.command}: error: {where}{_one_line(err.strerror or str(err))}", file=sys.stderr)
+        return 2
+
+
+def _one_line(text: str, width: int = 2000) -> str:
+    """``text`` on one line (newlines become spaces), cut to ``width`` characters."""
+    text = " ".join(text.split())
+    return text if len(text) <= width else text[:width] + " ..."
 
 
 if __name__ == "__main__":

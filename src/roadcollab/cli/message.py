@@ -5,8 +5,9 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from ..reporting.records import staged_file
 from ..wire.protocol import MECHANISM_CODES, decode, write_example
-from ._common import nonneg_int
+from ._common import command_parser, nonneg_int
 
 __all__ = ["NAME", "add_parser", "run"]
 
@@ -26,16 +27,21 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
     argparse.ArgumentParser
         The subcommand's parser.
     """
-    p = subparsers.add_parser(NAME, help="message utilities")
+    p = command_parser(subparsers, NAME, summary="message utilities (see 'roadcollab message example --help')",
+                       does="Tools for the versioned binary wire format that vehicles exchange.",
+                       writes="see the subcommands.", example="roadcollab message example --out msg.bin")
     msub = p.add_subparsers(dest="message_command", required=True)
-    q = msub.add_parser("example", help="write a valid example message",
-                        description="Write a valid example wire message with random content and print what it is.")
+    q = command_parser(msub, "example", summary="write a valid example message",
+                       does="Encodes one valid message of the chosen privacy mechanism, as a vehicle would send it.",
+                       writes="the encoded message to --out (replaced only when complete).",
+                       example="roadcollab message example --mechanism hardened --out msg.bin")
     q.add_argument("--out", type=Path, required=True, help="output file")
     q.add_argument("--mechanism", choices=list(MECHANISM_CODES), default="paper",
                    help="none/paper: an exchange message (T, S, e, wf); hardened/fused: an inversion message (z); "
                         "secure_aggregation: a masked input, the round-2 message a vehicle sends the aggregator "
-                        "(vehicle 1, session 0/0, 600 x 2 uint64 ring elements, uniform as a masked z is)")
-    q.add_argument("--seed", type=nonneg_int, default=0)
+                        "(vehicle 1, session 0/0, 600 x 2 uint64 ring elements, uniform as a masked z is); "
+                        "default paper")
+    q.add_argument("--seed", type=nonneg_int, default=0, help="seed of the example's random draws (default 0)")
     return p
 
 
@@ -54,7 +60,8 @@ def run(args: argparse.Namespace, command_line: str) -> int:
     int
         Exit status 0.
     """
-    n = write_example(args.out, mechanism=args.mechanism, seed=args.seed)
+    with staged_file(args.out) as tmp:
+        n = write_example(tmp, mechanism=args.mechanism, seed=args.seed)
     msg = decode(args.out.read_bytes())
     print(f"wrote {n} bytes to {args.out}: {type(msg).__name__} (mechanism {msg.mechanism!r})")
     return 0

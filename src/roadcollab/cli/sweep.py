@@ -7,9 +7,10 @@ import argparse
 from ..errors import ParameterError
 from ..experiments.sweep_config import SweepConfig
 from ..experiments.sweep import run_sweep
+from ..reporting.records import staged_output
 from ..reporting.sweep_report import write_sweep
-from ._common import (add_dask_options, add_out_option, dask_options, nonneg_int, positive_int, print_table,
-                      run_with_progress)
+from ._common import (command_parser, add_dask_options, add_out_option, check_dask_options, dask_options, nonneg_int, positive_int,
+                      print_table, run_with_progress)
 
 __all__ = ["NAME", "add_parser", "run"]
 
@@ -29,7 +30,12 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
     argparse.ArgumentParser
         The subcommand's parser.
     """
-    p = subparsers.add_parser(NAME, help="where Algorithm 1 beats a single vehicle: gamma x noise x uncertainty grid")
+    p = command_parser(
+        subparsers, NAME, summary="where Algorithm 1 beats a single vehicle: gamma x noise x uncertainty grid",
+        does="Compares vehicle 1's own observer with Algorithm 1 on a grid of observer parameters gamma, sensor "
+             "noise levels and parameter uncertainties, a new fleet and road for every run.",
+        writes="into --out (replaced as a whole at the end): sweep.csv, sweep.png, config.json, report.md.",
+        example="roadcollab sweep --runs 4 --gammas 8,512 --noise 0.05 --out results/sweep")
     add_out_option(p)
     p.add_argument("--runs", type=positive_int, default=8,
                    help="Monte Carlo runs per grid point, each with a new fleet and road (default 8)")
@@ -77,9 +83,11 @@ def run(args: argparse.Namespace, command_line: str) -> int:
         Exit status 0.
     """
     cfg = _config(args)
-    result, elapsed = run_with_progress(len(cfg.points()) * cfg.n_runs, NAME,
-                                        lambda cb: run_sweep(cfg, args.seed, progress=cb, **dask_options(args)))
-    findings = write_sweep(result, args.out, command=command_line, elapsed=elapsed)
+    check_dask_options(args)
+    with staged_output(args.out) as out:
+        result, elapsed = run_with_progress(len(cfg.points()) * cfg.n_runs, NAME,
+                                            lambda cb: run_sweep(cfg, args.seed, progress=cb, **dask_options(args)))
+        findings = write_sweep(result, out, command=command_line, elapsed=elapsed)
     print_table(f"Vehicle 1's observer vs Algorithm 1, {cfg.n_runs} runs per point, {elapsed:.1f} s",
                 ("noise (m/s^2)", "uncertainty", f"smallest gamma within {findings[0].threshold:g}x",
                  f"Alg. 1 / observer at gamma {findings[0].largest_gamma:g}", "Alg. 1 wins at gamma"),

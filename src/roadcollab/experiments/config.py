@@ -11,6 +11,7 @@ from .._validation import check_int, check_nonnegative, check_positive, check_re
 from ..errors import ParameterError
 from ..estimation.estimator import JDPNoise
 from ..estimation.grid import SegmentGrid
+from ..io.limits import FileLimits
 from ..models.road import RoadSpec, jump_statistics, wiener_intensity
 from ..models.vehicle import FleetSpec
 from ..privacy.obfuscation import ObfuscationSpec
@@ -59,6 +60,8 @@ class ExperimentConfig:
     redraw_fleet : bool
         Draw a new fleet for every run (statistics over fleets, e.g. how the fused estimate
         improves with fleet size on average); by default one fleet serves every run.
+    profile_limits : FileLimits
+        Largest ``road_profile`` file (MB) and most rows it may hold.
     """
 
     n_vehicles: int = 10
@@ -77,6 +80,7 @@ class ExperimentConfig:
     oracle: bool = False
     road_profile: str | None = None
     redraw_fleet: bool = False
+    profile_limits: FileLimits = field(default_factory=FileLimits)
 
     def __post_init__(self) -> None:
         check_int("n_vehicles", self.n_vehicles, low=1, high=1000)
@@ -88,7 +92,7 @@ class ExperimentConfig:
         check_nonnegative("sensor_noise_std", self.sensor_noise_std)
         check_positive("gamma", self.gamma)
         check_real("band_low_hz", self.band_low_hz, low=0.0, low_open=True, high=self.sample_rate / 2)
-        for name, typ in (("fleet", FleetSpec), ("obfuscation", ObfuscationSpec)):
+        for name, typ in (("fleet", FleetSpec), ("obfuscation", ObfuscationSpec), ("profile_limits", FileLimits)):
             if not isinstance(getattr(self, name), typ):
                 raise ParameterError(f"{name} must be a {typ.__name__}, got {type(getattr(self, name)).__name__}")
         self.road_spec()  # validates iso_class and the anomaly settings

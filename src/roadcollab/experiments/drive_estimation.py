@@ -42,7 +42,7 @@ from .._validation import check_positive, check_signal
 from ..collaboration.algorithm1 import CollaborativeEstimator
 from ..collaboration.relay import Relay
 from ..detection.detector import DetectorSpec, detect_anomalies
-from ..errors import ParameterError
+from ..errors import FileFormatError, ParameterError
 from ..estimation.grid import SegmentGrid
 from .config import ExperimentConfig
 from ..io.drives import Drive
@@ -174,8 +174,9 @@ def _drive_estimators(drives: list[Drive], grid: SegmentGrid, *, speed: float, s
 
     Raises
     ------
-    ParameterError
-        The design rejects a drive's parameters; the message starts with its parameters file.
+    FileFormatError
+        The design rejects a drive's parameters (a singular or unstable model); the message starts
+        with its parameters file and gives the cause.
     """
     noise_models: dict[float, object] = {}
     cars = []
@@ -188,7 +189,12 @@ def _drive_estimators(drives: list[Drive], grid: SegmentGrid, *, speed: float, s
                 raise ParameterError(f"{d.params_path}: {err}") from None
             noise_models[d.sensor_noise_std] = cfg.noise_model()
         vehicle = Vehicle(index=j, true_params=d.params, estimated_params=d.params)
-        cars.append(CollaborativeEstimator(vehicle, noise_models[d.sensor_noise_std], grid, gamma=gamma))
+        try:
+            cars.append(CollaborativeEstimator(vehicle, noise_models[d.sensor_noise_std], grid, gamma=gamma))
+        except (ValueError, np.linalg.LinAlgError, ArithmeticError) as err:  # e.g. "Singular matrix"
+            raise FileFormatError(f"{d.params_path}: no estimator can be designed for this vehicle at "
+                                  f"{speed:g} m/s and {sample_rate:g} Hz ({type(err).__name__}: {err}); check the "
+                                  "[vehicle] parameters") from None
     return cars
 
 
@@ -238,8 +244,13 @@ def estimate_drives(drives: list[Drive], *, gamma: float | None = None, band_low
     cars = _drive_estimators(drives, grid, speed=speed, sample_rate=fs, gamma=gamma, band_low_hz=band_low_hz)
     ys = [d.accel[:n] for d in drives]
     Ys = [grid.rfft(y) for y in ys]
-    plain = Relay(cars, "none").run(ys, spectra=Ys)
-    fused = Relay(cars, "fused").run(ys, spectra=Ys)
+    try:
+        plain = Relay(cars, "none").run(ys, spectra=Ys)
+        fused = Relay(cars, "fused").run(ys, spectra=Ys)
+    except (ValueError, np.linalg.LinAlgError, ArithmeticError) as err:  # a degenerate model mid-relay
+        raise FileFormatError(f"{', '.join(str(d.params_path) for d in drives)}: the relay failed on these "
+                              f"drives' vehicle models ({type(err).__name__}: {err}); check the [vehicle] "
+                              "parameters") from None
     out = {"single": [band(s.result.W_obs) for s in plain],
            "collaborative": [band(s.result.W_hat) for s in plain],
            "fused": [band(s.estimate_spectrum) for s in fused]}

@@ -109,12 +109,13 @@ class FleetPipeline:
                 profile = generate_road(spec, rng=rng)
             else:
                 path = None if cfg.road_profile == "packaged" else cfg.road_profile
-                profile = with_anomalies(measured_road(path, spacing=spec.spacing, rng=rng), spec, rng=rng)
+                measured = measured_road(path, spacing=spec.spacing, rng=rng, limits=cfg.profile_limits)
+                profile = with_anomalies(measured, spec, rng=rng)
         elif cfg.road_profile is None:
             profile = generate_road(cfg.road_spec(), rng=rng)
         else:
             path = None if cfg.road_profile == "packaged" else cfg.road_profile
-            profile = measured_road(path, rng=rng)
+            profile = measured_road(path, rng=rng, limits=cfg.profile_limits)
             if profile.length < cfg.window_length:
                 raise ParameterError(f"road_profile covers {profile.length:.1f} m, the window needs "
                                      f"segment_length + 2 * margin = {cfg.window_length:.1f} m")

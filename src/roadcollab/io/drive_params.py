@@ -1,8 +1,10 @@
 """A recorded drive's parameters file (TOML or JSON): speed, sensor noise, start and the vehicle's
 estimated half-car parameters (keys and units in :mod:`roadcollab.io.drives`).
 
-Every error is a :class:`~roadcollab.errors.ParameterError` whose message starts with the file's
-path and names the key, the expected and the found value.
+Every error is a :class:`~roadcollab.errors.FileFormatError` (a ``ParameterError``) whose message
+starts with the file's path and names the key, the expected and the found value. Every value must
+lie in its physical range (:data:`PARAMETER_RANGES`); a key given twice is an error in JSON as in
+TOML; the file may be at most 1 MB.
 """
 
 from __future__ import annotations
@@ -12,19 +14,36 @@ import math
 from dataclasses import fields
 from pathlib import Path
 
-from ..errors import ParameterError
+from ..errors import FileFormatError, ParameterError
 from ..models.vehicle import HalfCarParameters
+from .limits import PARAMS_MAX_BYTES, check_file_size, short_repr
 
-__all__ = ["DEFAULT_SENSOR_NOISE_STD", "params_path_for", "read_drive_params", "write_drive_params"]
+__all__ = ["DEFAULT_SENSOR_NOISE_STD", "PARAMETER_RANGES", "params_path_for", "read_drive_params",
+           "write_drive_params"]
 
 DEFAULT_SENSOR_NOISE_STD = 0.05
 _VEHICLE_KEYS = tuple(f.name for f in fields(HalfCarParameters))
-_VEHICLE_UNITS = {"sprung_mass": "kg", "roll_inertia": "kg m^2", "left_arm": "m", "right_arm": "m",
-                  "stiffness": "N/m", "damping": "N s/m"}
+#: Accepted range (low, high, unit) of every key. The vehicle ranges are about 4x wider on either side
+#: than the published sets: quarter cars from 208 kg / 13.1 kN/m / 350 N s/m (small car, CTMS bus
+#: damper) to 4500 kg / 300 kN/m / 20 kN s/m (bus) per corner, so 416-9000 kg per front half-car
+#: (gislas3/quartercar ``cars.py``; U. Michigan CTMS suspension example); Jazar's Example 508 car has
+#: I_x = 820 kg m^2 and arms of 0.70 / 0.75 m (/work/shared/data/realdata/reference_models/PROVENANCE.md);
+#: the packaged default is 750 kg, 550 kg m^2, 0.75 m, 22 kN/m, 1.8 kN s/m.
+PARAMETER_RANGES = {
+    "speed_mps": (0.5, 70.0, "m/s"),
+    "sensor_noise_std": (0.0, 20.0, "m/s^2"),
+    "start_m": (-1e7, 1e7, "m"),
+    "vehicle.sprung_mass": (100.0, 20_000.0, "kg"),
+    "vehicle.roll_inertia": (10.0, 100_000.0, "kg m^2"),
+    "vehicle.left_arm": (0.2, 2.0, "m"),
+    "vehicle.right_arm": (0.2, 2.0, "m"),
+    "vehicle.stiffness": (2_000.0, 1_500_000.0, "N/m"),
+    "vehicle.damping": (50.0, 100_000.0, "N s/m"),
+}
 _TOP_KEYS = ("speed_mps", "vehicle", "sensor_noise_std", "start_m")
 
 
-def read_text(path: Path, what: str) -> str:
+def read_text(path: Path, what: str, max_bytes: int = PARAMS_MAX_BYTES, flag: str | None = None) -> str:
     """A UTF-8 text file (a leading BOM is dropped), with errors that name the file.
 
     Parameters
@@ -32,20 +51,23 @@ def read_text(path: Path, what: str) -> str:
     path : Path
     what : str
         What the file is, for the error message (e.g. ``"parameters file"``).
+    max_bytes : int
+        Largest accepted size, bytes, checked before reading.
+    flag : str or None
+        The option that raises ``max_bytes``, named in the error.
 
     Returns
     -------
     str
     """
-    if not path.is_file():
-        raise ParameterError(f"{path}: {what} not found (expected an existing file)")
+    check_file_size(path, what, max_bytes, flag)
     try:
         return path.read_text(encoding="utf-8-sig")
     except UnicodeDecodeError as err:
-        raise ParameterError(f"{path}: expected a UTF-8 text file, got undecodable bytes ({err.reason} at byte "
-                             f"{err.start})") from None
+        raise FileFormatError(f"{path}: expected a UTF-8 text file, got undecodable bytes ({err.reason} at byte "
+                              f"{err.start})") from None
     except OSError as err:
-        raise ParameterError(f"{path}: cannot read {what}: {err.strerror or err}") from None
+        raise FileFormatError(f"{path}: cannot read {what}: {err.strerror or err}") from None
 
 
 def params_path_for(csv_path) -> Path:
@@ -63,11 +85,23 @@ def params_path_for(csv_path) -> Path:
     candidates = [csv_path.with_suffix(s) for s in (".toml", ".json")]
     found = [p for p in candidates if p.is_file()]
     if not found:
-        raise ParameterError(f"{csv_path}: parameters file not found: expected {candidates[0]} or {candidates[1]} "
-                             "beside the CSV (speed_mps and the [vehicle] parameters)")
+        raise FileFormatError(f"{csv_path}: parameters file not found: expected {candidates[0]} or {candidates[1]} "
+                              "beside the CSV (speed_mps and the [vehicle] parameters)")
     if len(found) > 1:
-        raise ParameterError(f"{csv_path}: ambiguous parameters: both {found[0]} and {found[1]} exist; keep one")
+        raise FileFormatError(f"{csv_path}: ambiguous parameters: both {found[0]} and {found[1]} exist; keep one")
     return found[0]
+
+
+def _unique_keys(path: Path):
+    """``object_pairs_hook`` for :func:`json.loads` that refuses a key given twice in one object."""
+    def hook(pairs):
+        seen = {}
+        for k, v in pairs:
+            if k in seen:
+                raise FileFormatError(f"{path}: duplicate key {short_repr(k)} (each key may appear once)")
+            seen[k] = v
+        return seen
+    return hook
 
 
 def _load_mapping(path: Path) -> dict:
@@ -77,48 +111,64 @@ def _load_mapping(path: Path) -> dict:
         try:  # tomllib is in the standard library only from Python 3.11: import it where TOML is read
             import tomllib
         except ModuleNotFoundError:  # Python 3.10
-            raise ParameterError(f"{path}: reading TOML needs Python >= 3.11 (tomllib); write the parameters as "
-                                 f"JSON in {path.with_suffix('.json')} instead") from None
+            raise FileFormatError(f"{path}: reading TOML needs Python >= 3.11 (tomllib); write the parameters as "
+                                  f"JSON in {path.with_suffix('.json')} instead") from None
         try:
             data = tomllib.loads(text)
         except tomllib.TOMLDecodeError as err:
-            raise ParameterError(f"{path}: expected valid TOML, got a syntax error: {err}") from None
+            raise FileFormatError(f"{path}: expected valid TOML, got a syntax error: {err}") from None
+        except RecursionError:
+            raise FileFormatError(f"{path}: expected a flat TOML file, got arrays or tables nested too deeply "
+                                  "to parse") from None
+        except ValueError as err:  # an integer beyond Python's digit limit for str -> int
+            raise FileFormatError(f"{path}: expected numbers of at most 20 digits, got {err}") from None
     elif suffix == ".json":
         try:
-            data = json.loads(text)
+            data = json.loads(text, object_pairs_hook=_unique_keys(path))
         except json.JSONDecodeError as err:
-            raise ParameterError(f"{path} line {err.lineno}: expected valid JSON, got a syntax error: {err.msg} "
-                                 f"(column {err.colno})") from None
+            raise FileFormatError(f"{path} line {err.lineno}: expected valid JSON, got a syntax error: {err.msg} "
+                                  f"(column {err.colno})") from None
+        except FileFormatError:
+            raise
+        except RecursionError:
+            raise FileFormatError(f"{path}: expected a flat JSON object, got arrays or objects nested too deeply "
+                                  "to parse") from None
+        except ValueError as err:  # an integer beyond Python's digit limit for str -> int
+            raise FileFormatError(f"{path}: expected numbers of at most 20 digits, got {err}") from None
         if not isinstance(data, dict):
-            raise ParameterError(f"{path}: expected a JSON object {{\"speed_mps\": ..., \"vehicle\": {{...}}}}, "
-                                 f"got a {type(data).__name__}")
+            raise FileFormatError(f"{path}: expected a JSON object {{\"speed_mps\": ..., \"vehicle\": {{...}}}}, "
+                                  f"got a {type(data).__name__}")
     else:
-        raise ParameterError(f"{path}: expected a .toml or .json parameters file, got suffix {path.suffix!r}")
+        raise FileFormatError(f"{path}: expected a .toml or .json parameters file, got suffix {path.suffix!r}")
     return data
 
 
-def _number(path: Path, key: str, value, *, low: float | None = None, low_open: bool = False,
-            unit: str = "") -> float:
-    unit_s = f" ({unit})" if unit else ""
+def _number(path: Path, key: str, value) -> float:
+    """``value`` as a float in the physical range :data:`PARAMETER_RANGES` ``[key]``; FileFormatError otherwise."""
+    low, high, unit = PARAMETER_RANGES[key]
     if isinstance(value, bool) or not isinstance(value, (int, float)):
-        raise ParameterError(f"{path}: key '{key}' must be a number{unit_s}, got {value!r} ({type(value).__name__})")
+        raise FileFormatError(f"{path}: key '{key}' must be a number ({unit}), got {short_repr(value)} "
+                              f"({type(value).__name__})")
+    if isinstance(value, int) and abs(value) > 10 ** 15:
+        raise FileFormatError(f"{path}: key '{key}' must lie in [{low:g}, {high:g}] {unit}, got an integer of "
+                              f"{len(str(abs(value))) if abs(value) < 10 ** 4000 else 'over 4000'} digits")
     v = float(value)
     if not math.isfinite(v):
-        raise ParameterError(f"{path}: key '{key}' must be a finite number{unit_s}, got {v!r}")
-    if low is not None and (v < low or (low_open and v == low)):
-        op = ">" if low_open else ">="
-        raise ParameterError(f"{path}: key '{key}' must be {op} {low:g}{unit_s}, got {v:g}")
+        raise FileFormatError(f"{path}: key '{key}' must be a finite number ({unit}), got {v!r}")
+    if not low <= v <= high:
+        raise FileFormatError(f"{path}: key '{key}' must lie in [{low:g}, {high:g}] {unit} (the physical range), "
+                              f"got {v:g}")
     return v
 
 
 def _check_keys(path: Path, mapping: dict, allowed: tuple[str, ...], required: tuple[str, ...], where: str) -> None:
-    unknown = [k for k in mapping if k not in allowed]
+    unknown = [short_repr(where + k, 40) for k in mapping if k not in allowed]
     if unknown:
-        raise ParameterError(f"{path}: unknown key(s) {', '.join(repr(where + k) for k in unknown)}; expected only "
-                             f"{', '.join(where + k for k in allowed)}")
+        raise FileFormatError(f"{path}: unknown key(s) {', '.join(unknown[:5])}; expected only "
+                              f"{', '.join(where + k for k in allowed)}")
     missing = [k for k in required if k not in mapping]
     if missing:
-        raise ParameterError(f"{path}: missing required key(s) {', '.join(repr(where + k) for k in missing)}")
+        raise FileFormatError(f"{path}: missing required key(s) {', '.join(repr(where + k) for k in missing)}")
 
 
 def read_drive_params(path) -> dict:
@@ -133,21 +183,26 @@ def read_drive_params(path) -> dict:
     dict
         ``speed`` (m/s), ``sensor_noise_std`` (m/s^2), ``start_m`` (m), ``params``
         (:class:`~roadcollab.models.vehicle.HalfCarParameters`).
+
+    Raises
+    ------
+    FileFormatError
+        ``"<path>: ..."``: larger than 1 MB, not UTF-8, a syntax error, nesting too deep to parse,
+        a duplicate, unknown or missing key, or a value that is not a number within
+        :data:`PARAMETER_RANGES`.
     """
     path = Path(path)
     data = _load_mapping(path)
     _check_keys(path, data, _TOP_KEYS, ("speed_mps", "vehicle"), "")
-    speed = _number(path, "speed_mps", data["speed_mps"], low=0.0, low_open=True, unit="m/s")
-    noise = _number(path, "sensor_noise_std", data.get("sensor_noise_std", DEFAULT_SENSOR_NOISE_STD), low=0.0,
-                    unit="m/s^2")
-    start = _number(path, "start_m", data.get("start_m", 0.0), unit="m")
+    speed = _number(path, "speed_mps", data["speed_mps"])
+    noise = _number(path, "sensor_noise_std", data.get("sensor_noise_std", DEFAULT_SENSOR_NOISE_STD))
+    start = _number(path, "start_m", data.get("start_m", 0.0))
     veh = data["vehicle"]
     if not isinstance(veh, dict):
-        raise ParameterError(f"{path}: key 'vehicle' must be a table ([vehicle] in TOML, an object in JSON) of "
-                             f"{', '.join(_VEHICLE_KEYS)}, got {veh!r} ({type(veh).__name__})")
+        raise FileFormatError(f"{path}: key 'vehicle' must be a table ([vehicle] in TOML, an object in JSON) of "
+                              f"{', '.join(_VEHICLE_KEYS)}, got {short_repr(veh)} ({type(veh).__name__})")
     _check_keys(path, veh, _VEHICLE_KEYS, _VEHICLE_KEYS, "vehicle.")
-    values = {k: _number(path, f"vehicle.{k}", veh[k], low=0.0, low_open=True, unit=_VEHICLE_UNITS[k])
-              for k in _VEHICLE_KEYS}
+    values = {k: _number(path, f"vehicle.{k}", veh[k]) for k in _VEHICLE_KEYS}
     return {"speed": speed, "sensor_noise_std": noise, "start_m": start, "params": HalfCarParameters(**values)}
 
 

@@ -10,35 +10,42 @@ File formats
 ------------
 **Accelerations** (``drive1.csv``): a header line ``time_s,accel_left,accel_right`` (exactly these
 names; spaces around them are ignored), then one row per sample of three finite numbers: time in
-s and the left and right body-tip vertical accelerations in m/s^2. Blank lines are ignored. The
+s and the left and right body-tip vertical accelerations in m/s^2. Blank lines are ignored. Numbers
+are plain ASCII decimals (``nan``, ``inf``, ``1_000`` and other scripts' digits are refused);
+an acceleration beyond +-200 m/s^2 is a logger glitch and refused with its line. The
 sampling must be uniform: every time step must be within 1e-6 relative of the median step (resample
-jittery logs first); the sample rate is ``1 / median step``, rounded to 9 significant digits. At
-least 64 rows. Only time differences are used: ``time_s`` may start anywhere.
+jittery logs first); the sample rate is ``1 / median step``, rounded to 9 significant digits, at
+most 10 kHz. At least 64 rows, at most 2,000,000 and 200 MB (:class:`~roadcollab.io.limits.FileLimits`;
+``--max-rows`` and ``--max-file-mb`` raise them; the size is checked before reading). Only time
+differences are used: ``time_s`` may start anywhere.
 
 **Parameters** (beside the CSV, same stem: ``drive1.toml`` or ``drive1.json``, not both)::
 
-    speed_mps = 15.0             # required, > 0: constant speed of the pass, m/s
-    sensor_noise_std = 0.05      # optional, >= 0, m/s^2 per sample (default 0.05)
-    start_m = 0.0                # optional: road distance of the first sample, m (default 0)
+    speed_mps = 15.0             # required, 0.5-70: constant speed of the pass, m/s
+    sensor_noise_std = 0.05      # optional, 0-20, m/s^2 per sample (default 0.05)
+    start_m = 0.0                # optional, +-1e7: road distance of the first sample, m (default 0)
 
     [vehicle]                    # required: the vehicle's *estimated* half-car parameters, SI units
-    sprung_mass = 750.0          # kg
-    roll_inertia = 550.0         # kg m^2
-    left_arm = 0.75              # m
-    right_arm = 0.75             # m
-    stiffness = 22000.0          # N/m
-    damping = 1800.0             # N s/m
+    sprung_mass = 750.0          # kg, 100-20000
+    roll_inertia = 550.0         # kg m^2, 10-100000
+    left_arm = 0.75              # m, 0.2-2
+    right_arm = 0.75             # m, 0.2-2
+    stiffness = 22000.0          # N/m, 2000-1.5e6
+    damping = 1800.0             # N s/m, 50-1e5
 
 JSON: the same keys, ``{"speed_mps": 15.0, "vehicle": {"sprung_mass": 750.0, ...}}``. Every key of
 ``vehicle`` is required; unknown keys anywhere are an error (a misspelt key must not silently
-fall back to a default). TOML needs Python >= 3.11 (``tomllib``); on 3.10 use JSON.
+fall back to a default), and so is a key given twice. The ranges and their sources are
+:data:`roadcollab.io.drive_params.PARAMETER_RANGES`. At most 1 MB. TOML needs Python >= 3.11
+(``tomllib``); on 3.10 use JSON.
 
 All drives must share the sample rate (to 1e-6 relative), ``speed_mps`` and ``start_m``: the
 estimators relay signals on one common segment grid, so sample ``k`` of every drive must be the
 same spot of the road. Trim the logs so that every drive starts at the same road position. Drives
 of different length are **truncated to the shortest** (the report says so).
 
-Every error is a :class:`~roadcollab.errors.ParameterError` whose message starts with the file's
+Every error is a :class:`~roadcollab.errors.FileFormatError` (a ``ParameterError``) whose message
+starts with the file's
 path and, for CSV content, ``line N:`` (1-based; the header is line 1), and says what was expected
 and what was found.
 """
@@ -52,16 +59,18 @@ from pathlib import Path
 import numpy as np
 
 from .._validation import check_signal
-from ..errors import ParameterError
+from ..errors import FileFormatError, ParameterError
 from ..models.vehicle import HalfCarParameters
-from .drive_params import params_path_for, read_drive_params, read_text
+from .drive_params import params_path_for, read_drive_params
+from .limits import MAX_ACCEL, FileLimits, check_file_size, parse_ascii_number, short_repr
 
-__all__ = ["CSV_COLUMNS", "MIN_ROWS", "UNIFORM_RTOL", "Drive", "read_drive_csv", "load_drive", "load_drives",
-           "write_drive_csv"]
+__all__ = ["CSV_COLUMNS", "MIN_ROWS", "MAX_SAMPLE_RATE", "UNIFORM_RTOL", "Drive", "read_drive_csv", "load_drive",
+           "load_drives", "write_drive_csv"]
 
 CSV_COLUMNS = ("time_s", "accel_left", "accel_right")
 MIN_ROWS = 64
 UNIFORM_RTOL = 1e-6
+MAX_SAMPLE_RATE = 10_000.0   # Hz: vehicle accelerometer logs run at 50-1000 Hz
 _HEADER_TEXT = ",".join(CSV_COLUMNS)
 
 
@@ -116,30 +125,68 @@ def _parse_number(path: Path, lineno: int, col: int, text: str) -> float:
     name = CSV_COLUMNS[col]
     s = text.strip()
     if not s:
-        raise ParameterError(f"{path} line {lineno}: column {col + 1} ({name}): expected a number, got an empty field")
-    try:
-        v = float(s)
-    except ValueError:
-        raise ParameterError(f"{path} line {lineno}: column {col + 1} ({name}): expected a number, got {s!r}") from None
-    if not math.isfinite(v):
-        raise ParameterError(f"{path} line {lineno}: column {col + 1} ({name}): expected a finite number, got {s!r}")
+        raise FileFormatError(f"{path} line {lineno}: column {col + 1} ({name}): expected a number, got an empty "
+                              "field")
+    v = parse_ascii_number(s)
+    if v is None:
+        raise FileFormatError(f"{path} line {lineno}: column {col + 1} ({name}): expected {_expected(s)}, got "
+                              f"{short_repr(s)}")
+    if col > 0 and abs(v) > MAX_ACCEL:
+        raise FileFormatError(f"{path} line {lineno}: column {col + 1} ({name}): expected an acceleration within "
+                              f"+-{MAX_ACCEL:g} m/s^2 (beyond it a sample is a logger glitch), got {s}")
     return v
 
 
-def _looks_numeric(fields_: list[str]) -> bool:
+def _expected(s: str) -> str:
+    """What a field that :func:`parse_ascii_number` refused should have been (NaN/overflow vs. non-ASCII)."""
     try:
-        [float(f) for f in fields_]
-    except ValueError:
-        return False
-    return True
+        v = float(s)
+    except (ValueError, OverflowError):
+        return "a number"
+    if not s.isascii() or "_" in s:
+        return "a number written with ASCII digits 0-9 (no other scripts, no '_')"
+    return "a finite number" if not math.isfinite(v) else "a plain decimal number"
 
 
-def read_drive_csv(path) -> tuple[np.ndarray, np.ndarray, float]:
+def _looks_numeric(fields_: list[str]) -> bool:
+    return all(parse_ascii_number(f.strip()) is not None for f in fields_)
+
+
+def _read_rows(path: Path, limits: FileLimits) -> tuple[list[int], list[str], tuple[int, str] | None]:
+    """The header (line number, text) and the 1-based line numbers and texts of the data rows.
+
+    Streams the file; stops with a FileFormatError at the first row past ``limits.max_rows``.
+    """
+    check_file_size(path, "drive CSV", limits.max_bytes)
+    linenos, rows, header = [], [], None
+    try:
+        with path.open(encoding="utf-8-sig", newline=None) as fh:
+            for lineno, ln in enumerate(fh, start=1):
+                if not ln.strip():
+                    continue
+                if header is None:
+                    header = (lineno, ln.rstrip("\n"))
+                    continue
+                if len(rows) >= limits.max_rows:
+                    raise FileFormatError(f"{path} line {lineno}: more than {limits.max_rows} data rows; raise the "
+                                          "limit with --max-rows")
+                linenos.append(lineno)
+                rows.append(ln)
+    except UnicodeDecodeError as err:
+        raise FileFormatError(f"{path}: expected a UTF-8 text file, got undecodable bytes ({err.reason})") from None
+    except OSError as err:
+        raise FileFormatError(f"{path}: cannot read drive CSV: {err.strerror or err}") from None
+    return linenos, rows, header
+
+
+def read_drive_csv(path, *, limits: FileLimits | None = None) -> tuple[np.ndarray, np.ndarray, float]:
     """Read and validate a drive's acceleration log (format in the module docstring).
 
     Parameters
     ----------
     path : str or Path
+    limits : FileLimits, optional
+        Largest file (MB, checked before reading) and most data rows; default ``FileLimits()``.
 
     Returns
     -------
@@ -152,66 +199,68 @@ def read_drive_csv(path) -> tuple[np.ndarray, np.ndarray, float]:
 
     Raises
     ------
-    ParameterError
+    FileFormatError
         ``"<path> line N: ..."`` for bad content, ``"<path>: ..."`` otherwise.
     """
     path = Path(path)
-    lines = read_text(path, "drive CSV").splitlines()
-    numbered = [(i + 1, ln) for i, ln in enumerate(lines) if ln.strip()]
-    if not numbered:
-        raise ParameterError(f"{path} line 1: expected the header '{_HEADER_TEXT}', got an empty file")
-    _check_header(path, *numbered[0])
-    rows = numbered[1:]
+    limits = FileLimits() if limits is None else limits
+    linenos, rows, header = _read_rows(path, limits)
+    if header is None:
+        raise FileFormatError(f"{path} line 1: expected the header '{_HEADER_TEXT}', got an empty file")
+    _check_header(path, *header)
     data = np.empty((len(rows), 3))
-    for r, (lineno, ln) in enumerate(rows):
+    for r, (lineno, ln) in enumerate(zip(linenos, rows)):
         parts = ln.split(",")
         if len(parts) != 3:
-            raise ParameterError(f"{path} line {lineno}: expected 3 numbers '{', '.join(CSV_COLUMNS)}', "
-                                 f"got {len(parts)}")
+            raise FileFormatError(f"{path} line {lineno}: expected 3 numbers '{', '.join(CSV_COLUMNS)}', "
+                                  f"got {len(parts)}")
         for c, text in enumerate(parts):
             data[r, c] = _parse_number(path, lineno, c, text)
     if len(rows) < MIN_ROWS:
-        raise ParameterError(f"{path}: expected at least {MIN_ROWS} data rows after the header, got {len(rows)}")
+        raise FileFormatError(f"{path}: expected at least {MIN_ROWS} data rows after the header, got {len(rows)}")
     t = data[:, 0]
-    step = _uniform_step(path, [lineno for lineno, _ in rows], t)
+    step = _uniform_step(path, linenos, t)
     sample_rate = float(f"{1.0 / step:.9g}")
+    if sample_rate > MAX_SAMPLE_RATE:
+        raise FileFormatError(f"{path}: expected a sample rate of at most {MAX_SAMPLE_RATE:g} Hz (a time step of at "
+                              f"least {1 / MAX_SAMPLE_RATE:g} s), got {sample_rate:.6g} Hz (step {step:.3g} s)")
     return t.copy(), data[:, 1:].copy(), sample_rate
 
 
 def _check_header(path: Path, head_no: int, head: str) -> None:
-    """Raise a ParameterError saying how the header line ``head`` differs from :data:`CSV_COLUMNS`."""
+    """Raise a FileFormatError saying how the header line ``head`` differs from :data:`CSV_COLUMNS`."""
     names = [f.strip() for f in head.split(",")]
     if names == list(CSV_COLUMNS):
         return
     if len(names) == 3 and _looks_numeric(names):
         detail = "a row of numbers (the header line is required)"
     elif len(names) != 3:
-        detail = f"{len(names)} column name(s) {head.strip()!r}"
+        detail = f"{len(names)} column name(s) {short_repr(head.strip())}"
     else:
         bad = next(i for i, (a, b) in enumerate(zip(names, CSV_COLUMNS)) if a != b)
-        detail = f"{head.strip()!r} (column {bad + 1} is {names[bad]!r}, expected {CSV_COLUMNS[bad]!r})"
-    raise ParameterError(f"{path} line {head_no}: expected the header '{_HEADER_TEXT}', got {detail}")
+        detail = f"{short_repr(head.strip())} (column {bad + 1} is {short_repr(names[bad], 30)}, expected {CSV_COLUMNS[bad]!r})"
+    raise FileFormatError(f"{path} line {head_no}: expected the header '{_HEADER_TEXT}', got {detail}")
 
 
 def _uniform_step(path: Path, linenos: list[int], t: np.ndarray) -> float:
-    """The median time step (s) of ``t``; a ParameterError naming the line if ``t`` is not increasing and uniform."""
+    """The median time step (s) of ``t``; a FileFormatError naming the line if ``t`` is not increasing and uniform."""
     dt = np.diff(t)
     bad = np.flatnonzero(dt <= 0)
     if bad.size:
         k = int(bad[0])
-        raise ParameterError(f"{path} line {linenos[k + 1]}: expected time_s to increase, got {float(t[k + 1])!r} "
+        raise FileFormatError(f"{path} line {linenos[k + 1]}: expected time_s to increase, got {float(t[k + 1])!r} "
                              f"after {float(t[k])!r} on line {linenos[k]}")
     step = float(np.median(dt))
     bad = np.flatnonzero(np.abs(dt - step) > UNIFORM_RTOL * step)
     if bad.size:
         k = int(bad[0])
-        raise ParameterError(f"{path} line {linenos[k + 1]}: expected uniform sampling (every time step within "
+        raise FileFormatError(f"{path} line {linenos[k + 1]}: expected uniform sampling (every time step within "
                              f"{UNIFORM_RTOL:g} relative of the median step {step:.9g} s), got a step of "
                              f"{dt[k]:.9g} s from time_s {float(t[k])!r} on line {linenos[k]}; resample the log")
     return step
 
 
-def load_drive(csv_path, params_path=None) -> Drive:
+def load_drive(csv_path, params_path=None, *, limits: FileLimits | None = None) -> Drive:
     """Read one drive: the CSV and its parameters file.
 
     Parameters
@@ -219,6 +268,8 @@ def load_drive(csv_path, params_path=None) -> Drive:
     csv_path : str or Path
     params_path : str or Path, optional
         Default: :func:`params_path_for` ``(csv_path)``.
+    limits : FileLimits, optional
+        Largest CSV (MB) and most rows (default ``FileLimits()``).
 
     Returns
     -------
@@ -226,16 +277,16 @@ def load_drive(csv_path, params_path=None) -> Drive:
     """
     csv_path = Path(csv_path)
     if csv_path.suffix.lower() in (".toml", ".json"):
-        raise ParameterError(f"{csv_path}: expected the drive's acceleration CSV here (its parameters file is "
+        raise FileFormatError(f"{csv_path}: expected the drive's acceleration CSV here (its parameters file is "
                              f"found beside it), got a parameters file")
-    t, accel, fs = read_drive_csv(csv_path)
+    t, accel, fs = read_drive_csv(csv_path, limits=limits)
     params_path = params_path_for(csv_path) if params_path is None else Path(params_path)
     p = read_drive_params(params_path)
     return Drive(csv_path=csv_path, params_path=params_path, time=t, accel=accel, sample_rate=fs, speed=p["speed"],
                  start_m=p["start_m"], sensor_noise_std=p["sensor_noise_std"], params=p["params"])
 
 
-def load_drives(paths) -> list[Drive]:
+def load_drives(paths, *, limits: FileLimits | None = None) -> list[Drive]:
     """Read every drive and check that they share one segment grid.
 
     Sample rates must agree to 1e-6 relative, ``speed_mps`` and ``start_m`` to 1e-9 relative;
@@ -245,6 +296,8 @@ def load_drives(paths) -> list[Drive]:
     ----------
     paths : str, Path or sequence of them
         Drive CSVs in driving order.
+    limits : FileLimits, optional
+        Largest CSV (MB) and most rows per drive (default ``FileLimits()``).
 
     Returns
     -------
@@ -255,18 +308,18 @@ def load_drives(paths) -> list[Drive]:
     paths = list(paths)
     if not paths:
         raise ParameterError("expected at least one drive (--drive FILE), got none")
-    drives = [load_drive(p) for p in paths]
+    drives = [load_drive(p, limits=limits) for p in paths]
     d0 = drives[0]
     for d in drives[1:]:
         if abs(d.sample_rate - d0.sample_rate) > UNIFORM_RTOL * d0.sample_rate:
-            raise ParameterError(f"{d.csv_path}: expected the sample rate of {d0.csv_path} ({d0.sample_rate:.9g} Hz), "
+            raise FileFormatError(f"{d.csv_path}: expected the sample rate of {d0.csv_path} ({d0.sample_rate:.9g} Hz), "
                                  f"got {d.sample_rate:.9g} Hz; all drives must share one sample rate (resample the "
                                  "log)")
         if abs(d.speed - d0.speed) > 1e-9 * d0.speed:
-            raise ParameterError(f"{d.params_path}: expected speed_mps = {d0.speed:g} as in {d0.params_path}, got "
+            raise FileFormatError(f"{d.params_path}: expected speed_mps = {d0.speed:g} as in {d0.params_path}, got "
                                  f"{d.speed:g}; all drives must share one speed (one segment grid)")
         if abs(d.start_m - d0.start_m) > 1e-9 * max(1.0, abs(d0.start_m)):
-            raise ParameterError(f"{d.params_path}: expected start_m = {d0.start_m:g} as in {d0.params_path}, got "
+            raise FileFormatError(f"{d.params_path}: expected start_m = {d0.start_m:g} as in {d0.params_path}, got "
                                  f"{d.start_m:g}; trim the logs so that every drive starts at the same road "
                                  "position")
     return drives

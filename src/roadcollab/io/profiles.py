@@ -16,13 +16,17 @@ from pathlib import Path
 import numpy as np
 
 from .._validation import check_matrix, check_nonnegative, check_positive
-from ..errors import ParameterError
+from ..errors import FileFormatError, ParameterError
 from ..models.profile import RoadProfile
 from ..models.road import MAX_SAMPLES, iso_gd0, moving_average, random_walk
+from .limits import FileLimits, check_file_size, parse_ascii_number, short_repr
 
 __all__ = ["MeasuredProfile", "packaged_profile_path", "load_profile", "measured_road"]
 
 _LATERAL_HIGHPASS = 20.0    # m, window of the moving average removed from the lateral residual
+MAX_DISTANCE = 1e7          # m: 10,000 km
+MAX_ELEVATION = 1e4         # m: above Everest; a larger value is a glitch
+MIN_SPACING, MAX_SPACING = 1e-4, 1.0   # m: profilometers sample every 1 mm to 0.3 m
 
 
 @dataclass(frozen=True, eq=False)
@@ -69,33 +73,63 @@ def packaged_profile_path():
     return resources.files("roadcollab") / "data" / "profile_1.txt"
 
 
-def _read_text(path, name: str) -> str:
-    """The UTF-8 text of ``path`` (str, PathLike or ``Traversable``); ParameterError if unreadable."""
+def _read_text(path, name: str, limits: FileLimits) -> str:
+    """The UTF-8 text of ``path`` (str, PathLike or ``Traversable``) within ``limits``; FileFormatError otherwise."""
+    if isinstance(path, (str, os.PathLike)):
+        check_file_size(Path(path), "profile file", limits.max_bytes)
     try:
         return (Path(path) if isinstance(path, (str, os.PathLike)) else path).read_text(encoding="utf-8")
-    except (OSError, UnicodeDecodeError) as err:
-        raise ParameterError(f"path: cannot read profile file {name}: {err}") from err
+    except UnicodeDecodeError as err:
+        raise FileFormatError(f"{name}: expected a UTF-8 text file, got undecodable bytes ({err.reason})") from None
+    except OSError as err:
+        raise FileFormatError(f"{name}: cannot read profile file: {err.strerror or err}") from None
 
 
-def _parse_rows(text: str, name: str) -> tuple[list[list[float]], list[int]]:
+def _expected(tokens: list[str]) -> str:
+    """What a line whose ``tokens`` :func:`parse_ascii_number` refused should have held."""
+    want = "2 numbers 'distance_m elevation_m'"
+    try:
+        values = [float(t) for t in tokens]
+    except (ValueError, OverflowError):
+        return want
+    if len(values) != 2:
+        return want
+    if not all(t.isascii() and "_" not in t for t in tokens):
+        return want + " written with ASCII digits 0-9"
+    return "finite numbers" if not all(map(math.isfinite, values)) else want + " in plain decimal notation"
+
+
+def _parse_line(raw: str, lineno: int, name: str) -> list[float] | None:
+    """``[distance, elevation]`` of one line, None for a blank or comment line; FileFormatError otherwise."""
+    line = raw.split("#", 1)[0].strip()
+    if not line:
+        return None
+    tokens = [t.strip() for t in line.split(",")] if "," in line else line.split()
+    values = [parse_ascii_number(t) for t in tokens]
+    if len(values) != 2 or None in values:
+        raise FileFormatError(f"{name}: line {lineno}: expected {_expected(tokens)}, got {short_repr(raw)}")
+    if abs(values[0]) > MAX_DISTANCE:
+        raise FileFormatError(f"{name}: line {lineno}: expected a distance within +-{MAX_DISTANCE:g} m, got "
+                              f"{values[0]:g}")
+    if abs(values[1]) > MAX_ELEVATION:
+        raise FileFormatError(f"{name}: line {lineno}: expected an elevation within +-{MAX_ELEVATION:g} m (beyond "
+                              f"it a sample is a glitch), got {values[1]:g}")
+    return values
+
+
+def _parse_rows(text: str, name: str, max_rows: int) -> tuple[list[list[float]], list[int]]:
     """Data rows ``[distance, elevation]`` with increasing distance, and their 1-based line numbers."""
     rows, lines = [], []
     for lineno, raw in enumerate(text.splitlines(), start=1):
-        line = raw.split("#", 1)[0].strip()
-        if not line:
+        values = _parse_line(raw, lineno, name)
+        if values is None:
             continue
-        tokens = [t.strip() for t in line.split(",")] if "," in line else line.split()
-        try:
-            values = [float(t) for t in tokens]
-        except ValueError:
-            values = []
-        if len(values) != 2:
-            raise ParameterError(f"{name}: line {lineno}: expected 2 numbers 'distance_m elevation_m', got {raw!r}")
-        if not all(math.isfinite(v) for v in values):
-            raise ParameterError(f"{name}: line {lineno}: expected finite numbers, got {raw!r}")
         if rows and values[0] <= rows[-1][0]:
-            raise ParameterError(f"{name}: line {lineno}: expected distance > {rows[-1][0]:g} (increasing), "
-                                 f"got {values[0]:g}")
+            raise FileFormatError(f"{name}: line {lineno}: expected distance > {rows[-1][0]:g} (increasing), "
+                                  f"got {values[0]:g}")
+        if len(rows) >= max_rows:
+            raise FileFormatError(f"{name}: line {lineno}: more than {max_rows} data rows; raise the limit with "
+                                  "--max-rows")
         rows.append(values)
         lines.append(lineno)
     return rows, lines
@@ -109,18 +143,23 @@ def _uniform_spacing(distance: np.ndarray, lines: list[int], name: str) -> float
     bad = np.flatnonzero(np.abs(steps - spacing) > 1e-6 * spacing + 1e-12 * np.abs(distance[1:]))
     if bad.size:
         i = int(bad[0])
-        raise ParameterError(f"{name}: line {lines[i + 1]}: expected uniform spacing {spacing:g} m, "
-                             f"got step {steps[i]:g} m")
+        raise FileFormatError(f"{name}: line {lines[i + 1]}: expected uniform spacing {spacing:g} m, "
+                              f"got step {steps[i]:g} m")
+    if not MIN_SPACING <= spacing <= MAX_SPACING:
+        raise FileFormatError(f"{name}: expected a distance step between {MIN_SPACING:g} and {MAX_SPACING:g} m, got "
+                              f"{spacing:g} m")
     return spacing
 
 
-def load_profile(path) -> MeasuredProfile:
+def load_profile(path, *, limits: FileLimits | None = None) -> MeasuredProfile:
     """Read rows ``distance_m elevation_m`` (whitespace or comma separated; ``#`` comments).
 
     Parameters
     ----------
     path : str, os.PathLike or importlib.resources.abc.Traversable
         The profile file, UTF-8.
+    limits : FileLimits, optional
+        Largest file (MB, checked before reading) and most rows; default ``FileLimits()``.
 
     Returns
     -------
@@ -129,14 +168,17 @@ def load_profile(path) -> MeasuredProfile:
 
     Raises
     ------
-    ParameterError
-        Naming the file and 1-based line: not 2 numbers, non-finite values, non-increasing or
-        non-uniform distance (relative tolerance 1e-6 of the spacing), fewer than 8 rows.
+    FileFormatError
+        Naming the file and 1-based line: too large or too many rows, not 2 plain ASCII numbers,
+        non-finite values, a distance beyond +-1e7 m or an elevation beyond +-1e4 m, non-increasing or
+        non-uniform distance (relative tolerance 1e-6 of the spacing), a spacing outside
+        0.1 mm - 1 m, fewer than 8 rows.
     """
     name = str(path)
-    rows, lines = _parse_rows(_read_text(path, name), name)
+    limits = FileLimits() if limits is None else limits
+    rows, lines = _parse_rows(_read_text(path, name, limits), name, limits.max_rows)
     if len(rows) < 8:
-        raise ParameterError(f"{name}: expected at least 8 data rows, got {len(rows)}")
+        raise FileFormatError(f"{name}: expected at least 8 data rows, got {len(rows)}")
     data = np.array(rows)
     spacing = _uniform_spacing(data[:, 0], lines, name)
     return MeasuredProfile(data[:, 0], data[:, 1], spacing, name)
@@ -149,7 +191,7 @@ def _detrend(distance: np.ndarray, z: np.ndarray) -> np.ndarray:
 
 
 def measured_road(path=None, *, second_track="lateral", lateral_class="A", detrend=True, spacing=None,
-                  enveloping_length=0.25, rng=None) -> RoadProfile:
+                  enveloping_length=0.25, rng=None, limits: FileLimits | None = None) -> RoadProfile:
     """Two-track road from a measured single-track profile (left track).
 
     Parameters
@@ -171,6 +213,8 @@ def measured_road(path=None, *, second_track="lateral", lateral_class="A", detre
         Tyre enveloping moving-average width (m), as in
         :func:`~roadcollab.models.road.generate_road`; 0 disables.
     rng : None, int or numpy.random.Generator
+    limits : FileLimits, optional
+        Largest profile file and most rows (see :func:`load_profile`).
 
     Returns
     -------
@@ -184,7 +228,7 @@ def measured_road(path=None, *, second_track="lateral", lateral_class="A", detre
     if not isinstance(detrend, (bool, np.bool_)):
         raise ParameterError(f"detrend must be a bool, got {detrend!r}")
     rng = np.random.default_rng(rng)
-    measured = load_profile(packaged_profile_path() if path is None else path)
+    measured = load_profile(packaged_profile_path() if path is None else path, limits=limits)
     distance = measured.distance - measured.distance[0]
     left = _detrend(distance, measured.elevation) if detrend else measured.elevation.copy()
     step = measured.spacing

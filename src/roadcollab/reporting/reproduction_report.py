@@ -96,11 +96,18 @@ def reproduction_summary(rows: list[MseRow], bound_rows: list[BoundRow] | None =
         "fused5_vehicles": k5 + 1,
         "oracle_over_fused_last": rows[-1].oracle_bound_mse_mean / rows[-1].fused_mse_mean,
     }
+    if not later:  # one vehicle: Algorithm 1 has no predecessor, so there is nothing to compare (None, not NaN)
+        out.update({k: None for k in _ALGORITHM1_KEYS})
     if bound_rows:
         worst = min(bound_rows, key=lambda r: r.z)
         out.update(bound_min_z=worst.z, bound_min_z_estimator=worst.estimator,
                    bound_min_z_vehicle=worst.vehicle, bound_beaten=bool(worst.z < -3))
     return out
+
+
+_ALGORITHM1_KEYS = ("algorithm1_mean_mse", "vehicle1_observer_over_algorithm1",
+                    "observer_over_algorithm1_same_vehicles", "own_inversion_over_algorithm1_same_vehicles",
+                    "own_posterior_inversion_over_algorithm1_same_vehicles")
 
 
 def _ratio_words(ratio: float) -> str:
@@ -111,10 +118,12 @@ def _ratio_words(ratio: float) -> str:
 def _summary_lines(summary: dict, n_vehicles: int) -> list[str]:
     """The report's summary bullets, worded from the numbers."""
     s = summary
+    alg1 = ("- Algorithm 1 needs a predecessor: with one vehicle there is no Algorithm 1 estimate to compare."
+            if s["algorithm1_mean_mse"] is None else None)
     return [
         f"- Vehicle 1's lag-free online estimate (observer only) has MSE {s['vehicle1_observer_mse']:.4g}, "
         f"{s['vehicle1_observer_over_own_inversion']:.2f}x its own offline inversion.",
-        f"- Algorithm 1 (vehicles 2..{n_vehicles}, mean MSE {s['algorithm1_mean_mse']:.4g}) is "
+        alg1 or f"- Algorithm 1 (vehicles 2..{n_vehicles}, mean MSE {s['algorithm1_mean_mse']:.4g}) is "
         f"{_ratio_words(s['vehicle1_observer_over_algorithm1'])} than vehicle 1's online estimate. On the same "
         f"vehicles it is {_ratio_words(s['observer_over_algorithm1_same_vehicles'])} than their own online "
         f"estimates, {_ratio_words(s['own_inversion_over_algorithm1_same_vehicles'])} than their own offline "
