@@ -10,7 +10,7 @@ import roadcollab as rc
 from roadcollab.collaboration.guard import GuardReport, ReceiverGuard, fleet_guards, third_octave_bands
 from roadcollab.collaboration.relay import Exchange, Relay
 from roadcollab.errors import MessageError, ParameterError
-from roadcollab.experiments.pipeline import pipeline_for, record_run
+from roadcollab.experiments.pipeline import PipelineCache, record_run
 from roadcollab.experiments.poisoning import CONSTRUCTIONS, _jordan_trap, poisoning_rows
 from roadcollab.experiments.seeds import SeedPlan, run_stream
 from roadcollab.lti.realisation import StateSpaceData
@@ -56,7 +56,7 @@ def test_radius_margin():
 @pytest.fixture(scope="module")
 def default_fleet_run():
     cfg = rc.ExperimentConfig(n_runs=1, segment_length=120.0)      # the default fleet (10 vehicles, seed 0)
-    pipe = pipeline_for(cfg, 0)
+    pipe = PipelineCache().pipeline(cfg, 0)
     ss = SeedPlan(0).runs(1)[0]
     _, ys, Ys = record_run(pipe, run_stream(ss, "road"), run_stream(ss, "noise"), cfg.sensor_noise_std)
     return cfg, pipe, ys, Ys

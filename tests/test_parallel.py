@@ -36,11 +36,13 @@ def test_attack_study_on_dask_matches_serial():
     from roadcollab.experiments.security_study import AttackStudyConfig, run_attack_study
 
     cfg = AttackStudyConfig(experiment=ExperimentConfig(n_vehicles=3, n_runs=1, segment_length=90.0), n_runs=2,
-                            paillier_bits=512, paillier_sample=2, physical_fit_runs=1, dp_epsilons=(1.0,))
+                            paillier_bits=512, paillier_sample=2, physical_fit_runs=1, dp_epsilons=(1.0,),
+                            replica_runs=1, replica_targets=1, poisoning_runs=1)
     a, b = run_attack_study(cfg, 5), run_attack_study(cfg, 5, workers=2)
-    assert a.attack_rows == b.attack_rows
+    assert [repr(r) for r in a.attack_rows] == [repr(r) for r in b.attack_rows]
     assert a.linkability_rows == b.linkability_rows
-    assert [r["mse_vehicle2"] for r in a.baseline_rows] == [r["mse_vehicle2"] for r in b.baseline_rows]
+    assert [r.mse_vehicle2 for r in a.baseline_rows] == [r.mse_vehicle2 for r in b.baseline_rows]
+    assert [repr(r) for r in a.poisoning_rows] == [repr(r) for r in b.poisoning_rows]   # NaN != NaN
 
 
 def test_seed_plan_streams_are_stateless_and_match_spawn():

@@ -10,7 +10,8 @@ from roadcollab.errors import ParameterError
 from roadcollab.experiments.config import ExperimentConfig
 from roadcollab.experiments.replica_study import ReplicaRow, run_replica_study
 from roadcollab.experiments.security_segment import target_poles
-from roadcollab.experiments.security_study import AttackStudyConfig, _study_pipeline
+from roadcollab.experiments.pipeline import PipelineCache
+from roadcollab.experiments.security_study import AttackStudyConfig
 from roadcollab.models.simulation import simulate_response
 from roadcollab.privacy.attacks import pole_errors
 from roadcollab.privacy.baselines.dp import DPSpec, gaussian_sigma
@@ -22,7 +23,7 @@ from roadcollab.privacy.physical_fit import _log_ratios
 @pytest.fixture(scope="module")
 def study():
     cfg = AttackStudyConfig()
-    pipe = _study_pipeline(cfg, 0)
+    pipe = PipelineCache().pipeline(cfg.experiment, 0)
     return cfg, pipe, target_poles(pipe)
 
 

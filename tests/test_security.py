@@ -7,7 +7,8 @@ from roadcollab import ExperimentConfig, sample_fleet
 from roadcollab.experiments.pipeline import FleetPipeline
 from roadcollab.privacy.obfuscation import obfuscate
 from roadcollab.privacy.attacks import (PhysicalPrior, attack_model_reduction, attack_multiplicity, attack_pole_intersection, attack_signals_prior, pole_errors, select_by_prior)
-from roadcollab.experiments.security_study import AttackStudyConfig, _linkability, run_attack_study
+from roadcollab.experiments.security_study import AttackStudyConfig, run_attack_study
+from roadcollab.experiments.security_tables import _linkability
 from roadcollab.models.simulation import add_sensor_noise, simulate_response
 
 CFG = ExperimentConfig(n_vehicles=3, n_runs=1, segment_length=120.0)
@@ -79,17 +80,28 @@ def test_linkability_oracles():
 
 
 def test_study_smoke():
-    cfg = AttackStudyConfig(experiment=ExperimentConfig(n_vehicles=3, n_runs=1, segment_length=120.0), n_runs=2,
-                            paillier_bits=512, paillier_sample=4, physical_fit_runs=1, dp_epsilons=(1.0,))
+    cfg = AttackStudyConfig(experiment=ExperimentConfig(n_vehicles=4, n_runs=1, segment_length=120.0), n_runs=2,
+                            paillier_bits=512, paillier_sample=4, physical_fit_runs=1, dp_epsilons=(1.0,),
+                            replica_runs=1, replica_targets=1, poisoning_runs=1, secagg_min_inputs=2,
+                            secagg_colluders=(1,))
     res = run_attack_study(cfg, 3)
-    keys = {(r["mechanism"], r["attack"]) for r in res.attack_rows}
+    keys = {(r.mechanism, r.attack) for r in res.attack_rows}
     for mech in ("paper", "hardened"):
         for attack in ("model_reduction", "pole_intersection"):
             assert (mech, attack) in keys
-    assert all(r["max_rel_diff"] < 1e-9 for r in res.exactness_rows)
-    names = [r["mechanism"] for r in res.baseline_rows]
-    assert names[:3] == ["none", "paper", "hardened"] and "he" in names and "aead" in names
-    dp = next(r for r in res.baseline_rows if r["mechanism"].startswith("dp"))
+    for mech in ("none", "paper", "paper_vehicle", "hardened", "dp(eps=1)", "fused", "secure_aggregation"):
+        assert (mech, "replica") in keys, mech
+    assert ("secure_aggregation", "replica_collusion_c3") in keys      # n - 1 colluders: the edge case
+    assert all(r.max_rel_diff < 1e-9 for r in res.exactness_rows)
+    assert "secure_aggregation" in [r.mechanism for r in res.exactness_rows]
+    names = [r.mechanism for r in res.baseline_rows]
+    assert names[:3] == ["none", "paper", "hardened"] and {"he", "aead", "secure_aggregation"} <= set(names)
+    dp = next(r for r in res.baseline_rows if r.mechanism.startswith("dp"))
     none = res.baseline_rows[0]
-    assert dp["mse_vehicle1"] == pytest.approx(none["mse_vehicle1"])   # vehicle 1 receives nothing
-    assert dp["mse_vehicle2"] > none["mse_vehicle2"]                     # noise costs accuracy
+    assert dp.mse_vehicle1 == pytest.approx(none.mse_vehicle1)   # vehicle 1 receives nothing
+    assert dp.mse_vehicle2 > none.mse_vehicle2                     # noise costs accuracy
+    targets = {r.target for r in res.poisoning_rows}
+    assert {"receiver_none", "receiver_hardened", "fused_mean", "fused_robust"} <= targets
+    assert all(r.max_ratio_to_observer <= 2 for r in res.poisoning_rows if r.target.startswith("receiver"))
+    assert [r.segments for r in res.composition_rows] == [1, 3, 10, 100]
+    assert {p.mechanism for p in res.frontier} >= {"none", "hardened", "secure_aggregation"}

@@ -5,10 +5,11 @@ from __future__ import annotations
 import argparse
 
 from ..experiments.config import ExperimentConfig
+from ..experiments.security_replica import replica_fit_count
 from ..experiments.security_study import AttackStudyConfig, run_attack_study
 from ..reporting.attack_report import write_attack
 from ..reporting.records import staged_output
-from ._common import (command_parser, add_dask_options, add_study_options, check_dask_options, dask_options, paillier_bits, print_table,
+from ._common import (command_parser, add_dask_options, add_study_options, check_dask_options, dask_options, paillier_bits, positive_int, print_table,
                       run_with_progress)
 
 __all__ = ["NAME", "add_parser", "run"]
@@ -31,16 +32,23 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
     """
     p = command_parser(
         subparsers, NAME, summary="security study: attacks, linkability, exactness, baselines",
-        does="Attacks the messages of Algorithm 1 with and without Algorithm 2 (structural, signal and physical-fit "
-             "attacks on each sender's model), measures linkability and the exactness of the privacy mechanism, "
-             "and compares with differential privacy, Paillier encryption and AEAD baselines.",
-        writes="into --out (replaced as a whole at the end): attack.csv, exactness.csv, linkability.csv, "
-               "baselines.csv, Figs. 8-11, config.json, report.md.",
+        does="Attacks the messages of Algorithm 1 with and without Algorithm 2 (structural, signal, physical-fit "
+             "and replica attacks on each sender's model), measures linkability, the exactness of the privacy "
+             "mechanisms and what hostile messages do to a guarded receiver and to the fleet's fusion, and "
+             "compares with differential privacy (composed over segments), Paillier encryption, AEAD and secure "
+             "aggregation.",
+        writes="into --out (replaced as a whole at the end): attack.csv (with the replica attacker), exactness.csv, "
+               "linkability.csv, poisoning.csv, baselines.csv (DP, Paillier, AEAD, secure aggregation), "
+               "dp_composition.csv, frontier.csv, Figs. 8-12, config.json, report.md.",
         example="roadcollab attack --runs 5 --paillier-bits 1024 --out results/attack")
     add_study_options(p, runs=20, runs_help="segments (default 20, at least 2)",
                       vehicles_help="fleet size (default 10, at least 3)")
     p.add_argument("--paillier-bits", type=paillier_bits, default=2048,
                    help="Paillier key size, bits (512-8192 in steps of 64; default 2048)")
+    p.add_argument("--replica-runs", type=positive_int, default=3,
+                   help="segments of the replica attacks (default 3; linked attacks need 3)")
+    p.add_argument("--poisoning-runs", type=positive_int, default=2,
+                   help="runs of the poisoning measurements (default 2)")
     add_dask_options(p)
     return p
 
@@ -61,15 +69,17 @@ def run(args: argparse.Namespace, command_line: str) -> int:
         Exit status 0.
     """
     cfg = AttackStudyConfig(experiment=ExperimentConfig(n_vehicles=args.vehicles, n_runs=1), n_runs=args.runs,
-                            paillier_bits=args.paillier_bits)
+                            paillier_bits=args.paillier_bits, replica_runs=args.replica_runs,
+                            poisoning_runs=args.poisoning_runs)
     check_dask_options(args)
     with staged_output(args.out) as out:
-        result, elapsed = run_with_progress(cfg.n_runs, NAME, lambda cb: run_attack_study(
+        steps = cfg.n_runs + replica_fit_count(cfg)
+        result, elapsed = run_with_progress(steps, NAME, lambda cb: run_attack_study(
             cfg, args.seed, progress=cb, **dask_options(args)))
         write_attack(result, out, command=command_line, elapsed=elapsed)
     print_table(f"Attacks on S_j's poles, {cfg.n_runs} segments, {elapsed:.1f} s",
-                ("mechanism", "attack", "median rel. pole error", "success rate"),
-                [(r["mechanism"], r["attack"], f"{r['median_rel_pole_error']:.3g}", f"{r['success_rate']:.2f}")
-                 for r in result.attack_rows])
+                ("mechanism", "attack", "road", "segments", "median rel. pole error", "success rate"),
+                [(r.mechanism, r.attack, r.road, str(r.segments), f"{r.median_rel_pole_error:.3g}",
+                  f"{r.success_rate:.2f}") for r in result.attack_rows])
     print(f"wrote {args.out}/report.md")
     return 0

@@ -214,7 +214,7 @@ def _score(run: _Run, zf: np.ndarray) -> float:
 
 
 def fusion_poisoning_rows(config: AnomalyStudyConfig, seed: int, *, n_runs: int = 4, malicious: int = 4,
-                          strategies=FUSION_STRATEGIES) -> list[PoisoningSummary]:
+                          strategies=FUSION_STRATEGIES, pipe=None) -> list[PoisoningSummary]:
     """Measure every strategy of one malicious vehicle against both fusion nodes.
 
     Parameters
@@ -229,6 +229,8 @@ def fusion_poisoning_rows(config: AnomalyStudyConfig, seed: int, *, n_runs: int 
         0-based index of the malicious vehicle.
     strategies : sequence of str
         Subset of :data:`FUSION_STRATEGIES`.
+    pipe : FleetPipeline, optional
+        The pipeline of ``config.experiment`` and ``seed`` if already built.
 
     Returns
     -------
@@ -241,7 +243,7 @@ def fusion_poisoning_rows(config: AnomalyStudyConfig, seed: int, *, n_runs: int 
     bad = [s for s in strategies if s not in FUSION_STRATEGIES]
     if bad:
         raise ParameterError(f"strategies must be among {FUSION_STRATEGIES}, got {bad}")
-    pipe = FleetPipeline(exp, fleet_and_run_seeds(exp, seed)[0])
+    pipe = FleetPipeline(exp, fleet_and_run_seeds(exp, seed)[0]) if pipe is None else pipe
     run_seeds = SeedPlan(seed).runs(n_runs)
     road_spec = config.road_spec()
     acc = {(s, t): [] for s in strategies for t in FUSION_TARGETS}

@@ -25,7 +25,7 @@ from ..models.vehicle import Vehicle, sample_fleet
 from .config import ExperimentConfig
 from .seeds import SeedPlan
 
-__all__ = ["FleetPipeline", "PipelineCache", "fleet_and_run_seeds", "pipeline_for", "record_run"]
+__all__ = ["FleetPipeline", "PipelineCache", "fleet_and_run_seeds", "record_run"]
 
 #: Pipelines a :class:`PipelineCache` keeps (the oldest is dropped beyond this).
 _MAX_PIPELINES = 8
@@ -236,27 +236,3 @@ class PipelineCache:
         pipe = FleetPipeline(config, fleet, road_moment=self._moments.get(repr(config)))
         self._moments[repr(config)] = pipe.road_moment
         return pipe
-
-
-#: The process-wide cache behind :func:`pipeline_for` (the security study's path only).
-_LEGACY_CACHE = PipelineCache()
-
-
-def pipeline_for(config: ExperimentConfig, seed: int) -> FleetPipeline:
-    """The (per-process cached) pipeline of a configuration and root seed.
-
-    Kept for the security study only, whose rewrite switches to a :class:`PipelineCache` of its
-    own passed by ``map_runs(shared=...)``; every other study owns its cache.
-
-    Parameters
-    ----------
-    config : ExperimentConfig
-    seed : int
-        Root seed; the fleet is :func:`fleet_and_run_seeds`'s.
-
-    Returns
-    -------
-    FleetPipeline
-        Built once per process and key ``(repr(config), seed)``.
-    """
-    return _LEGACY_CACHE.pipeline(config, seed)

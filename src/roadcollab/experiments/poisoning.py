@@ -52,7 +52,7 @@ from ..wire.message import ExchangeMessage, InversionMessage
 from ..wire.protocol import decode, encode
 from .config import ExperimentConfig
 from .fusion_poisoning import PoisoningSummary
-from .pipeline import pipeline_for, record_run
+from .pipeline import PipelineCache, record_run
 from .seeds import SeedPlan, run_stream
 
 __all__ = ["CONSTRUCTIONS", "PoisoningRow", "PoisoningResult", "hostile_message", "poisoning_rows", "summarize"]
@@ -335,7 +335,7 @@ def _run_constructions(pipe, guard, mech, run, ys, Ys, score, dz, anomalies) -> 
 
 
 def poisoning_rows(config: ExperimentConfig | None = None, *, seed: int = 0, n_runs: int = 2, receiver: int = 1,
-                   mechanisms=("none", "hardened"), guard_options: dict | None = None) -> PoisoningResult:
+                   mechanisms=("none", "hardened"), guard_options: dict | None = None, pipe=None) -> PoisoningResult:
     """Measure every hostile construction against one receiver, with and without its guard.
 
     Parameters
@@ -352,6 +352,8 @@ def poisoning_rows(config: ExperimentConfig | None = None, *, seed: int = 0, n_r
         Keys of :data:`CONSTRUCTIONS`.
     guard_options : dict, optional
         Keyword options of :class:`~roadcollab.collaboration.guard.ReceiverGuard`.
+    pipe : FleetPipeline, optional
+        The pipeline of ``config`` and ``seed`` if already built.
 
     Returns
     -------
@@ -364,7 +366,7 @@ def poisoning_rows(config: ExperimentConfig | None = None, *, seed: int = 0, n_r
     bad = [m for m in mechanisms if m not in CONSTRUCTIONS]
     if bad:
         raise ParameterError(f"mechanisms must be among {sorted(CONSTRUCTIONS)}, got {bad}")
-    pipe = pipeline_for(config, seed)
+    pipe = PipelineCache().pipeline(config, seed) if pipe is None else pipe
     grid, n, sl = pipe.grid, pipe.grid.n_samples, config.scored
     guard = ReceiverGuard(pipe.estimators[receiver], pipe.road_moment, config.sensor_noise_std,
                           **(guard_options or {}))

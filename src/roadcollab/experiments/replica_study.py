@@ -32,7 +32,8 @@ from ..privacy.baselines.dp import gaussian_sigma, l2_sensitivity
 from ..privacy.baselines.dp_composition import composed_epsilon
 from ..privacy.replica import replica_fit
 from .security_segment import target_poles
-from .security_study import AttackStudyConfig, _study_pipeline
+from .pipeline import PipelineCache
+from .security_config import AttackStudyConfig
 from .seeds import SeedPlan, run_stream
 
 __all__ = ["ReplicaRow", "ReplicaStudyResult", "run_replica_study", "replica_messages"]
@@ -106,7 +107,8 @@ def _mechanisms(epsilons) -> tuple[str, ...]:
 
 
 # Long: one segment's messages and roads for every mechanism, drawn stream by stream in fleet order.
-def replica_messages(config: AttackStudyConfig, seed: int, run: int, *, epsilons=None, n_targets: int = 3) -> dict:
+def replica_messages(config: AttackStudyConfig, seed: int, run: int, *, epsilons=None, n_targets: int = 3,
+                     pipe=None) -> dict:
     """What the replica attacker sees on one segment of the security study.
 
     Parameters
@@ -121,17 +123,19 @@ def replica_messages(config: AttackStudyConfig, seed: int, run: int, *, epsilons
         Per-message DP levels (default ``config.dp_epsilons``).
     n_targets : int
         Vehicles attacked: the first ``n_targets`` of the fleet (>= 1).
+    pipe : FleetPipeline, optional
+        The study's pipeline (default: built from ``config`` and ``seed``).
 
     Returns
     -------
     dict
         ``"z"``: ``{mechanism: [z_j (nfft, 2) m/s per target]}``; ``"road"``: ``{"true": [(N, 2)], "fused":
-        [(N, 2)]}`` road velocity per target, m/s; ``"grid"``, ``"targets"`` (poles per target, rad/s) and
-        ``"sigmas"`` (``{epsilon: sigma}``, m/s).
+        [(N, 2)]}`` road velocity per target, m/s; ``"grid"``, ``"targets"`` (poles per target, rad/s),
+        ``"sigmas"`` (``{epsilon: sigma}``, m/s) and ``"z_all"`` (every vehicle's ``z``, (V, nfft, 2) m/s).
     """
     seed = check_int("seed", seed, low=0)
     run = check_int("run", run, low=0)
-    pipe = _study_pipeline(config, seed)
+    pipe = PipelineCache().pipeline(config.experiment, seed) if pipe is None else pipe
     n_targets = check_int("n_targets", n_targets, low=1, high=len(pipe.estimators))
     eps = tuple(config.dp_epsilons if epsilons is None else epsilons)
     grid, ests = pipe.grid, pipe.estimators
@@ -142,7 +146,8 @@ def replica_messages(config: AttackStudyConfig, seed: int, run: int, *, epsilons
     Ys = [grid.rfft(add_sensor_noise(simulate_response(e.true_plant, w), noise, rng=noise_rng)) for e in ests]
     sens = l2_sensitivity(ests[0], config.dp_rho)
     sigmas = {e: gaussian_sigma(e, config.dp_delta, sens) for e in eps}
-    z_hard = [grid.irfft(ests[j].invert(Ys[j])) for j in range(n_targets)]
+    z_all = np.array([grid.irfft(e.invert(Y)) for e, Y in zip(ests, Ys)])
+    z_hard = list(z_all[:n_targets])
     zs = {"hardened": z_hard}
     for e, mech in zip(eps, _mechanisms(eps)[1:]):
         zs[mech] = [z + sigmas[e] * dp_rng.standard_normal(z.shape) for z in z_hard]
@@ -150,7 +155,7 @@ def replica_messages(config: AttackStudyConfig, seed: int, run: int, *, epsilons
     total = np.sum(post, axis=0)
     fused = [((total - post[j]) / (len(ests) - 1))[:grid.n_samples] for j in range(n_targets)]
     return {"z": zs, "road": {"true": [w] * n_targets, "fused": fused}, "grid": grid,
-            "targets": target_poles(pipe)[:n_targets], "sigmas": sigmas}
+            "targets": target_poles(pipe)[:n_targets], "sigmas": sigmas, "z_all": z_all}
 
 
 def _score(fits: list[tuple[np.ndarray, float]], targets: list[np.ndarray]) -> tuple[float, float, int, float]:
@@ -205,7 +210,8 @@ def run_replica_study(config: AttackStudyConfig, seed: int, *, n_runs: int = 3, 
     links = [check_int("linked_segments[]", L, low=2) for L in linked_segments]
     eps = tuple(config.dp_epsilons if epsilons is None else epsilons)
     nominal = config.experiment.fleet.nominal
-    segs = [replica_messages(config, seed, r, epsilons=eps, n_targets=n_targets) for r in range(n_runs)]
+    pipe = PipelineCache().pipeline(config.experiment, seed)
+    segs = [replica_messages(config, seed, r, epsilons=eps, n_targets=n_targets, pipe=pipe) for r in range(n_runs)]
     grid, targets = segs[0]["grid"], segs[0]["targets"]
     per_eps = dict(zip(_mechanisms(eps), (None,) + eps))
     rows = []

@@ -31,8 +31,8 @@ from ..privacy.attacks import (attack_model_reduction, attack_multiplicity, atta
 from ..privacy.physical_fit import attack_physical_fit
 from ..wire import protocol
 
-if TYPE_CHECKING:  # annotations only: security_study imports this module
-    from .security_study import AttackStudyConfig
+if TYPE_CHECKING:  # annotations only
+    from .security_config import AttackStudyConfig
 
 __all__ = ["SegmentAttacks", "attack_segment", "target_poles", "dp_mse_key", "EXACT_MECHANISMS",
            "TIMED_MECHANISMS"]
