@@ -112,7 +112,17 @@ def elevation_at(grid, elevation, positions) -> np.ndarray:
 
 
 def covered(elevation) -> np.ndarray:
-    """(n,) bool: grid points where a (n, C) elevation is finite."""
+    """Grid points where an elevation is finite.
+
+    Parameters
+    ----------
+    elevation : (n, C) array_like
+        m, NaN where not covered.
+
+    Returns
+    -------
+    (n,) bool ndarray
+    """
     return np.all(np.isfinite(np.asarray(elevation, dtype=float)), axis=1)
 
 

@@ -43,16 +43,19 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..collaboration.algorithm1 import CollaborativeEstimator
+from ..detection.detector import DetectorSpec, detect_anomalies
 from ..errors import FileFormatError, ParameterError
 from ..estimation.grid import SegmentGrid
 from ..io.drives import Drive
+from ..models.iri import IRISegments, iri_segments
 from ..models.vehicle import FleetSpec, Vehicle
 from .config import ExperimentConfig
 from .distance_maps import band_limit_stretch, covered, distance_grid, elevation_at, elevation_to_distance, \
     estimate_offset
-from .drive_estimation import integrate_elevation
+from .drive_estimation import AnomalyRow, integrate_elevation
 
-__all__ = ["FLEET_ESTIMATORS", "FleetEstimates", "VehicleRecord", "invert_drive", "estimate_fleet"]
+__all__ = ["FLEET_ESTIMATORS", "FleetEstimates", "VehicleRecord", "invert_drive", "estimate_fleet",
+           "find_fleet_anomalies", "fused_iri"]
 
 FLEET_ESTIMATORS = ("single", "inversion", "collaborative", "fused")
 
@@ -279,3 +282,55 @@ def estimate_fleet(drives: list[Drive], *, spacing: float = 0.05, align: bool = 
     return FleetEstimates(drives=list(drives), position=x, spacing=float(spacing), elevation=elevation,
                           offsets=offsets, offset_peaks=peaks, band_low_per_m=float(n_low),
                           band_low_hz=float(band_low_hz), gamma=float(gamma), aligned=bool(align))
+
+
+def find_fleet_anomalies(est: FleetEstimates, spec: DetectorSpec | None = None) -> list[AnomalyRow]:
+    """Anomalies in the fused elevation of every drive, seen by a virtual vehicle on the grid.
+
+    A grid of step ``dx`` is the time grid of a vehicle at the drives' mean speed ``v`` sampled at
+    ``v / dx``; its road velocity is ``v`` times the slope of the fused elevation.
+
+    Parameters
+    ----------
+    est : FleetEstimates
+    spec : DetectorSpec, optional
+        Detector settings (default ``DetectorSpec()``).
+
+    Returns
+    -------
+    list of AnomalyRow
+        Estimator ``fused``, vehicle = the number of drives.
+    """
+    spec = DetectorSpec() if spec is None else spec
+    ok = covered(est.fused)
+    x, h = est.position[ok], est.fused[ok]
+    v = float(np.mean([d.speed for d in est.drives]))
+    rate = v / est.spacing
+    w = np.zeros_like(h)
+    w[:-1] = np.diff(h, axis=0) * rate
+    V = len(est.drives)
+    return [AnomalyRow("fused", V, float(det.position), det.side, det.kind, float(det.depth), float(det.confidence))
+            for det in detect_anomalies(w, positions=x, speed=v, sample_rate=rate, spec=spec)]
+
+
+def fused_iri(est: FleetEstimates, segment_length: float) -> tuple[IRISegments | None, str | None]:
+    """IRI per segment of the fused elevation over the stretch any drive passed, or a note why not.
+
+    Parameters
+    ----------
+    est : FleetEstimates
+    segment_length : float
+        m.
+
+    Returns
+    -------
+    IRISegments or None
+        None if the fused stretch is shorter than one segment (or the IRI's initialisation).
+    str or None
+        The note in that case.
+    """
+    ok = covered(est.fused)
+    try:
+        return iri_segments(est.position[ok], est.fused[ok], segment_length), None
+    except ParameterError as err:
+        return None, f"IRI was not computed: {err}."
