@@ -45,7 +45,7 @@ from ..detection.detector import DetectorSpec, detect_anomalies
 from ..errors import FileFormatError, ParameterError
 from ..estimation.grid import SegmentGrid
 from .config import ExperimentConfig
-from ..io.drives import Drive
+from ..io.drives import Drive, common_time_grid
 from ..models.vehicle import Vehicle
 
 __all__ = ["ESTIMATORS", "AnomalyRow", "DriveEstimates", "integrate_elevation", "estimate_drives",
@@ -209,7 +209,8 @@ def estimate_drives(drives: list[Drive], *, gamma: float | None = None, band_low
     Parameters
     ----------
     drives : list of Drive
-        In driving order, sharing sample rate, speed and start (see :func:`roadcollab.io.drives.load_drives`).
+        In driving order, sharing one time grid (:func:`roadcollab.io.drives.common_time_grid`);
+        others go to :func:`roadcollab.experiments.fleet_estimation.estimate_fleet`.
     gamma, band_low_hz : float, optional
         Observer parameter and band edge (Hz). Default: the
         :class:`~roadcollab.experiments.reproduction.ExperimentConfig` defaults (512, 0.5 Hz).
@@ -223,11 +224,14 @@ def estimate_drives(drives: list[Drive], *, gamma: float | None = None, band_low
     Raises
     ------
     ParameterError
-        Not a non-empty list of drives, a sample rate not above twice the band edge, or parameters
-        the estimator design rejects.
+        Not a non-empty list of drives, drives on different time grids, a sample rate not above twice
+        the band edge, or parameters the estimator design rejects.
     """
     if not drives or not all(isinstance(d, Drive) for d in drives):
         raise ParameterError("drives must be a non-empty list of Drive (see load_drives)")
+    if not common_time_grid(drives):
+        raise ParameterError("drives must share one time grid (constant speed_mps, sample rate and start_m); use "
+                             "estimate_fleet for drives at different speeds, rates or starts")
     d0 = drives[0]
     base = ExperimentConfig()
     gamma = base.gamma if gamma is None else gamma

@@ -171,17 +171,20 @@ def _check_keys(path: Path, mapping: dict, allowed: tuple[str, ...], required: t
         raise FileFormatError(f"{path}: missing required key(s) {', '.join(repr(where + k) for k in missing)}")
 
 
-def read_drive_params(path) -> dict:
+def read_drive_params(path, *, speed_column: str | None = None) -> dict:
     """Read and validate a drive's parameters file (TOML or JSON, keys in the module docstring).
 
     Parameters
     ----------
     path : str or Path
+    speed_column : str or None
+        ``"speed_mps"`` or ``"distance_m"`` if the drive's CSV carries that column: ``speed_mps``
+        must then be absent from the file (one source of speed); None: it is required.
 
     Returns
     -------
     dict
-        ``speed`` (m/s), ``sensor_noise_std`` (m/s^2), ``start_m`` (m), ``params``
+        ``speed`` (m/s; None with ``speed_column``), ``sensor_noise_std`` (m/s^2), ``start_m`` (m), ``params``
         (:class:`~roadcollab.models.vehicle.HalfCarParameters`).
 
     Raises
@@ -193,8 +196,11 @@ def read_drive_params(path) -> dict:
     """
     path = Path(path)
     data = _load_mapping(path)
-    _check_keys(path, data, _TOP_KEYS, ("speed_mps", "vehicle"), "")
-    speed = _number(path, "speed_mps", data["speed_mps"])
+    _check_keys(path, data, _TOP_KEYS, ("vehicle",) if speed_column else ("speed_mps", "vehicle"), "")
+    if speed_column and "speed_mps" in data:
+        raise FileFormatError(f"{path}: key 'speed_mps' must be absent: the drive's CSV carries a {speed_column} "
+                              "column (one source of speed per drive); remove one of them")
+    speed = None if speed_column else _number(path, "speed_mps", data["speed_mps"])
     noise = _number(path, "sensor_noise_std", data.get("sensor_noise_std", DEFAULT_SENSOR_NOISE_STD))
     start = _number(path, "start_m", data.get("start_m", 0.0))
     veh = data["vehicle"]
@@ -206,7 +212,7 @@ def read_drive_params(path) -> dict:
     return {"speed": speed, "sensor_noise_std": noise, "start_m": start, "params": HalfCarParameters(**values)}
 
 
-def write_drive_params(path, *, speed: float, params: HalfCarParameters, sensor_noise_std: float | None = None,
+def write_drive_params(path, *, speed: float | None, params: HalfCarParameters, sensor_noise_std: float | None = None,
                        start_m: float | None = None) -> Path:
     """Write a parameters file (``.toml`` or ``.json`` by suffix), full precision.
 
@@ -216,8 +222,8 @@ def write_drive_params(path, *, speed: float, params: HalfCarParameters, sensor_
     ----------
     path : str or Path
         Output file (overwritten); the suffix ``.toml`` or ``.json`` (any case) picks the format.
-    speed : float
-        ``speed_mps``, m/s.
+    speed : float or None
+        ``speed_mps``, m/s; None omits the key (a drive whose CSV carries its speed or distance).
     params : HalfCarParameters
         The vehicle's estimated parameters, written as the ``vehicle`` table (SI units).
     sensor_noise_std : float, optional
@@ -236,7 +242,7 @@ def write_drive_params(path, *, speed: float, params: HalfCarParameters, sensor_
         If the suffix is neither ``.toml`` nor ``.json`` (nothing is written).
     """
     path = Path(path)
-    top = {"speed_mps": float(speed)}
+    top = {} if speed is None else {"speed_mps": float(speed)}
     if sensor_noise_std is not None:
         top["sensor_noise_std"] = float(sensor_noise_std)
     if start_m is not None:

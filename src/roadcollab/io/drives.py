@@ -9,19 +9,24 @@ them (:func:`write_drive_csv`, :func:`write_drive_params`); the estimation is
 File formats
 ------------
 **Accelerations** (``drive1.csv``): a header line ``time_s,accel_left,accel_right`` (exactly these
-names; spaces around them are ignored), then one row per sample of three finite numbers: time in
-s and the left and right body-tip vertical accelerations in m/s^2. Blank lines are ignored. Numbers
-are plain ASCII decimals (``nan``, ``inf``, ``1_000`` and other scripts' digits are refused);
-an acceleration beyond +-200 m/s^2 is a logger glitch and refused with its line. The
-sampling must be uniform: every time step must be within 1e-6 relative of the median step (resample
-jittery logs first); the sample rate is ``1 / median step``, rounded to 9 significant digits, at
-most 10 kHz. At least 64 rows, at most 2,000,000 and 200 MB (:class:`~roadcollab.io.limits.FileLimits`;
+names; spaces around them are ignored), optionally followed by ``,speed_mps`` (the vehicle's speed
+per sample, 0.5-70 m/s) or ``,distance_m`` (an odometer reading per sample, m, increasing), then one
+row per sample of finite numbers: time in s and the left and right body-tip vertical accelerations
+in m/s^2 (and the fourth column). Blank lines are ignored. Numbers are plain ASCII decimals
+(``nan``, ``inf``, ``1_000`` and other scripts' digits are refused); an acceleration beyond
++-200 m/s^2 is a logger glitch and refused with its line. Time stamps (:mod:`roadcollab.io.drive_log`):
+uniform ones (every step within 1e-6 of the median) are used as logged, jittery ones are resampled
+onto a uniform grid at the mean rate with a cubic interpolating spline; a clock step (time not
+increasing) and a gap (a step above 3x the median) are refused with the line. The sample rate is
+at most 10 kHz and at least ``max(20 Hz, 10 x the highest body mode of the [vehicle] model)``:
+a slower log cannot resolve the suspension's response and is refused with that reason. At least 64 rows, at most 2,000,000 and 200 MB (:class:`~roadcollab.io.limits.FileLimits`;
 ``--max-rows`` and ``--max-file-mb`` raise them; the size is checked before reading). Only time
 differences are used: ``time_s`` may start anywhere.
 
 **Parameters** (beside the CSV, same stem: ``drive1.toml`` or ``drive1.json``, not both)::
 
-    speed_mps = 15.0             # required, 0.5-70: constant speed of the pass, m/s
+    speed_mps = 15.0             # 0.5-70: constant speed of the pass, m/s; required unless the CSV
+                                 # has a speed_mps or distance_m column (then it must be absent)
     sensor_noise_std = 0.05      # optional, 0-20, m/s^2 per sample (default 0.05)
     start_m = 0.0                # optional, +-1e7: road distance of the first sample, m (default 0)
 
@@ -39,10 +44,12 @@ fall back to a default), and so is a key given twice. The ranges and their sourc
 :data:`roadcollab.io.drive_params.PARAMETER_RANGES`. At most 1 MB. TOML needs Python >= 3.11
 (``tomllib``); on 3.10 use JSON.
 
-All drives must share the sample rate (to 1e-6 relative), ``speed_mps`` and ``start_m``: the
-estimators relay signals on one common segment grid, so sample ``k`` of every drive must be the
-same spot of the road. Trim the logs so that every drive starts at the same road position. Drives
-of different length are **truncated to the shortest** (the report says so).
+Road position of sample ``k`` (:attr:`Drive.positions`): ``start_m + speed_mps * k / rate`` with a
+constant speed; ``start_m`` + the trapezoidal integral of the ``speed_mps`` column; or
+``start_m + distance_m[k] - distance_m[0]``. Drives may differ in speed, sample rate, start and
+length: :func:`common_time_grid` says whether they share one time grid (then
+:func:`roadcollab.experiments.drive_estimation.estimate_drives` relays them in time, as the
+simulations do); otherwise :mod:`roadcollab.experiments.fleet_estimation` works on road distance.
 
 Every error is a :class:`~roadcollab.errors.FileFormatError` (a ``ParameterError``) whose message
 starts with the file's
@@ -52,7 +59,6 @@ and what was found.
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -60,17 +66,16 @@ import numpy as np
 
 from .._validation import check_signal
 from ..errors import FileFormatError, ParameterError
-from ..models.vehicle import HalfCarParameters
+from ..models.vehicle import HalfCarParameters, half_car_model
+from .drive_log import CSV_COLUMNS, MAX_SAMPLE_RATE, MIN_ROWS, OPTIONAL_COLUMNS, UNIFORM_RTOL, DriveLog, read_drive_log
 from .drive_params import params_path_for, read_drive_params
-from .limits import MAX_ACCEL, FileLimits, check_file_size, parse_ascii_number, short_repr
+from .limits import FileLimits
 
-__all__ = ["CSV_COLUMNS", "MIN_ROWS", "MAX_SAMPLE_RATE", "UNIFORM_RTOL", "Drive", "read_drive_csv", "load_drive",
-           "load_drives", "write_drive_csv"]
+__all__ = ["CSV_COLUMNS", "MIN_ROWS", "MAX_SAMPLE_RATE", "UNIFORM_RTOL", "MIN_SAMPLE_RATE", "MODE_FACTOR", "Drive",
+           "read_drive_csv", "body_mode_hz", "load_drive", "load_drives", "common_time_grid", "write_drive_csv"]
 
-CSV_COLUMNS = ("time_s", "accel_left", "accel_right")
-MIN_ROWS = 64
-UNIFORM_RTOL = 1e-6
-MAX_SAMPLE_RATE = 10_000.0   # Hz: vehicle accelerometer logs run at 50-1000 Hz
+MIN_SAMPLE_RATE = 20.0   # Hz: never below, whatever the vehicle
+MODE_FACTOR = 10.0       # the sample rate must be at least 10x the highest body mode
 _HEADER_TEXT = ",".join(CSV_COLUMNS)
 
 
@@ -84,19 +89,27 @@ class Drive:
     ----------
     csv_path, params_path : Path
     time : (N,) ndarray
-        ``time_s`` as logged, s.
+        Uniform time stamps, s (``time_s`` as logged, or the resampling grid).
     accel : (N, 2) ndarray
         Left and right body-tip accelerations, m/s^2.
     sample_rate : float
-        ``1 / median time step``, rounded to 9 significant digits, Hz.
+        Hz.
     speed : float
-        m/s.
+        The constant ``speed_mps`` of the parameters file, or the mean speed of the log, m/s.
     start_m : float
         Road distance of the first sample, m.
     sensor_noise_std : float
         m/s^2.
     params : HalfCarParameters
         The vehicle's estimated parameters.
+    positions : (N,) ndarray
+        Road distance of every sample, m (module docstring).
+    speed_source : str
+        ``"parameters"``, ``"speed_mps column"`` or ``"distance_m column"``.
+    resampled : bool
+        True if jittery time stamps were resampled (:mod:`roadcollab.io.drive_log`).
+    max_jitter : float
+        Largest relative deviation of a logged time step from the median step.
     """
 
     csv_path: Path
@@ -108,79 +121,40 @@ class Drive:
     start_m: float
     sensor_noise_std: float
     params: HalfCarParameters
+    positions: np.ndarray
+    speed_source: str = "parameters"
+    resampled: bool = False
+    max_jitter: float = 0.0
 
     @property
     def n_samples(self) -> int:
         """Number of samples N."""
         return int(self.accel.shape[0])
 
+    @property
+    def constant_speed(self) -> bool:
+        """True if the speed is the constant ``speed_mps`` of the parameters file."""
+        return self.speed_source == "parameters"
+
+    def speeds(self) -> np.ndarray:
+        """(N,) ndarray: speed at every sample, m/s (``gradient(positions) * sample_rate``)."""
+        return np.gradient(self.positions) * self.sample_rate
+
     def describe(self) -> dict:
         """JSON-ready description (no signals)."""
+        v = self.speeds()
         return {"csv": str(self.csv_path), "params_file": str(self.params_path), "n_samples": self.n_samples,
-                "sample_rate_hz": self.sample_rate, "speed_mps": self.speed, "start_m": self.start_m,
+                "sample_rate_hz": self.sample_rate, "speed_mps": self.speed, "speed_source": self.speed_source,
+                "speed_min_mps": float(v.min()), "speed_max_mps": float(v.max()), "start_m": self.start_m,
+                "end_m": float(self.positions[-1]), "resampled": self.resampled, "max_jitter": self.max_jitter,
                 "sensor_noise_std": self.sensor_noise_std, "vehicle": self.params.as_dict()}
-
-
-def _parse_number(path: Path, lineno: int, col: int, text: str) -> float:
-    name = CSV_COLUMNS[col]
-    s = text.strip()
-    if not s:
-        raise FileFormatError(f"{path} line {lineno}: column {col + 1} ({name}): expected a number, got an empty "
-                              "field")
-    v = parse_ascii_number(s)
-    if v is None:
-        raise FileFormatError(f"{path} line {lineno}: column {col + 1} ({name}): expected {_expected(s)}, got "
-                              f"{short_repr(s)}")
-    if col > 0 and abs(v) > MAX_ACCEL:
-        raise FileFormatError(f"{path} line {lineno}: column {col + 1} ({name}): expected an acceleration within "
-                              f"+-{MAX_ACCEL:g} m/s^2 (beyond it a sample is a logger glitch), got {s}")
-    return v
-
-
-def _expected(s: str) -> str:
-    """What a field that :func:`parse_ascii_number` refused should have been (NaN/overflow vs. non-ASCII)."""
-    try:
-        v = float(s)
-    except (ValueError, OverflowError):
-        return "a number"
-    if not s.isascii() or "_" in s:
-        return "a number written with ASCII digits 0-9 (no other scripts, no '_')"
-    return "a finite number" if not math.isfinite(v) else "a plain decimal number"
-
-
-def _looks_numeric(fields_: list[str]) -> bool:
-    return all(parse_ascii_number(f.strip()) is not None for f in fields_)
-
-
-def _read_rows(path: Path, limits: FileLimits) -> tuple[list[int], list[str], tuple[int, str] | None]:
-    """The header (line number, text) and the 1-based line numbers and texts of the data rows.
-
-    Streams the file; stops with a FileFormatError at the first row past ``limits.max_rows``.
-    """
-    check_file_size(path, "drive CSV", limits.max_bytes)
-    linenos, rows, header = [], [], None
-    try:
-        with path.open(encoding="utf-8-sig", newline=None) as fh:
-            for lineno, ln in enumerate(fh, start=1):
-                if not ln.strip():
-                    continue
-                if header is None:
-                    header = (lineno, ln.rstrip("\n"))
-                    continue
-                if len(rows) >= limits.max_rows:
-                    raise FileFormatError(f"{path} line {lineno}: more than {limits.max_rows} data rows; raise the "
-                                          "limit with --max-rows")
-                linenos.append(lineno)
-                rows.append(ln)
-    except UnicodeDecodeError as err:
-        raise FileFormatError(f"{path}: expected a UTF-8 text file, got undecodable bytes ({err.reason})") from None
-    except OSError as err:
-        raise FileFormatError(f"{path}: cannot read drive CSV: {err.strerror or err}") from None
-    return linenos, rows, header
 
 
 def read_drive_csv(path, *, limits: FileLimits | None = None) -> tuple[np.ndarray, np.ndarray, float]:
     """Read and validate a drive's acceleration log (format in the module docstring).
+
+    Jittery time stamps are resampled (:func:`roadcollab.io.drive_log.read_drive_log`); a
+    ``speed_mps`` or ``distance_m`` column is read but not returned here.
 
     Parameters
     ----------
@@ -191,73 +165,55 @@ def read_drive_csv(path, *, limits: FileLimits | None = None) -> tuple[np.ndarra
     Returns
     -------
     time : (N,) ndarray
-        s.
+        Uniform time stamps, s.
     accel : (N, 2) ndarray
         m/s^2, columns ``[left, right]``.
     sample_rate : float
-        ``1 / median(diff(time))`` rounded to 9 significant digits, Hz.
+        Hz.
 
     Raises
     ------
     FileFormatError
         ``"<path> line N: ..."`` for bad content, ``"<path>: ..."`` otherwise.
     """
-    path = Path(path)
-    limits = FileLimits() if limits is None else limits
-    linenos, rows, header = _read_rows(path, limits)
-    if header is None:
-        raise FileFormatError(f"{path} line 1: expected the header '{_HEADER_TEXT}', got an empty file")
-    _check_header(path, *header)
-    data = np.empty((len(rows), 3))
-    for r, (lineno, ln) in enumerate(zip(linenos, rows)):
-        parts = ln.split(",")
-        if len(parts) != 3:
-            raise FileFormatError(f"{path} line {lineno}: expected 3 numbers '{', '.join(CSV_COLUMNS)}', "
-                                  f"got {len(parts)}")
-        for c, text in enumerate(parts):
-            data[r, c] = _parse_number(path, lineno, c, text)
-    if len(rows) < MIN_ROWS:
-        raise FileFormatError(f"{path}: expected at least {MIN_ROWS} data rows after the header, got {len(rows)}")
-    t = data[:, 0]
-    step = _uniform_step(path, linenos, t)
-    sample_rate = float(f"{1.0 / step:.9g}")
-    if sample_rate > MAX_SAMPLE_RATE:
-        raise FileFormatError(f"{path}: expected a sample rate of at most {MAX_SAMPLE_RATE:g} Hz (a time step of at "
-                              f"least {1 / MAX_SAMPLE_RATE:g} s), got {sample_rate:.6g} Hz (step {step:.3g} s)")
-    return t.copy(), data[:, 1:].copy(), sample_rate
+    log = read_drive_log(path, limits=limits)
+    return log.time, log.accel, log.sample_rate
 
 
-def _check_header(path: Path, head_no: int, head: str) -> None:
-    """Raise a FileFormatError saying how the header line ``head`` differs from :data:`CSV_COLUMNS`."""
-    names = [f.strip() for f in head.split(",")]
-    if names == list(CSV_COLUMNS):
-        return
-    if len(names) == 3 and _looks_numeric(names):
-        detail = "a row of numbers (the header line is required)"
-    elif len(names) != 3:
-        detail = f"{len(names)} column name(s) {short_repr(head.strip())}"
-    else:
-        bad = next(i for i, (a, b) in enumerate(zip(names, CSV_COLUMNS)) if a != b)
-        detail = f"{short_repr(head.strip())} (column {bad + 1} is {short_repr(names[bad], 30)}, expected {CSV_COLUMNS[bad]!r})"
-    raise FileFormatError(f"{path} line {head_no}: expected the header '{_HEADER_TEXT}', got {detail}")
+def body_mode_hz(params: HalfCarParameters) -> float:
+    """Highest natural frequency of the half-car's body modes (heave, roll), Hz.
+
+    Parameters
+    ----------
+    params : HalfCarParameters
+
+    Returns
+    -------
+    float
+        ``max |lambda| / (2 pi)`` over the poles of :func:`~roadcollab.models.vehicle.half_car_model`.
+    """
+    return float(np.max(np.abs(half_car_model(params).poles())) / (2 * np.pi))
 
 
-def _uniform_step(path: Path, linenos: list[int], t: np.ndarray) -> float:
-    """The median time step (s) of ``t``; a FileFormatError naming the line if ``t`` is not increasing and uniform."""
-    dt = np.diff(t)
-    bad = np.flatnonzero(dt <= 0)
-    if bad.size:
-        k = int(bad[0])
-        raise FileFormatError(f"{path} line {linenos[k + 1]}: expected time_s to increase, got {float(t[k + 1])!r} "
-                             f"after {float(t[k])!r} on line {linenos[k]}")
-    step = float(np.median(dt))
-    bad = np.flatnonzero(np.abs(dt - step) > UNIFORM_RTOL * step)
-    if bad.size:
-        k = int(bad[0])
-        raise FileFormatError(f"{path} line {linenos[k + 1]}: expected uniform sampling (every time step within "
-                             f"{UNIFORM_RTOL:g} relative of the median step {step:.9g} s), got a step of "
-                             f"{dt[k]:.9g} s from time_s {float(t[k])!r} on line {linenos[k]}; resample the log")
-    return step
+def _positions(log: DriveLog, speed: float | None, start: float) -> np.ndarray:
+    """Road distance of every sample (module docstring), m."""
+    if log.column == "distance_m":
+        return start + (log.values - log.values[0])
+    if log.column == "speed_mps":
+        v = log.values
+        return start + np.concatenate([[0.0], np.cumsum(0.5 * (v[1:] + v[:-1]))]) / log.sample_rate
+    return start + speed * np.arange(log.time.shape[0]) / log.sample_rate
+
+
+def _check_rate(log: DriveLog, csv_path: Path, params_path: Path, params: HalfCarParameters) -> None:
+    """Refuse a sample rate below ``max(MIN_SAMPLE_RATE, MODE_FACTOR x body mode)`` with the reason."""
+    mode = body_mode_hz(params)
+    need = max(MIN_SAMPLE_RATE, MODE_FACTOR * mode)
+    if log.sample_rate < need:
+        raise FileFormatError(f"{csv_path}: expected a sample rate of at least {need:.4g} Hz (the larger of "
+                              f"{MIN_SAMPLE_RATE:g} Hz and {MODE_FACTOR:g}x the highest body mode, {mode:.3g} Hz, "
+                              f"of the vehicle in {params_path.name}), got {log.sample_rate:.6g} Hz: the log cannot "
+                              "resolve the suspension's response")
 
 
 def load_drive(csv_path, params_path=None, *, limits: FileLimits | None = None) -> Drive:
@@ -274,23 +230,33 @@ def load_drive(csv_path, params_path=None, *, limits: FileLimits | None = None) 
     Returns
     -------
     Drive
+
+    Raises
+    ------
+    FileFormatError
+        A bad CSV or parameters file, ``speed_mps`` both in the parameters and as a column (or in
+        neither), or a sample rate too low for the vehicle.
     """
     csv_path = Path(csv_path)
     if csv_path.suffix.lower() in (".toml", ".json"):
         raise FileFormatError(f"{csv_path}: expected the drive's acceleration CSV here (its parameters file is "
                              f"found beside it), got a parameters file")
-    t, accel, fs = read_drive_csv(csv_path, limits=limits)
+    log = read_drive_log(csv_path, limits=limits)
     params_path = params_path_for(csv_path) if params_path is None else Path(params_path)
-    p = read_drive_params(params_path)
-    return Drive(csv_path=csv_path, params_path=params_path, time=t, accel=accel, sample_rate=fs, speed=p["speed"],
-                 start_m=p["start_m"], sensor_noise_std=p["sensor_noise_std"], params=p["params"])
+    p = read_drive_params(params_path, speed_column=log.column)
+    _check_rate(log, csv_path, params_path, p["params"])
+    positions = _positions(log, p["speed"], p["start_m"])
+    duration = (log.time.shape[0] - 1) / log.sample_rate
+    speed = p["speed"] if log.column is None else float((positions[-1] - positions[0]) / duration)
+    source = "parameters" if log.column is None else f"{log.column} column"
+    return Drive(csv_path=csv_path, params_path=params_path, time=log.time, accel=log.accel,
+                 sample_rate=log.sample_rate, speed=speed, start_m=p["start_m"],
+                 sensor_noise_std=p["sensor_noise_std"], params=p["params"], positions=positions,
+                 speed_source=source, resampled=log.resampled, max_jitter=log.max_jitter)
 
 
 def load_drives(paths, *, limits: FileLimits | None = None) -> list[Drive]:
-    """Read every drive and check that they share one segment grid.
-
-    Sample rates must agree to 1e-6 relative, ``speed_mps`` and ``start_m`` to 1e-9 relative;
-    the error names the drive that differs from the first.
+    """Read every drive (they may differ in speed, sample rate, start and length).
 
     Parameters
     ----------
@@ -308,26 +274,30 @@ def load_drives(paths, *, limits: FileLimits | None = None) -> list[Drive]:
     paths = list(paths)
     if not paths:
         raise ParameterError("expected at least one drive (--drive FILE), got none")
-    drives = [load_drive(p, limits=limits) for p in paths]
-    d0 = drives[0]
-    for d in drives[1:]:
-        if abs(d.sample_rate - d0.sample_rate) > UNIFORM_RTOL * d0.sample_rate:
-            raise FileFormatError(f"{d.csv_path}: expected the sample rate of {d0.csv_path} ({d0.sample_rate:.9g} Hz), "
-                                 f"got {d.sample_rate:.9g} Hz; all drives must share one sample rate (resample the "
-                                 "log)")
-        if abs(d.speed - d0.speed) > 1e-9 * d0.speed:
-            raise FileFormatError(f"{d.params_path}: expected speed_mps = {d0.speed:g} as in {d0.params_path}, got "
-                                 f"{d.speed:g}; all drives must share one speed (one segment grid)")
-        if abs(d.start_m - d0.start_m) > 1e-9 * max(1.0, abs(d0.start_m)):
-            raise FileFormatError(f"{d.params_path}: expected start_m = {d0.start_m:g} as in {d0.params_path}, got "
-                                 f"{d.start_m:g}; trim the logs so that every drive starts at the same road "
-                                 "position")
-    return drives
+    return [load_drive(p, limits=limits) for p in paths]
 
+
+def common_time_grid(drives: list[Drive]) -> bool:
+    """True if the drives share one time grid: constant speeds (parameters files), sample rates to
+    1e-6 relative, speeds to 1e-9 relative and ``start_m`` to 1e-9 relative (sample ``k`` of every
+    drive is then the same spot of the road).
+
+    Parameters
+    ----------
+    drives : list of Drive
+
+    Returns
+    -------
+    bool
+    """
+    d0 = drives[0]
+    return all(d.constant_speed and abs(d.sample_rate - d0.sample_rate) <= UNIFORM_RTOL * d0.sample_rate
+               and abs(d.speed - d0.speed) <= 1e-9 * d0.speed
+               and abs(d.start_m - d0.start_m) <= 1e-9 * max(1.0, abs(d0.start_m)) for d in drives)
 
 # --- writing -------------------------------------------------------------------------------------
 
-def write_drive_csv(path, time, accel) -> Path:
+def write_drive_csv(path, time, accel, *, column: str | None = None, values=None) -> Path:
     """Write a drive CSV in the documented format, full precision (``repr`` floats).
 
     Parameters
@@ -335,9 +305,13 @@ def write_drive_csv(path, time, accel) -> Path:
     path : str or Path
         Output file (overwritten).
     time : (N,) array_like
-        ``time_s`` column, s (uniform sampling is not checked here; :func:`read_drive_csv` checks it).
+        ``time_s`` column, s (the clock is not checked here; :func:`read_drive_csv` checks it).
     accel : (N, 2) array_like
         Left and right body-tip vertical accelerations, m/s^2, finite.
+    column : {"speed_mps", "distance_m"} or None
+        Name of an optional fourth column.
+    values : (N,) array_like, optional
+        Its values (m/s or m); required with ``column``.
 
     Returns
     -------
@@ -347,13 +321,22 @@ def write_drive_csv(path, time, accel) -> Path:
     Raises
     ------
     ParameterError
-        If ``accel`` is not a finite (N, 2) array or ``time`` does not have shape (N,).
+        If ``accel`` is not a finite (N, 2) array, ``time`` or ``values`` does not have shape (N,), or
+        ``column`` is not one of the optional columns.
     """
     time = np.asarray(time, dtype=float)
     accel = check_signal("accel", accel, 2)
     if time.shape != (accel.shape[0],):
         raise ParameterError(f"time must have shape ({accel.shape[0]},), got {time.shape}")
-    lines = [_HEADER_TEXT] + [f"{float(t)!r},{float(a)!r},{float(b)!r}" for t, (a, b) in zip(time, accel)]
+    cols = [time, accel[:, 0], accel[:, 1]]
+    header = _HEADER_TEXT
+    if column is not None:
+        if column not in OPTIONAL_COLUMNS or values is None or np.shape(values) != time.shape:
+            raise ParameterError(f"column must be one of {OPTIONAL_COLUMNS} with values of shape {time.shape}, got "
+                                 f"{column!r} and {None if values is None else np.shape(values)}")
+        cols.append(np.asarray(values, dtype=float))
+        header += f",{column}"
+    lines = [header] + [",".join(repr(float(v)) for v in row) for row in zip(*cols)]
     path = Path(path)
     path.write_text("\n".join(lines) + "\n")
     return path

@@ -12,12 +12,14 @@ import numpy as np
 from ..experiments.drive_estimation import ESTIMATORS, AnomalyRow, DriveEstimates
 from ..experiments.config import ExperimentConfig
 from . import plotting_drives
+from ..models.iri import IRISegments
+from .fleet_report import iri_lines, write_iri_csv
 from .records import markdown_table, row_columns, write_config, write_csv, write_rows
 
 __all__ = ["ESTIMATE_FILES", "write_estimates"]
 
-ESTIMATE_FILES = ["road_estimates.csv", "final_estimate.csv", "anomalies.csv", "road_velocity.png", "elevation.png",
-                  "config.json", "report.md"]
+ESTIMATE_FILES = ["road_estimates.csv", "final_estimate.csv", "anomalies.csv", "iri.csv", "road_velocity.png",
+                  "elevation.png", "config.json", "report.md"]
 _SIDES = ("left", "right")
 
 
@@ -242,7 +244,8 @@ def _anomalies_section(est: DriveEstimates, anomalies: list[AnomalyRow] | None, 
 
 def write_estimates(est: DriveEstimates, out, *, command: str, anomalies: list[AnomalyRow] | None,
                     anomaly_note: str | None = None, elapsed: float | None = None,
-                    detector_config: dict | None = None) -> dict:
+                    detector_config: dict | None = None, iri: IRISegments | None = None,
+                    iri_note: str | None = None) -> dict:
     """Write every output of ``roadcollab estimate`` to the folder ``out``; returns the summary.
 
     Files: ``road_estimates.csv`` (wide: ``position_m, time_s``, then
@@ -270,6 +273,10 @@ def write_estimates(est: DriveEstimates, out, *, command: str, anomalies: list[A
     detector_config : dict, optional
         Settings of the anomaly detector, recorded in ``config.json`` as ``anomaly_detector``
         (null if None).
+    iri : IRISegments, optional
+        IRI per segment of the last drive's fused elevation (``iri.csv``; header only if None).
+    iri_note : str, optional
+        Why the IRI was not computed (a note in the report and ``config.json``).
 
     Returns
     -------
@@ -283,19 +290,23 @@ def write_estimates(est: DriveEstimates, out, *, command: str, anomalies: list[A
     out.mkdir(parents=True, exist_ok=True)
     anomaly_rows = anomalies or []
     _write_tables(est, out, anomaly_rows)
+    write_iri_csv(out / "iri.csv", iri)
     zoom = _write_figures(est, out)
     counts = _anomaly_counts(est, anomaly_rows)
-    notes = _notes(est, anomaly_note)
+    notes = _notes(est, anomaly_note) + ([iri_note] if iri_note else [])
     _write_config_json(est, out / "config.json", command=command, notes=notes, elapsed=elapsed,
                        detector_config=detector_config)
     lines = (_report_header(est, command=command, notes=notes, elapsed=elapsed) + _inputs_section(est)
-             + _method_section(est) + _figures_section(est, zoom) + _anomalies_section(est, anomalies, counts))
+             + _method_section(est) + _figures_section(est, zoom) + _anomalies_section(est, anomalies, counts)
+             + iri_lines(iri, iri_note, f"The elevation holds wavelengths below {est.speed / est.band_low_hz:g} m "
+                                        "only; the Golden Car also responds to longer ones, so this IRI is a lower "
+                                        "estimate."))
     (out / "report.md").write_text("\n".join(lines))
     return {
         "out_dir": str(out), "n_drives": len(est.drives), "sample_rate_hz": est.sample_rate, "speed_mps": est.speed,
         "start_m": est.start_m, "n_samples": est.n_samples, "samples_per_drive": [d.n_samples for d in est.drives],
         "truncated": est.truncated, "duration_s": _duration_s(est), "length_m": _length_m(est),
         "n_anomalies": {name: sum(counts[name]) for name in ESTIMATORS} if anomalies is not None else None,
-        "notes": notes,
+        "notes": notes, "grid": "time",
         "files": list(ESTIMATE_FILES),
     }
