@@ -249,6 +249,37 @@ class ReceiverGuard:
             out[self.bands[i]] = z[self.bands[i]]
         return out, GuardReport(tuple(accepted), tuple(refused), tuple(reasons), tuple(stats), False)
 
+    def substitute(self, message: ExchangeMessage | InversionMessage, Y: np.ndarray, fallback: np.ndarray
+                   ) -> tuple[np.ndarray, GuardReport]:
+        """The message's ``z`` where plausible, ``fallback`` (e.g. the receiver's own inversion) elsewhere.
+
+        Parameters
+        ----------
+        message : ExchangeMessage | InversionMessage
+            The incoming message (an exchange, a relayed average or an aggregate).
+        Y : (K, 2) complex ndarray
+            The receiver's own record spectrum on the grid.
+        fallback : (K, 2) complex ndarray
+            Spectrum used in refused bands (and everywhere if the whole message is refused).
+
+        Returns
+        -------
+        Z : (K, 2) complex ndarray
+            Finite spectrum on the grid; zero outside the active bins.
+        report : GuardReport
+        """
+        z_ok, report = self.check(message, Y)
+        g = self.estimator.grid
+        act_idx = np.flatnonzero(g.active)
+        Z = np.zeros_like(fallback)
+        if report.whole_message_refused:
+            Z[act_idx] = fallback[act_idx]
+            return Z, report
+        Z[act_idx] = z_ok
+        for b in report.refused_bands:
+            Z[act_idx[self.bands[b]]] = fallback[act_idx[self.bands[b]]]
+        return Z, report
+
     def feedforward(self, message: ExchangeMessage | InversionMessage, Y: np.ndarray
                     ) -> tuple[np.ndarray, GuardReport]:
         """``w^f_j`` from the guarded ``z`` (:meth:`check`): 0 where refused.

@@ -249,19 +249,10 @@ class Relay:
         average there is the receiver's own), a wholly refused average restarts the chain."""
         est = self.estimators[j]
         Y = est.spectrum(y) if Y is None else Y
-        z_ok, report = guard.check(incoming, Y)
-        if report.whole_message_refused:
-            incoming = None
-        elif report.refused_bands:
-            g = self.grid
-            posterior = self.exchange.mechanism == "fused_posterior"
-            own = est.invert(Y, posterior=posterior)
-            Z = np.zeros_like(own)
-            Z[g.active] = z_ok
-            for b in report.refused_bands:
-                idx = np.flatnonzero(g.active)[guard.bands[b]]
-                Z[idx] = own[idx]
-            incoming = replace(incoming, z=g.irfft(Z))
+        own = est.invert(Y, posterior=self.exchange.mechanism == "fused_posterior")
+        Z, report = guard.substitute(incoming, Y, own)
+        incoming = None if report.whole_message_refused else (
+            replace(incoming, z=self.grid.irfft(Z)) if report.refused_bands else incoming)
         return replace(self.send(j, est.estimate(y, None, Y=Y), incoming), guard=report)
 
     def run(self, measurements, *, spectra=None) -> list[RelayStep]:

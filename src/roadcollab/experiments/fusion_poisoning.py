@@ -11,6 +11,13 @@ Two fusion nodes are compared on the same messages:
   messages it accepts, anomalies reported only when corroborated by
   :data:`~roadcollab.detection.corroboration.DEFAULT_MIN_VOTES` vehicles' own detections.
 
+- ``secagg_guarded``: secure aggregation (:mod:`roadcollab.privacy.secure_aggregation`): nobody sees
+  an individual input, so no robust combination is possible; what is kept is the clipping of every
+  input at the source (``SecAggSpec.clip``) and each receiver's guard on the aggregate
+  (:meth:`~roadcollab.collaboration.guard.ReceiverGuard.substitute`: implausible bands are replaced by
+  its own inversion), measured at vehicle 1; anomalies as for ``robust`` (vehicles may still report
+  their own detections for corroboration).
+
 Strategies (the attacker knows its own honest ``z``, the true anomalies and the fleet size ``n``):
 ``scale_10``, ``scale_1e3`` (``z`` times a factor), ``negate``, ``tone`` (a 2 Hz sine of 10 x the
 rms of ``z``), ``noise_3x`` (band-limited noise of 3 x the rms), ``extreme`` (1e300 on 100 samples),
@@ -26,7 +33,9 @@ from dataclasses import asdict, dataclass, fields
 import numpy as np
 
 from .._validation import check_int
+from ..collaboration.guard import ReceiverGuard
 from ..collaboration.robust_fusion import RobustFusion, fuse_inversions
+from ..privacy.secagg_messages import SecAggSpec
 from ..detection.corroboration import DEFAULT_MIN_VOTES, corroborate
 from ..detection.detector import Detection, detect_anomalies
 from ..detection.scoring import lost_anomalies, new_false_detections
@@ -41,7 +50,7 @@ __all__ = ["FUSION_STRATEGIES", "FUSION_TARGETS", "PoisoningSummary", "fusion_po
 
 FUSION_STRATEGIES = ("scale_10", "scale_1e3", "negate", "tone", "noise_3x", "extreme", "count", "fake_pothole",
                      "erase_potholes")
-FUSION_TARGETS = ("mean", "robust")
+FUSION_TARGETS = ("mean", "robust", "secagg_guarded")
 _FAKE_DEPTH = 0.05       # m
 _FAKE_LENGTH = 0.5       # m
 _TOLERANCE = 1.0         # m, as the anomaly study
@@ -111,6 +120,8 @@ class _Run:
     z: np.ndarray              # (V, nfft, 2) honest inversions
     truth: np.ndarray          # (N, 2) band-limited true road velocity
     own: list                  # each vehicle's own detections (honest)
+    Ys: list                   # each vehicle's record spectrum
+    guard: ReceiverGuard       # vehicle 1's guard (the receiver of the aggregate)
 
     @property
     def grid(self):
@@ -143,7 +154,8 @@ def _honest_run(pipe: FleetPipeline, ss, road_spec) -> _Run:
     road, _, Ys = record_run(pipe, run_stream(ss, "road"), run_stream(ss, "noise"), cfg.sensor_noise_std, road_spec)
     z = np.array([g.irfft(e.invert(Y, posterior=True)) for e, Y in zip(pipe.estimators, Ys)])
     truth = g.band_limited(g.rfft(road.velocity), g.n_samples)
-    run = _Run(pipe, road, z, truth, [])
+    guard = ReceiverGuard(pipe.estimators[0], pipe.road_moment, cfg.sensor_noise_std)
+    run = _Run(pipe, road, z, truth, [], Ys, guard)
     run.own.extend(run.detect(zi) for zi in z)
     return run
 
@@ -201,6 +213,17 @@ def _robust_node(run: _Run, msgs: list[InversionMessage]) -> tuple[np.ndarray, i
     return out.z, len(out.refused)
 
 
+def _secagg_node(run: _Run, msgs: list[InversionMessage]) -> tuple[np.ndarray, int]:
+    """Secure aggregation as vehicle 1 uses it: the average of the clipped inputs (what the protocol
+    reveals; ``count`` does not exist there), checked by vehicle 1's guard against its own posterior
+    inversion, which replaces the refused bands."""
+    clip = SecAggSpec().clip
+    agg = np.mean([np.clip(m.z, -clip, clip) for m in msgs], axis=0)
+    est = run.pipe.estimators[0]
+    Z, report = run.guard.substitute(run.message(agg, len(msgs)), run.Ys[0], est.invert(run.Ys[0], posterior=True))
+    return run.grid.irfft(Z), int(report.refused)
+
+
 def _reported(target: str, run: _Run, zf: np.ndarray, own: list) -> list[Detection]:
     dets = run.detect(zf)
     return dets if target == "mean" else corroborate(dets, own, min_votes=DEFAULT_MIN_VOTES, tolerance=_TOLERANCE)
@@ -235,7 +258,7 @@ def fusion_poisoning_rows(config: AnomalyStudyConfig, seed: int, *, n_runs: int 
     Returns
     -------
     list of PoisoningSummary
-        Targets ``fused_mean`` and ``fused_robust`` per strategy.
+        Targets ``fused_mean``, ``fused_robust`` and ``fused_secagg_guarded`` per strategy.
     """
     n_runs = check_int("n_runs", n_runs, low=1)
     exp = config.experiment
@@ -251,7 +274,7 @@ def fusion_poisoning_rows(config: AnomalyStudyConfig, seed: int, *, n_runs: int 
         run = _honest_run(pipe, run_seeds[r], road_spec)
         rng = np.random.default_rng(run_stream(run_seeds[r], "privacy"))
         honest = [run.message(z) for z in run.z]
-        for target, node in (("mean", _mean_node), ("robust", _robust_node)):
+        for target, node in (("mean", _mean_node), ("robust", _robust_node), ("secagg_guarded", _secagg_node)):
             zf_h, _ = node(run, honest)
             rep_h = _reported(target, run, zf_h, run.own)
             mse_h = _score(run, zf_h)
