@@ -5,13 +5,9 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Sequence
 
-import matplotlib
+import numpy as np
 
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-
-from .plotting import save_figure  # noqa: E402
+from .plotting_base import plt, save_figure
 
 __all__ = ["plot_sweep"]
 
@@ -78,6 +74,8 @@ def plot_sweep(rows: Sequence, path) -> Path:
                            key=lambda r: r.gamma)
             handles = _draw_panel(ax, panel, rows[0].n_vehicles)
             if i == 0 and k == 0:
-                ax.legend(handles=handles, fontsize=7, loc="best")
+                ax.legend(handles=handles, fontsize=7, loc="best", framealpha=0.85)
             _label_panel(ax, s, u, bottom=i == len(noises) - 1, left=k == 0)
+    fig.suptitle(r"Road-velocity MSE vs observer parameter $\gamma$ (mean over runs; bars: $\pm$1 standard error)",
+                 fontsize=11)
     return save_figure(fig, path)

@@ -12,7 +12,7 @@ import numpy as np
 from . import plotting
 from ..experiments.reproduction import ESTIMATORS
 from ..experiments.reproduction_iri import iri_ratios
-from ..experiments.reproduction_rows import BoundRow, FleetRow, IriRow, MseRow, RunTraces, TraceRow
+from ..experiments.reproduction_rows import BoundRow, FleetRow, FusionRow, IriRow, MseRow, RunTraces, TraceRow
 from .records import markdown_table, output_dir, write_config, write_rows
 
 __all__ = ["headline_table", "reproduction_summary", "write_reproduction"]
@@ -219,9 +219,15 @@ def _results_lines(summary: dict, rows: list[MseRow], n_vehicles: int, trace_fig
         "",
         "## Fused, centralized and oracle estimates",
         "",
+        "Bars: 95 % confidence interval of the mean over runs (`fig_fusion.csv` holds means, standard deviations "
+        "and intervals).",
+        "",
         "![fusion](fig_fusion.png)",
         "",
         "## Figs. 5-7: actual road input vs estimates with and without privacy (run 1, a 3 s window)",
+        "",
+        "Below each track's signals, the error of each estimate (estimate - actual, RMS over the window in the "
+        "legend).",
         "",
     ]
     for j, name in enumerate(trace_figures):
@@ -272,10 +278,14 @@ def _measured_section(measured, out: Path) -> list[str]:
     mres, mel = measured
     mrows = mres.table()
     write_rows(out / "mse_measured.csv", mrows, MseRow)
+    frows = mres.fusion_rows()
+    write_rows(out / "fig_measured_mse.csv", frows, FusionRow)
     irows = mres.iri_rows()
     if irows:
         write_rows(out / "iri_measured.csv", irows, IriRow)
-    plotting.plot_fusion(mrows, out / "fig_measured_mse.png")
+    plotting.plot_fusion(frows, out / "fig_measured_mse.png", title=(
+        f"Measured profile: MSE per vehicle of the fleet estimates (mean over {mres.config.n_runs} runs; "
+        "bars: 95 % CI)"))
     ms = reproduction_summary(mrows, mres.bound_check())
     mc = mres.config
     return [
@@ -304,9 +314,9 @@ def _fleet_lines(fleet_rows: list[FleetRow]) -> list[str]:
 def write_reproduction(result, out, *, command: str, elapsed: float, measured=None) -> dict:
     """Write every output of ``roadcollab reproduce`` to the folder ``out``.
 
-    Files: ``mse.csv``, ``bound_check.csv``, ``fig4_mse.png``, ``fig_fusion.png``,
+    Files: ``mse.csv``, ``bound_check.csv``, ``fig4_mse.png``, ``fig_fusion.png`` with ``fig_fusion.csv``,
     ``fig5..7_vehicle{1..3}.png`` with their CSVs, ``fleet.csv``, ``config.json`` and ``report.md``;
-    with ``measured`` also ``mse_measured.csv``, ``fig_measured_mse.png`` and, when the measured run
+    with ``measured`` also ``mse_measured.csv``, ``fig_measured_mse.png`` with its CSV and, when the measured run
     compared IRIs, ``iri_measured.csv``.
 
     Parameters
@@ -333,7 +343,9 @@ def write_reproduction(result, out, *, command: str, elapsed: float, measured=No
     write_rows(out / "mse.csv", rows, MseRow)
     write_rows(out / "bound_check.csv", bound, BoundRow)
     plotting.plot_mse(rows, out / "fig4_mse.png")
-    plotting.plot_fusion(rows, out / "fig_fusion.png")
+    fusion_rows = result.fusion_rows()
+    write_rows(out / "fig_fusion.csv", fusion_rows, FusionRow)
+    plotting.plot_fusion(fusion_rows, out / "fig_fusion.png")
     trace_figures = _write_trace_figures(result.runs[0].traces, out)
     fleet_rows = result.fleet_rows()
     write_rows(out / "fleet.csv", fleet_rows, FleetRow)
