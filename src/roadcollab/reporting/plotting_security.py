@@ -5,6 +5,7 @@ With the other ``plotting*`` modules, one of the modules that import matplotlib.
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 from typing import Sequence
 
@@ -14,16 +15,23 @@ from .plotting_base import legend_outside, plt, save_figure
 
 __all__ = ["plot_attack_success", "plot_privacy_frontier"]
 
+_NUMBER = re.compile(r"(\d+(?:\.\d+)?)")
+
 
 def _field(row, name: str):
     """``row[name]`` of a dict row or ``row.name`` of a row object."""
     return row[name] if isinstance(row, dict) else getattr(row, name)
 
 
+def _natural_key(text: str) -> tuple:
+    """Sort key that orders numbers inside names by value (``dp(eps=2)`` before ``dp(eps=10)``)."""
+    return tuple((0, float(p), "") if i % 2 else (1, 0.0, p) for i, p in enumerate(_NUMBER.split(text)))
+
+
 def _grouped(rows: Sequence) -> tuple[list, np.ndarray, list]:
-    """Rows sorted by mechanism (attacks in their given order), their x positions with a gap between
-    mechanisms, and the groups ``(mechanism, first x, last x)``."""
-    rows = sorted(rows, key=lambda r: str(_field(r, "mechanism")))   # stable: attack order kept
+    """Rows sorted by mechanism (natural order; attacks in their given order), their x positions with a gap
+    between mechanisms, and the groups ``(mechanism, first x, last x)``."""
+    rows = sorted(rows, key=lambda r: _natural_key(str(_field(r, "mechanism"))))   # stable: attack order kept
     x, groups, pos = [], [], 0.0
     for i, r in enumerate(rows):
         mech = str(_field(r, "mechanism"))
@@ -92,7 +100,7 @@ def plot_attack_success(rows: Sequence, path) -> Path:
     for xi, v in zip(x, rate):
         a1.text(xi, v + 0.02, "0" if v == 0 else f"{v:.2f}", ha="center", va="bottom", fontsize=7)
     a1.set_ylabel("success rate\n(all poles within 1 %)")
-    a1.set_ylim(0, 1.18)
+    a1.set_ylim(0, 1.25)
     _error_panel(a2, x, err)
     a2.set_ylabel("median relative\npole error")
     a2.set_xticks(x)
@@ -101,8 +109,9 @@ def plot_attack_success(rows: Sequence, path) -> Path:
         ax.grid(True, axis="y", alpha=0.3)
         for (_, _, last), (_, first, _) in zip(groups[:-1], groups[1:]):
             ax.axvline(0.5 * (last + first), color="k", lw=0.8)
-    for mech, first, last in groups:
-        a1.text(0.5 * (first + last), 1.12, mech, ha="center", va="center", fontsize=9, fontweight="bold")
+    for mech, first, last in groups:  # a one-attack group is one bar wide: break long names before "("
+        name = mech.replace("(", "\n(", 1) if last == first and len(mech) > 8 else mech
+        a1.text(0.5 * (first + last), 1.15, name, ha="center", va="center", fontsize=8, fontweight="bold")
     legend_outside(a2)
     a1.set_title("Fig. 11: how often the attacks recover the poles of $S_j$, per mechanism", fontsize=10)
     return save_figure(fig, path)
