@@ -6,6 +6,8 @@ from pathlib import Path
 
 import pytest
 
+from roadcollab.experiments.reproduction_rows import IriRow
+from roadcollab.reporting.records import row_columns
 from roadcollab.wire import protocol
 from roadcollab.cli.main import main
 
@@ -18,8 +20,11 @@ def test_reproduce_writes_all_outputs(tmp_path):
                  "--out", str(out)]) == 0
     for name in ("mse.csv", "fig4_mse.png", "fig5_vehicle1.png", "fig6_vehicle2.png", "fig7_vehicle3.png",
                  "fig5_vehicle1.csv", "fig_fusion.png", "fleet.csv", "config.json", "report.md",
-                 "mse_measured.csv", "fig_measured_mse.png"):
+                 "mse_measured.csv", "fig_measured_mse.png", "iri_measured.csv", "fig_fusion.csv"):
         assert (out / name).stat().st_size > 0, name
+    iri_rows = list(csv.DictReader((out / "iri_measured.csv").open()))
+    assert list(iri_rows[0]) == row_columns(IriRow) and len(iri_rows) == 2 * 2 * 6  # runs x tracks x 50 m segments
+    assert "estimated against true IRI" in (out / "report.md").read_text()
     rows = list(csv.DictReader((out / "mse.csv").open()))
     assert [r["vehicle"] for r in rows] == ["1", "2", "3"]
     for col in ("vehicle", "mse_mean", "mse_std", "mse_no_privacy_mean", "observer_only_mse_mean",

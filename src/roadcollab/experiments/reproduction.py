@@ -26,14 +26,15 @@ from typing import Callable
 
 import numpy as np
 
-from .._validation import check_int
+from .._validation import check_int, check_positive
 from ..collaboration.relay import Exchange, Relay
 from ..errors import ParameterError
 from ..models.vehicle import Vehicle, sample_fleet
 from ..privacy.obfuscation import theorem1_errors
 from .config import ExperimentConfig
 from .pipeline import FleetPipeline, PipelineCache, fleet_and_run_seeds, record_run
-from .reproduction_rows import BoundRow, FleetRow, MseRow, RunTraces
+from .reproduction_iri import RunIri, iri_rows, run_iri
+from .reproduction_rows import BoundRow, FleetRow, FusionRow, IriRow, MseRow, RunTraces
 from .seeds import SeedPlan, as_seed_sequence, run_stream
 from .runner import map_runs
 
@@ -67,6 +68,8 @@ class RunResult:
         Mean square of the band-limited true road velocity, (m/s)^2.
     traces : RunTraces or None
         Time series for Figs. 5-7.
+    iri : RunIri or None
+        IRI per segment of the truth and of the last vehicle's estimates.
     """
 
     mse: dict
@@ -78,10 +81,21 @@ class RunResult:
     theorem1_wf_band: np.ndarray
     truth_power: float
     traces: RunTraces | None = None
+    iri: RunIri | None = None
 
 
+def _estimate_spectra(pipe: FleetPipeline, j: int, Ys: list, plain, priv, fused, fused_post) -> dict:
+    """Spectrum of every estimator in :data:`ESTIMATORS` at vehicle ``j`` (0-based) from the relays' steps."""
+    est, r = pipe.estimators[j], plain.result
+    return {"observer_only": r.W_obs, "own_inversion": est.invert(Ys[j]),
+            "own_posterior_inversion": est.invert(Ys[j], posterior=True), "algorithm1": r.W_hat,
+            "algorithm1_private": priv.result.W_hat, "fused": fused.estimate_spectrum,
+            "fused_posterior": fused_post.estimate_spectrum, "centralized": pipe.centralized.estimate(Ys[:j + 1]),
+            "oracle_bound": pipe.oracle_bound.estimate(Ys[:j + 1])}
 
-def simulate_run(pipe: FleetPipeline, rng, *, keep_traces: int = 0, privacy: bool = True) -> RunResult:
+
+def simulate_run(pipe: FleetPipeline, rng, *, keep_traces: int = 0, privacy: bool = True,
+                 iri_segment_length: float | None = None) -> RunResult:
     """One Monte Carlo run: road, measurements, and every estimator on the same records.
 
     Parameters
@@ -92,6 +106,9 @@ def simulate_run(pipe: FleetPipeline, rng, *, keep_traces: int = 0, privacy: boo
         Keep the time series of the first ``keep_traces`` vehicles (for Figs. 5-7).
     privacy : bool
         Also run the obfuscated chain (Algorithm 2).
+    iri_segment_length : float, optional
+        Also compare the IRI per segment of this length (m) of the true profile and of the last
+        vehicle's estimates (:func:`~roadcollab.experiments.reproduction_iri.run_iri`).
 
     Returns
     -------
@@ -120,20 +137,19 @@ def simulate_run(pipe: FleetPipeline, rng, *, keep_traces: int = 0, privacy: boo
     rel, rel_h, t1e, t1w, t1e_b, t1w_b = (np.zeros(V) for _ in range(6))
     for j, est in enumerate(ests):
         r = plain[j].result
-        out["observer_only"][j] = mse(r.W_obs)
-        out["own_inversion"][j] = mse(est.invert(Ys[j]))
-        out["own_posterior_inversion"][j] = mse(est.invert(Ys[j], posterior=True))
-        out["algorithm1"][j] = mse(r.W_hat)
-        out["algorithm1_private"][j] = mse(priv[j].result.W_hat)
-        out["fused"][j] = mse(fused[j].estimate_spectrum)
-        out["fused_posterior"][j] = mse(fused_post[j].estimate_spectrum)
-        out["centralized"][j] = mse(pipe.centralized.estimate(Ys[:j + 1]))
-        out["oracle_bound"][j] = mse(pipe.oracle_bound.estimate(Ys[:j + 1]))
+        spectra = _estimate_spectra(pipe, j, Ys, plain[j], priv[j], fused[j], fused_post[j])
+        for name, X in spectra.items():
+            out[name][j] = mse(X)
         scale = max(float(np.max(np.abs(r.estimate))), 1e-300)
         rel[j] = float(np.max(np.abs(priv[j].result.estimate - r.estimate))) / scale
         rel_h[j] = float(np.max(np.abs(hard[j].result.estimate - r.estimate))) / scale
         if privacy:
             t1e[j], t1w[j], t1e_b[j], t1w_b[j] = theorem1_errors(priv[j].clear, priv[j].message, *priv[j].psi, grid)
+    iri = None
+    if iri_segment_length is not None:  # the last vehicle: the fleet estimates use every record
+        iri = run_iri(road.positions[sl.start:sl.stop + 1], w[sl], truth,
+                      {name: grid.band_limited(X, n)[sl] for name, X in spectra.items()},
+                      sample_rate=cfg.sample_rate, vehicle=V, segment_length=iri_segment_length)
     traces = None
     if keep_traces:
         traces = RunTraces(time=road.time[sl], truth=truth, truth_raw=w[sl],
@@ -141,7 +157,7 @@ def simulate_run(pipe: FleetPipeline, rng, *, keep_traces: int = 0, privacy: boo
                            private=[grid.band_limited(s.result.W_hat, n)[sl] for s in priv[:keep_traces]])
     return RunResult(mse=out, max_rel_diff=rel, max_rel_diff_hardened=rel_h, theorem1_e=t1e, theorem1_wf=t1w,
                      theorem1_e_band=t1e_b, theorem1_wf_band=t1w_b,
-                     truth_power=float(np.mean(truth**2)), traces=traces)
+                     truth_power=float(np.mean(truth**2)), traces=traces, iri=iri)
 
 
 @dataclass(frozen=True, eq=False)
@@ -217,6 +233,32 @@ class ReproductionResult:
         """
         return [dataclasses.asdict(r) for r in self.table()]
 
+    def fusion_rows(self) -> list[FusionRow]:
+        """Rows of the fusion figure's CSV: MSE mean, std and 95 % CI per estimator and vehicle.
+
+        Returns
+        -------
+        list of FusionRow
+            Estimator-major (order of :data:`ESTIMATORS`), then vehicle.
+        """
+        R = len(self.runs)
+        rows = []
+        for name in ESTIMATORS:
+            m = self.mse(name)
+            for j in range(self.config.n_vehicles):
+                std = float(m[:, j].std(ddof=1)) if R > 1 else 0.0
+                rows.append(FusionRow(name, j + 1, float(m[:, j].mean()), std, 1.96 * std / np.sqrt(R), R))
+        return rows
+
+    def iri_rows(self) -> list[IriRow]:
+        """Rows of ``iri_measured.csv`` (empty unless run with ``iri_segment_length``).
+
+        Returns
+        -------
+        list of IriRow
+        """
+        return iri_rows([r.iri for r in self.runs])
+
     def fleet_rows(self) -> list[FleetRow]:
         """Rows of ``fleet.csv``: true and estimated parameters of every vehicle.
 
@@ -256,6 +298,7 @@ class _ReproductionTask:
     config: ExperimentConfig
     seed: int
     privacy: bool
+    iri_segment_length: float | None = None
 
     def __call__(self, indices, cache: PipelineCache) -> list[RunResult]:
         plan = SeedPlan(self.seed)
@@ -267,13 +310,14 @@ class _ReproductionTask:
                                                                       rng=np.random.default_rng(fleet_ss)))
             else:
                 pipe, sim_ss = cache.pipeline(self.config, self.seed), plan.run(i)
-            out.append(simulate_run(pipe, sim_ss, keep_traces=3 if i == 0 else 0, privacy=self.privacy))
+            out.append(simulate_run(pipe, sim_ss, keep_traces=3 if i == 0 else 0, privacy=self.privacy,
+                                    iri_segment_length=self.iri_segment_length))
         return out
 
 
 def run_reproduction(config: ExperimentConfig, seed: int, *, progress: Callable[[int], None] | None = None,
-                     privacy: bool = True, workers: int | None = None, scheduler: str | None = None
-                     ) -> ReproductionResult:
+                     privacy: bool = True, workers: int | None = None, scheduler: str | None = None,
+                     iri_segment_length: float | None = None) -> ReproductionResult:
     """Run the Monte Carlo reproduction, serially or on Dask.
 
     Parameters
@@ -290,6 +334,8 @@ def run_reproduction(config: ExperimentConfig, seed: int, *, progress: Callable[
         Local Dask cluster with this many worker processes.
     scheduler : str, optional
         Address of an existing Dask scheduler.
+    iri_segment_length : float, optional
+        Compare true and estimated IRI per segment of this length, m (:meth:`ReproductionResult.iri_rows`).
 
     Returns
     -------
@@ -309,6 +355,9 @@ def run_reproduction(config: ExperimentConfig, seed: int, *, progress: Callable[
         raise ParameterError(f"config must be an ExperimentConfig, got {type(config).__name__}")
     seed = check_int("seed", seed, low=0)
     fleet = fleet_and_run_seeds(config, seed)[0]
-    runs = map_runs(_ReproductionTask(config, seed, privacy), config.n_runs, workers=workers, scheduler=scheduler,
+    if iri_segment_length is not None:
+        iri_segment_length = check_positive("iri_segment_length", iri_segment_length)
+    runs = map_runs(_ReproductionTask(config, seed, privacy, iri_segment_length), config.n_runs, workers=workers,
+                    scheduler=scheduler,
                     progress=progress, shared=PipelineCache())
     return ReproductionResult(config=config, seed=seed, fleet=fleet, runs=runs)

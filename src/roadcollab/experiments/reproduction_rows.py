@@ -1,8 +1,9 @@
 """Row types of the reproduction's CSVs: the fields of each are its file's columns, in order.
 
 ``mse.csv`` / ``mse_measured.csv`` (:class:`MseRow`), ``bound_check.csv`` (:class:`BoundRow`),
-``fleet.csv`` (:class:`FleetRow`) and ``fig5..7_vehicle{1..3}.csv`` (:class:`TraceRow`, from a
-run's :class:`RunTraces`).
+``fleet.csv`` (:class:`FleetRow`), ``fig5..7_vehicle{1..3}.csv`` (:class:`TraceRow`, from a
+run's :class:`RunTraces`), ``fig_fusion.csv`` / ``fig_measured_mse.csv`` (:class:`FusionRow`) and
+``iri_measured.csv`` (:class:`IriRow`).
 """
 
 from __future__ import annotations
@@ -13,7 +14,7 @@ import numpy as np
 
 from ..models.vehicle import Vehicle
 
-__all__ = ["MseRow", "BoundRow", "FleetRow", "TraceRow", "RunTraces"]
+__all__ = ["MseRow", "BoundRow", "FleetRow", "TraceRow", "RunTraces", "FusionRow", "IriRow"]
 
 
 @dataclass(frozen=True)
@@ -93,6 +94,77 @@ class BoundRow:
     mean_excess: float
     stderr: float
     z: float
+
+
+@dataclass(frozen=True)
+class FusionRow:
+    """One (estimator, vehicle) of the fusion figure's CSV: MSE over runs with its spread.
+
+    Attributes
+    ----------
+    estimator : str
+        One of the reproduction's estimators.
+    vehicle : int
+        1-based.
+    mse_mean : float
+        Mean MSE over runs, (m/s)^2.
+    mse_std : float
+        Standard deviation over runs (0 for one run), (m/s)^2.
+    mse_ci95 : float
+        Half-width of the normal 95 % confidence interval of the mean, ``1.96 std / sqrt(runs)``,
+        (m/s)^2.
+    runs : int
+        Number of runs.
+    """
+
+    estimator: str
+    vehicle: int
+    mse_mean: float
+    mse_std: float
+    mse_ci95: float
+    runs: int
+
+
+@dataclass(frozen=True)
+class IriRow:
+    """One (run, track, segment) of ``iri_measured.csv``: true and estimated IRI, m/km.
+
+    Attributes
+    ----------
+    run : int
+        0-based run.
+    vehicle : int
+        1-based vehicle whose estimates are scored (fleet estimates use vehicles ``1..vehicle``).
+    track : str
+        ``"left"`` (the measured track) or ``"right"`` (measured plus a synthetic residual).
+    start_m, end_m : float
+        Segment bounds, road distance, m.
+    true_iri_raw : float
+        IRI of the true profile the vehicles drove over.
+    true_iri_band_limited : float
+        IRI of the true profile band-limited like the estimates (no wavelengths beyond
+        ``speed / band_low_hz``).
+    observer_only_iri, own_inversion_iri, own_posterior_inversion_iri, algorithm1_iri, algorithm1_private_iri, \
+fused_iri, fused_posterior_iri, centralized_iri, oracle_bound_iri : float
+        IRI of each estimator's elevation (its band-limited road-velocity estimate integrated).
+    """
+
+    run: int
+    vehicle: int
+    track: str
+    start_m: float
+    end_m: float
+    true_iri_raw: float
+    true_iri_band_limited: float
+    observer_only_iri: float
+    own_inversion_iri: float
+    own_posterior_inversion_iri: float
+    algorithm1_iri: float
+    algorithm1_private_iri: float
+    fused_iri: float
+    fused_posterior_iri: float
+    centralized_iri: float
+    oracle_bound_iri: float
 
 
 @dataclass(frozen=True)

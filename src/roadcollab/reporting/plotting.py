@@ -1,45 +1,23 @@
 """Figures of ``roadcollab reproduce``, ``attack`` and ``anomalies`` (Agg backend, files only).
 
-With :mod:`~roadcollab.reporting.plotting_sweep` and :mod:`~roadcollab.reporting.plotting_drives`, the only
-modules that import matplotlib.
+With the other ``plotting_*`` modules (:mod:`~roadcollab.reporting.plotting_base` holds the backend and
+:func:`save_figure`), the only modules that import matplotlib. Fig. 11 (:func:`plot_attack_success`) lives
+in :mod:`~roadcollab.reporting.plotting_security` and is re-exported here.
 """
 
 from __future__ import annotations
 
 from pathlib import Path
 
-import matplotlib
+import numpy as np
 
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
+from .plotting_base import legend_outside, plt, save_figure
+from .plotting_security import plot_attack_success
 
 __all__ = ["save_figure", "plot_mse", "plot_fusion", "plot_estimates", "plot_poles", "plot_attack_success",
            "plot_anomaly_map", "plot_f1_vs_depth", "plot_f1_vs_noise"]
 
 _TRACKS = ("left track", "right track")
-
-
-def save_figure(fig, path) -> Path:
-    """Lay out ``fig``, write it to ``path`` at 120 dpi and close it.
-
-    Parameters
-    ----------
-    fig : matplotlib.figure.Figure
-        The finished figure.
-    path : str or Path
-        Output image (format from the suffix).
-
-    Returns
-    -------
-    Path
-        ``path``.
-    """
-    path = Path(path)
-    fig.tight_layout()
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
-    return path
 
 
 def _mse_axes(ax, vehicles) -> None:
@@ -49,7 +27,6 @@ def _mse_axes(ax, vehicles) -> None:
     ax.set_ylabel("road-velocity MSE ((m/s)$^2$)")
     ax.set_xticks(vehicles)
     ax.grid(True, which="both", alpha=0.3)
-    ax.legend()
 
 
 def plot_mse(rows: list, path) -> Path:
@@ -68,7 +45,7 @@ def plot_mse(rows: list, path) -> Path:
     Path
     """
     v = np.array([r.vehicle for r in rows])
-    fig, ax = plt.subplots(figsize=(8, 4.8))
+    fig, ax = plt.subplots(figsize=(10, 4.8))
     ax.errorbar(v, [r.mse_mean for r in rows], yerr=[r.mse_std for r in rows], fmt="o-", capsize=4,
                 label="Algorithm 1 + 2 (collaborative, private)")
     ax.errorbar(v + 0.1, [r.observer_only_mse_mean for r in rows], yerr=[r.observer_only_mse_std for r in rows],
@@ -81,42 +58,71 @@ def plot_mse(rows: list, path) -> Path:
                               ("oracle_bound_mse_mean", "oracle bound (true models, 1..j)", "k:")):
         ax.plot(v, [getattr(r, key) for r in rows], style, label=label)
     _mse_axes(ax, v)
-    ax.legend(fontsize=7, loc="best")
-    ax.set_title("MSE per vehicle (mean over runs; bars: std)")
+    legend_outside(ax, fontsize=7)
+    ax.set_title("Fig. 4: MSE per vehicle of every estimator (mean over runs; bars: std)")
     return save_figure(fig, path)
 
 
-def plot_fusion(rows: list, path) -> Path:
-    """MSE vs vehicle for the fleet estimates: observer only, Algorithm 1, fused, centralized
-    and the oracle bound.
+#: The fusion figure's estimators: (estimator of :class:`FusionRow`, label, format).
+_FUSION_LINES = (("observer_only", "observer only (own, online)", "s--"),
+                 ("algorithm1_private", "Algorithm 1 + 2", "o-"),
+                 ("fused", "fused (average of z)", "^-"),
+                 ("fused_posterior", "fused (posterior inversions)", "<-"),
+                 ("centralized", "centralized linear MMSE", "v-."),
+                 ("oracle_bound", "oracle bound", "k:"))
+
+
+def plot_fusion(rows: list, path, *, title: str | None = None) -> Path:
+    """MSE vs vehicle for the fleet estimates, with 95 % confidence intervals of the mean over runs.
+
+    Lines: observer only, Algorithm 1 + 2, fused, fused posterior, centralized and the oracle
+    bound; each offset slightly along the vehicle axis so the bars do not overlap. On the log axis
+    a lower bar end at or below zero is drawn down to 1 % of the mean.
 
     Parameters
     ----------
-    rows : list of MseRow
-        ``mse.csv`` rows.
+    rows : list of FusionRow
+        :meth:`~roadcollab.experiments.reproduction.ReproductionResult.fusion_rows` (MSE in (m/s)^2).
     path : str or Path
         Output image.
+    title : str, optional
+        Figure title (default: names the runs and the bars).
 
     Returns
     -------
     Path
     """
-    v = np.array([r.vehicle for r in rows])
-    fig, ax = plt.subplots(figsize=(7, 4))
-    for key, label, style in (("observer_only_mse_mean", "observer only", "s--"),
-                              ("mse_mean", "Algorithm 1", "o-"),
-                              ("fused_mse_mean", "fused (average of z)", "^-"),
-                              ("fused_posterior_mse_mean", "fused (posterior inversions)", "<-"),
-                              ("centralized_mse_mean", "centralized linear MMSE", "v-."),
-                              ("oracle_bound_mse_mean", "oracle bound", "k:")):
-        ax.plot(v, [getattr(r, key) for r in rows], style, label=label)
-    _mse_axes(ax, v)
+    fig, ax = plt.subplots(figsize=(9.5, 4.2))
+    runs = max((r.runs for r in rows), default=0)
+    for i, (name, label, style) in enumerate(_FUSION_LINES):
+        sel = sorted((r for r in rows if r.estimator == name), key=lambda r: r.vehicle)
+        if not sel:
+            continue
+        v = np.array([r.vehicle for r in sel], dtype=float) + 0.06 * (i - (len(_FUSION_LINES) - 1) / 2)
+        mean = np.array([r.mse_mean for r in sel])
+        ci = np.array([r.mse_ci95 for r in sel])
+        ax.errorbar(v, mean, yerr=[np.minimum(ci, 0.99 * mean), ci], fmt=style, capsize=3, lw=1.2, ms=5,
+                    label=label)
+    _mse_axes(ax, sorted({r.vehicle for r in rows}))
+    legend_outside(ax)
+    ax.set_title(title or f"MSE per vehicle of the fleet estimates (mean over {runs} runs; bars: 95 % CI)",
+                 fontsize=10)
     return save_figure(fig, path)
+
+
+def _rms(x) -> float:
+    """Root mean square, NaN for no samples."""
+    x = np.asarray(x, dtype=float)
+    return float(np.sqrt(np.mean(x ** 2))) if x.size else float("nan")
 
 
 def plot_estimates(time, truth, plain, private, vehicle: int, path, *, window: tuple[float, float] | None = None
                    ) -> Path:
-    """Figs. 5-7: actual (band-limited) road input vs the estimates with and without privacy.
+    """Figs. 5-7: actual (band-limited) road input vs the estimates with and without privacy, and the error.
+
+    Per track two panels on one time axis: the signals, then the residuals ``estimate - truth``
+    of the estimate without and with privacy (RMS over the window in the legend; the two residuals
+    differ by Algorithm 2's numerical error only, so the dashed one lies on the solid one).
 
     Parameters
     ----------
@@ -140,15 +146,29 @@ def plot_estimates(time, truth, plain, private, vehicle: int, path, *, window: t
     """
     time = np.asarray(time)
     sel = slice(None) if window is None else (time >= window[0]) & (time <= window[1])
-    fig, axes = plt.subplots(2, 1, figsize=(8, 5), sharex=True)
-    for c, ax in enumerate(axes):
-        ax.plot(time[sel], truth[sel, c], "k-", lw=1.2, label="actual (band-limited)")
-        ax.plot(time[sel], plain[sel, c], "-", lw=1.0, label="estimate without privacy")
-        ax.plot(time[sel], private[sel, c], "--", lw=1.0, label="estimate with privacy")
+    t, truth, plain, private = time[sel], np.asarray(truth)[sel], np.asarray(plain)[sel], np.asarray(private)[sel]
+    fig, axes = plt.subplots(4, 1, figsize=(10, 7.5), sharex=True, gridspec_kw={"height_ratios": [2, 1, 2, 1]})
+    for c in range(2):
+        ax, res = axes[2 * c], axes[2 * c + 1]
+        ax.plot(t, truth[:, c], "k-", lw=1.2, label="actual (band-limited)")
+        ax.plot(t, plain[:, c], "-", color="tab:blue", lw=1.0, label="estimate without privacy")
+        ax.plot(t, private[:, c], "--", color="tab:orange", lw=1.0, label="estimate with privacy")
         ax.set_ylabel(f"{_TRACKS[c]}\nw (m/s)")
-        ax.grid(True, alpha=0.3)
-    axes[0].legend(loc="upper right", fontsize=8)
-    axes[0].set_title(f"Vehicle {vehicle}: road-velocity input and its estimates")
+        res.axhline(0.0, color="k", lw=0.6)
+        res.plot(t, plain[:, c] - truth[:, c], "-", color="tab:blue", lw=1.0,
+                 label=f"without privacy (RMS {_rms(plain[:, c] - truth[:, c]):.3g} m/s)")
+        res.plot(t, private[:, c] - truth[:, c], "--", color="tab:orange", lw=1.0,
+                 label=f"with privacy (RMS {_rms(private[:, c] - truth[:, c]):.3g} m/s)")
+        res.set_ylabel("error\n(m/s)")
+        lim = 1.1 * float(np.max(np.abs(np.r_[plain[:, c], private[:, c]] - np.r_[truth[:, c], truth[:, c]]),
+                                 initial=1e-12))
+        res.set_ylim(-lim, lim)
+        legend_outside(ax)
+        legend_outside(res, title="estimate - actual")
+        for a in (ax, res):
+            a.grid(True, alpha=0.3)
+    axes[0].set_title(f"Figs. 5-7, vehicle {vehicle}: road-velocity input, its estimates (Algorithm 1) and their "
+                      "errors", fontsize=10)
     axes[-1].set_xlabel("time (s)")
     return save_figure(fig, path)
 
@@ -180,45 +200,11 @@ def plot_poles(example: dict, path) -> Path:
     ax.set_xlabel("Re s (rad/s)")
     ax.set_ylabel("Im s (rad/s)")
     ax.grid(True, alpha=0.3)
-    ax.legend(fontsize=8)
+    ax.legend(fontsize=8, loc="best", framealpha=0.85)
     ax.set_title(f"Vehicle {example['vehicle']}: poles of $S_j$ and the attackers' estimates")
     lim = 2.5 * float(np.max(np.abs(t)))
     ax.set_xlim(-lim, 0.2 * lim)
     ax.set_ylim(-lim, lim)
-    return save_figure(fig, path)
-
-
-def plot_attack_success(rows: list[dict], path) -> Path:
-    """Success rate and median relative pole error per mechanism and attack.
-
-    Parameters
-    ----------
-    rows : list of dict
-        ``attack.csv`` rows (``mechanism``, ``attack``, ``success_rate``, ``median_rel_pole_error``).
-    path : str or Path
-        Output image (format from the suffix, 120 dpi).
-
-    Returns
-    -------
-    Path
-        ``path``.
-    """
-    labels = [f"{r['mechanism']}\n{r['attack']}" for r in rows]
-    x = np.arange(len(rows))
-    fig, (a1, a2) = plt.subplots(2, 1, figsize=(max(7, 0.8 * len(rows)), 6), sharex=True)
-    a1.bar(x, [r["success_rate"] for r in rows], color="tab:red")
-    a1.set_ylabel("success rate\n(all poles within 1 %)")
-    a1.set_ylim(0, 1.05)
-    a1.grid(True, axis="y", alpha=0.3)
-    err = [min(r["median_rel_pole_error"], 1e3) for r in rows]
-    a2.bar(x, err, color="tab:blue")
-    a2.set_yscale("log")
-    a2.axhline(0.1, color="k", ls="--", lw=1, label="0.1")
-    a2.set_ylabel("median relative\npole error")
-    a2.set_xticks(x)
-    a2.set_xticklabels(labels, rotation=60, ha="right", fontsize=8)
-    a2.legend()
-    a2.grid(True, axis="y", alpha=0.3)
     return save_figure(fig, path)
 
 
@@ -316,7 +302,7 @@ def plot_anomaly_map(map_example, path) -> Path:
 
 def _plot_f1_vs(rows: list, key: str, path, xlabel: str, *, scale: float = 1.0, logx: bool = False,
                 title: str = "") -> Path:
-    fig, ax = plt.subplots(figsize=(7, 4))
+    fig, ax = plt.subplots(figsize=(9.5, 4))
     names = list(dict.fromkeys(r.estimator for r in rows))
     for name in names:
         sel = sorted((r for r in rows if r.estimator == name), key=lambda r: getattr(r, key))
@@ -332,7 +318,7 @@ def _plot_f1_vs(rows: list, key: str, path, xlabel: str, *, scale: float = 1.0, 
     ax.set_xlabel(xlabel)
     ax.set_ylabel("F1 / recall")
     ax.grid(True, which="both", alpha=0.3)
-    ax.legend(fontsize=7)
+    legend_outside(ax, fontsize=7)
     ax.set_title(title, fontsize=9)
     return save_figure(fig, path)
 

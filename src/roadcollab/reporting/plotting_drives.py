@@ -4,11 +4,9 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import matplotlib
+import numpy as np
 
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
+from .plotting_base import legend_outside, plt, save_figure
 
 __all__ = ["plot_tracks"]
 
@@ -36,7 +34,7 @@ def plot_tracks(positions, series: dict, path, *, ylabel: str, title: str = "",
     ylabel : str
         y-axis label with its unit, e.g. ``"road velocity (m/s)"``.
     title : str
-        Title of the first column (none if empty).
+        Title of the first column (default: from ``ylabel``).
     zoom : (float, float), optional
         ``(start_m, end_m)``, m, both ends included.
 
@@ -62,15 +60,10 @@ def plot_tracks(positions, series: dict, path, *, ylabel: str, title: str = "",
             if col == 0 and zoom is not None:
                 ax.axvspan(zoom[0], zoom[1], color="k", alpha=0.08, lw=0)
         axes[c, 0].set_ylabel(f"{_TRACKS[c]}\n{ylabel}")
-    axes[0, 0].legend(loc="upper right", fontsize=8)
-    if title:
-        axes[0, 0].set_title(title, fontsize=10)
+    legend_outside(axes[0, -1])
+    axes[0, 0].set_title(title or f"{ylabel[:1].upper()}{ylabel[1:]} per track", fontsize=10)
     if zoom is not None:
         axes[0, 1].set_title(f"zoom {zoom[0]:.0f}-{zoom[1]:.0f} m", fontsize=10)
         axes[-1, 1].set_xlabel("position (m)")
     axes[-1, 0].set_xlabel("position along the road (m)")
-    path = Path(path)
-    fig.tight_layout()
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
-    return path
+    return save_figure(fig, path)

@@ -4,11 +4,9 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import matplotlib
+import numpy as np
 
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
+from .plotting_base import legend_outside, plt, save_figure
 
 __all__ = ["plot_iri"]
 
@@ -47,9 +45,5 @@ def plot_iri(start, end, series: dict, path, *, title: str) -> Path:
     ax.set_ylabel("IRI (m/km)")
     ax.set_title(title, fontsize=10)
     ax.grid(True, alpha=0.3)
-    ax.legend(loc="lower right", fontsize=8)
-    path = Path(path)
-    fig.tight_layout()
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
-    return path
+    legend_outside(ax)
+    return save_figure(fig, path)

@@ -1,18 +1,120 @@
-"""Figures of ``roadcollab attack`` beyond the paper's: the privacy/accuracy frontier.
+"""Figures of ``roadcollab attack``: Fig. 11 (attack success per mechanism) and the privacy/accuracy frontier.
 
-With :mod:`~roadcollab.reporting.plotting`, one of the modules that import matplotlib.
+With the other ``plotting*`` modules, one of the modules that import matplotlib.
 """
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 from typing import Sequence
 
 import numpy as np
 
-from .plotting import plt, save_figure
+from .plotting_base import legend_outside, plt, save_figure
 
-__all__ = ["plot_privacy_frontier"]
+__all__ = ["plot_attack_success", "plot_privacy_frontier"]
+
+_NUMBER = re.compile(r"(\d+(?:\.\d+)?)")
+
+
+def _field(row, name: str):
+    """``row[name]`` of a dict row or ``row.name`` of a row object."""
+    return row[name] if isinstance(row, dict) else getattr(row, name)
+
+
+def _natural_key(text: str) -> tuple:
+    """Sort key that orders numbers inside names by value (``dp(eps=2)`` before ``dp(eps=10)``)."""
+    return tuple((0, float(p), "") if i % 2 else (1, 0.0, p) for i, p in enumerate(_NUMBER.split(text)))
+
+
+def _grouped(rows: Sequence) -> tuple[list, np.ndarray, list]:
+    """Rows sorted by mechanism (natural order; attacks in their given order), their x positions with a gap
+    between mechanisms, and the groups ``(mechanism, first x, last x)``."""
+    rows = sorted(rows, key=lambda r: _natural_key(str(_field(r, "mechanism"))))   # stable: attack order kept
+    x, groups, pos = [], [], 0.0
+    for i, r in enumerate(rows):
+        mech = str(_field(r, "mechanism"))
+        if i and mech != groups[-1][0]:
+            pos += 0.8
+        if not groups or mech != groups[-1][0]:
+            groups.append([mech, pos, pos])
+        groups[-1][2] = pos
+        x.append(pos)
+        pos += 1.0
+    return rows, np.array(x), [tuple(g) for g in groups]
+
+
+def _error_panel(ax, x: np.ndarray, err: np.ndarray) -> None:
+    """Median relative pole error on a log axis: finite errors as bars, zero and infinite ones written out."""
+    finite = err[np.isfinite(err) & (err > 0)]
+    lo = float(finite.min()) / 4 if finite.size else 1e-3
+    hi = float(finite.max()) * 4 if finite.size else 10.0
+    lo, hi = min(lo, 0.02), max(hi, 0.5)  # keep the 0.1 line in view
+    ax.set_yscale("log")
+    ax.set_ylim(lo, hi)
+    ok = np.isfinite(err) & (err > 0)
+    ax.bar(x[ok], err[ok], color="tab:blue", label="median relative pole error")
+    inf = np.isposinf(err)
+    if inf.any():
+        ax.bar(x[inf], np.full(inf.sum(), hi), color="none", edgecolor="tab:red", hatch="//",
+               label="infinite: the attack found no pole")
+    for xi, e in zip(x, err):
+        if e == 0:
+            ax.text(xi, lo * 1.15, "0\n(exact)", ha="center", va="bottom", fontsize=7, color="tab:green")
+        elif np.isposinf(e):
+            ax.text(xi, np.sqrt(lo * hi), "inf (nothing found)", ha="center", va="center", rotation=90, fontsize=7,
+                    color="tab:red", bbox={"fc": "white", "ec": "none", "alpha": 0.8, "pad": 1})
+        elif not np.isfinite(e):
+            ax.text(xi, lo * 1.15, "n/a", ha="center", va="bottom", fontsize=7, color="grey")
+    ax.axhline(0.1, color="k", ls="--", lw=1, label="relative error 0.1")
+
+
+def plot_attack_success(rows: Sequence, path) -> Path:
+    """Fig. 11: success rate and median relative pole error per attack, grouped by mechanism.
+
+    Mechanisms are sorted by name and separated by vertical lines, with the name above each
+    group. Success rates are written on their bars (so a zero is visible). Pole errors are
+    bars on a log axis; an error of exactly zero is written as "0", an infinite one (the attack
+    returned no pole) as a hatched bar to the top marked "inf (nothing found)", and nothing is
+    clipped.
+
+    Parameters
+    ----------
+    rows : sequence of dict or of objects
+        ``attack.csv`` rows with ``mechanism`` (str), ``attack`` (str), ``success_rate`` (in
+        [0, 1]) and ``median_rel_pole_error`` (>= 0, may be infinite or NaN), as keys or attributes.
+    path : str or Path
+        Output image (format from the suffix, 120 dpi).
+
+    Returns
+    -------
+    Path
+        ``path``.
+    """
+    rows, x, groups = _grouped(rows)
+    fig, (a1, a2) = plt.subplots(2, 1, figsize=(max(8.0, 0.7 * len(rows) + 3.5), 6.5), sharex=True)
+    rate = np.array([float(_field(r, "success_rate")) for r in rows])
+    err = np.array([float(_field(r, "median_rel_pole_error")) for r in rows])
+    a1.bar(x, rate, color="tab:red")
+    for xi, v in zip(x, rate):
+        a1.text(xi, v + 0.02, "0" if v == 0 else f"{v:.2f}", ha="center", va="bottom", fontsize=7)
+    a1.set_ylabel("success rate\n(all poles within 1 %)")
+    a1.set_ylim(0, 1.25)
+    _error_panel(a2, x, err)
+    a2.set_ylabel("median relative\npole error")
+    a2.set_xticks(x)
+    a2.set_xticklabels([str(_field(r, "attack")) for r in rows], rotation=60, ha="right", fontsize=8)
+    for ax in (a1, a2):
+        ax.grid(True, axis="y", alpha=0.3)
+        for (_, _, last), (_, first, _) in zip(groups[:-1], groups[1:]):
+            ax.axvline(0.5 * (last + first), color="k", lw=0.8)
+    for mech, first, last in groups:  # a one-attack group is one bar wide: break long names before "("
+        name = mech.replace("(", "\n(", 1) if last == first and len(mech) > 8 else mech
+        a1.text(0.5 * (first + last), 1.15, name, ha="center", va="center", fontsize=8, fontweight="bold")
+    legend_outside(a2)
+    a1.set_title("Fig. 11: how often the attacks recover the poles of $S_j$, per mechanism", fontsize=10)
+    return save_figure(fig, path)
 
 
 def plot_privacy_frontier(points: Sequence, path) -> Path:
@@ -46,7 +148,7 @@ def plot_privacy_frontier(points: Sequence, path) -> Path:
     a1.set_ylabel("strongest attack: success rate\n(all poles within 1 %)")
     a1.set_title("Attack success vs accuracy")
     a1.grid(True, which="both", alpha=0.3)
-    a1.legend(fontsize=8, loc="best")
+    legend_outside(a1)
     a2.set_xscale("log")
     a2.set_yscale("log")
     a2.axhline(0.1, color="k", ls="--", lw=1)

@@ -5,13 +5,9 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Sequence
 
-import matplotlib
+import numpy as np
 
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-
-from .plotting import save_figure  # noqa: E402
+from .plotting_base import legend_outside, plt, save_figure
 
 __all__ = ["plot_sweep"]
 
@@ -69,7 +65,7 @@ def plot_sweep(rows: Sequence, path) -> Path:
     rows = list(rows)
     noises = sorted({r.sensor_noise_std for r in rows})
     uncerts = sorted({r.parameter_uncertainty for r in rows})
-    fig, axes = plt.subplots(len(noises), len(uncerts), figsize=(4.6 * len(uncerts), 3.6 * len(noises)),
+    fig, axes = plt.subplots(len(noises), len(uncerts), figsize=(4.6 * len(uncerts) + 2.4, 3.6 * len(noises) + 0.4),
                              sharex=True, sharey=True, squeeze=False)
     for i, s in enumerate(noises):
         for k, u in enumerate(uncerts):
@@ -77,7 +73,9 @@ def plot_sweep(rows: Sequence, path) -> Path:
             panel = sorted((r for r in rows if r.sensor_noise_std == s and r.parameter_uncertainty == u),
                            key=lambda r: r.gamma)
             handles = _draw_panel(ax, panel, rows[0].n_vehicles)
-            if i == 0 and k == 0:
-                ax.legend(handles=handles, fontsize=7, loc="best")
+            if i == 0 and k == len(uncerts) - 1:
+                legend_outside(ax, handles=handles, fontsize=7)
             _label_panel(ax, s, u, bottom=i == len(noises) - 1, left=k == 0)
+    fig.suptitle("Road-velocity MSE vs observer parameter $\\gamma$\n(mean over runs; bars: $\\pm$1 standard error)",
+                 fontsize=10)
     return save_figure(fig, path)

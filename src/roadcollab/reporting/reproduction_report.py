@@ -10,7 +10,9 @@ from pathlib import Path
 import numpy as np
 
 from . import plotting
-from ..experiments.reproduction_rows import BoundRow, FleetRow, MseRow, RunTraces, TraceRow
+from ..experiments.reproduction import ESTIMATORS
+from ..experiments.reproduction_iri import iri_ratios
+from ..experiments.reproduction_rows import BoundRow, FleetRow, FusionRow, IriRow, MseRow, RunTraces, TraceRow
 from .records import markdown_table, output_dir, write_config, write_rows
 
 __all__ = ["headline_table", "reproduction_summary", "write_reproduction"]
@@ -217,9 +219,15 @@ def _results_lines(summary: dict, rows: list[MseRow], n_vehicles: int, trace_fig
         "",
         "## Fused, centralized and oracle estimates",
         "",
+        "Bars: 95 % confidence interval of the mean over runs (`fig_fusion.csv` holds means, standard deviations "
+        "and intervals).",
+        "",
         "![fusion](fig_fusion.png)",
         "",
         "## Figs. 5-7: actual road input vs estimates with and without privacy (run 1, a 3 s window)",
+        "",
+        "Below each track's signals, the error of each estimate (estimate - actual, RMS over the window in the "
+        "legend).",
         "",
     ]
     for j, name in enumerate(trace_figures):
@@ -227,12 +235,57 @@ def _results_lines(summary: dict, rows: list[MseRow], n_vehicles: int, trace_fig
     return lines
 
 
+def _ratio_cell(mean: float, std: float) -> str:
+    """``mean +- std`` of a ratio for the IRI table."""
+    return f"{mean:.3f} +- {std:.3f}"
+
+
+def _iri_lines(rows: list[IriRow], estimators, config) -> list[str]:
+    """The IRI comparison of the measured runs: mean true IRI and the table of estimated / true ratios."""
+    if not rows:
+        return []
+    ratios = {(r.estimator, r.track): r for r in iri_ratios(rows, estimators)}
+    table = [{"estimator": name,
+              **{f"{t} {ref}": _ratio_cell(getattr(ratios[name, t], f"ratio_{ref}"),
+                                           getattr(ratios[name, t], f"ratio_{ref}_std"))
+                 for t in ("left", "both") for ref in ("raw", "band")}} for name in estimators]
+    left = [r for r in rows if r.track == "left"]
+    seg = rows[0].end_m - rows[0].start_m
+    band_m = config.speed / config.band_low_hz
+    return [
+        "### Road roughness: estimated against true IRI (`iri_measured.csv`)",
+        "",
+        f"Golden Car IRI (ASTM E1926, 80 km/h) per {seg:g} m segment of the scored {config.segment_length:g} m "
+        f"({len({r.start_m for r in rows})} segments per run and track, {len({r.run for r in rows})} runs), of "
+        f"vehicle {rows[0].vehicle}'s estimates (the fleet estimates use vehicles 1..{rows[0].vehicle}). Each "
+        "estimate's elevation is its band-limited road-velocity estimate integrated over distance (increment "
+        "w / fs per sample). It lacks wavelengths above "
+        f"{band_m:g} m (speed / band edge) while the IRI responds to about 1.2-30 m, so the truth is given twice: "
+        "*raw* = the profile the vehicles drove over, *band* = that profile band-limited like the estimates. "
+        f"Mean true IRI of the measured (left) track: raw {np.mean([r.true_iri_raw for r in left]):.3f} m/km, "
+        f"band-limited {np.mean([r.true_iri_band_limited for r in left]):.3f} m/km.",
+        "",
+        "Mean of estimated / true IRI per segment (+- std over runs and segments); *left* is the measured track, "
+        "*both* adds the right track (measured plus a synthetic residual):",
+        "",
+        markdown_table(table, list(table[0].keys())),
+        "",
+    ]
+
+
 def _measured_section(measured, out: Path) -> list[str]:
     """The run on the shipped measured profile: writes ``mse_measured.csv`` and its figure, returns report lines."""
     mres, mel = measured
     mrows = mres.table()
     write_rows(out / "mse_measured.csv", mrows, MseRow)
-    plotting.plot_fusion(mrows, out / "fig_measured_mse.png")
+    frows = mres.fusion_rows()
+    write_rows(out / "fig_measured_mse.csv", frows, FusionRow)
+    irows = mres.iri_rows()
+    if irows:
+        write_rows(out / "iri_measured.csv", irows, IriRow)
+    plotting.plot_fusion(frows, out / "fig_measured_mse.png", title=(
+        f"Measured profile: MSE per vehicle of the fleet estimates (mean over {mres.config.n_runs} runs; "
+        "bars: 95 % CI)"))
     ms = reproduction_summary(mrows, mres.bound_check())
     mc = mres.config
     return [
@@ -249,6 +302,7 @@ def _measured_section(measured, out: Path) -> list[str]:
         "",
         "![measured](fig_measured_mse.png)",
         "",
+        *_iri_lines(irows, ESTIMATORS, mc),
     ]
 
 
@@ -260,9 +314,10 @@ def _fleet_lines(fleet_rows: list[FleetRow]) -> list[str]:
 def write_reproduction(result, out, *, command: str, elapsed: float, measured=None) -> dict:
     """Write every output of ``roadcollab reproduce`` to the folder ``out``.
 
-    Files: ``mse.csv``, ``bound_check.csv``, ``fig4_mse.png``, ``fig_fusion.png``,
+    Files: ``mse.csv``, ``bound_check.csv``, ``fig4_mse.png``, ``fig_fusion.png`` with ``fig_fusion.csv``,
     ``fig5..7_vehicle{1..3}.png`` with their CSVs, ``fleet.csv``, ``config.json`` and ``report.md``;
-    with ``measured`` also ``mse_measured.csv`` and ``fig_measured_mse.png``.
+    with ``measured`` also ``mse_measured.csv``, ``fig_measured_mse.png`` with its CSV and, when the measured run
+    compared IRIs, ``iri_measured.csv``.
 
     Parameters
     ----------
@@ -288,7 +343,9 @@ def write_reproduction(result, out, *, command: str, elapsed: float, measured=No
     write_rows(out / "mse.csv", rows, MseRow)
     write_rows(out / "bound_check.csv", bound, BoundRow)
     plotting.plot_mse(rows, out / "fig4_mse.png")
-    plotting.plot_fusion(rows, out / "fig_fusion.png")
+    fusion_rows = result.fusion_rows()
+    write_rows(out / "fig_fusion.csv", fusion_rows, FusionRow)
+    plotting.plot_fusion(fusion_rows, out / "fig_fusion.png")
     trace_figures = _write_trace_figures(result.runs[0].traces, out)
     fleet_rows = result.fleet_rows()
     write_rows(out / "fleet.csv", fleet_rows, FleetRow)

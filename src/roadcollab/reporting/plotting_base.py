@@ -1,0 +1,57 @@
+"""What every figure module shares: the Agg backend, :func:`save_figure` and legends that hide no data.
+
+Imported by :mod:`~roadcollab.reporting.plotting` and the ``plotting_*`` modules, the only
+modules that import matplotlib.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+
+__all__ = ["plt", "save_figure", "legend_outside"]
+
+
+def save_figure(fig, path) -> Path:
+    """Lay out ``fig``, write it to ``path`` at 120 dpi and close it.
+
+    Parameters
+    ----------
+    fig : matplotlib.figure.Figure
+        The finished figure.
+    path : str or Path
+        Output image (format from the suffix).
+
+    Returns
+    -------
+    Path
+        ``path``.
+    """
+    path = Path(path)
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+    return path
+
+
+def legend_outside(ax, *, fontsize: float = 8, **kw):
+    """A legend to the right of ``ax``, outside the axes, so it covers no data.
+
+    Parameters
+    ----------
+    ax : matplotlib.axes.Axes
+        Axes whose labelled artists are listed.
+    fontsize : float
+        Points.
+    **kw
+        Passed to ``ax.legend`` (e.g. ``handles``, ``title``).
+
+    Returns
+    -------
+    matplotlib.legend.Legend
+    """
+    return ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), borderaxespad=0.0, fontsize=fontsize, **kw)
