@@ -207,7 +207,8 @@ def run_bench(*, sizes=(1000, 2000, 4000, 8000, 16000, 32000, 64000), repeats: i
     with threadpool_limits(limits=1):
         main = {m: bench_segment(4000, mechanism=m, repeats=repeats, seed=seed) for m in MECHANISMS}
         naive = bench_naive(4000, repeats=repeats, seed=seed)
-        floor = floor_ms(FleetPipeline(_config_for(4000), sample_fleet(1, ExperimentConfig().fleet, rng=seed)).grid)
+        cfg = _config_for(4000)
+        floor = floor_ms(FleetPipeline(cfg, sample_fleet(2, cfg.fleet, rng=seed)).grid)
         exact = bench_exactness(seed=seed)
         scaling = []
         for n in sizes:
