@@ -16,3 +16,14 @@ def test_bench_segment_reports_its_fields(mechanism):
 def test_bench_rejects_unknown_mechanism():
     with pytest.raises(ParameterError, match="mechanism must be one of"):
         bench_segment(1000, mechanism="rot13")
+
+
+def test_naive_chain_agrees_with_the_library_and_exactness_is_measured():
+    from roadcollab.experiments.bench import bench_exactness, bench_naive
+
+    naive = bench_naive(1000, repeats=2)
+    assert naive["ms_min"] > 0 and naive["max_rel_vs_library"] < 1e-9
+    ex = bench_exactness(segments=1, n_samples=1000)
+    assert set(ex) == {"privacy_vs_clear", "privacy_vs_clear_direct_receiver", "receiver_algorithms",
+                       "receiver_vs_sender"}
+    assert ex["privacy_vs_clear"] < 1e-11 and ex["receiver_algorithms"] < 1e-9 and ex["receiver_vs_sender"] < 1e-9

@@ -202,7 +202,8 @@ class Relay:
             clear = est.message(result)
             ch = self.channel(j) if mech == "paper_vehicle" else None
             msg, psi1, psi2 = obfuscate(clear, self.grid, self.exchange.obfuscation, rng=self.rng,
-                                        T_response=est.T_ss_f, S_response=est.S_ss_f, channel=ch)
+                                        T_response=est.T_ss_f, S_response=est.S_ss_f, channel=ch,
+                                        spectra=(result.E, result.Wf))
             return RelayStep(result, msg, clear=clear, psi=(psi1, psi2))
         if mech == "hardened":
             return RelayStep(result, est.hardened_message(result))

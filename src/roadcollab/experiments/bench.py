@@ -25,11 +25,12 @@ from ..errors import ParameterError
 from ..experiments.config import ExperimentConfig
 from ..experiments.pipeline import FleetPipeline
 from ..collaboration.algorithm1 import CollaborativeEstimator
-from ..collaboration.relay import Exchange, Relay
+from ..collaboration.relay import Exchange, Relay, simulate_measurements
+from .bench_naive import exactness_figures, floor_ms, naive_paper_step
 from ..models.simulation import add_sensor_noise, simulate_response
 from ..models.vehicle import sample_fleet
 
-__all__ = ["bench_segment", "run_bench"]
+__all__ = ["bench_segment", "bench_naive", "bench_exactness", "run_bench"]
 
 MECHANISMS = ("none", "paper", "paper_vehicle", "hardened")
 
@@ -94,15 +95,89 @@ def bench_segment(n_samples: int = 4000, *, mechanism: str = "paper", repeats: i
         protocol.encode(relay.step(1, y, msg_in).message)
         times.append((time.perf_counter() - t0) * 1e3)
     return {"mechanism": mechanism, "samples_per_segment": grid.n_samples, "nfft": grid.nfft,
-            "ms_per_vehicle_segment": statistics.median(times), "ms_per_vehicle_setup": statistics.median(setups),
-            "ms_pipeline_setup_2_vehicles": setup_total * 1e3}
+            "ms_per_vehicle_segment": statistics.median(times), "ms_min": min(times),
+            "ms_per_vehicle_setup": statistics.median(setups), "ms_pipeline_setup_2_vehicles": setup_total * 1e3}
+
+
+def bench_naive(n_samples: int = 4000, *, repeats: int = 30, seed: int = 0) -> dict:
+    """Milliseconds of one ``paper`` vehicle-segment by the naive numpy chain
+    (:func:`~roadcollab.experiments.bench_naive.naive_paper_step`), timed like :func:`bench_segment`
+    (decode to encode, with the vehicle's simulated record), and its agreement with the library.
+
+    Parameters
+    ----------
+    n_samples : int
+        Samples per segment.
+    repeats : int
+        Timed segments.
+    seed : int
+
+    Returns
+    -------
+    dict
+        ``ms_min``, ``ms_median`` and ``max_rel_vs_library`` (largest
+        ``max |W_hat_naive - W_hat| / max |W_hat|`` over the segments, spectra).
+    """
+    n_samples = check_int("n_samples", n_samples, low=64, high=2**20)
+    repeats = check_int("repeats", repeats, low=1)
+    cfg = _config_for(n_samples)
+    rng = np.random.default_rng(seed)
+    pipe = FleetPipeline(cfg, sample_fleet(2, cfg.fleet, rng=rng))
+    prev, car = pipe.estimators
+    relay = Relay(pipe.estimators, Exchange("paper", cfg.obfuscation), rng=rng)
+    times, worst = [], 0.0
+    for _ in range(repeats):
+        w = pipe.road(rng).velocity[:pipe.grid.n_samples]
+        y_prev = add_sensor_noise(simulate_response(prev.true_plant, w), cfg.sensor_noise_std, rng=rng)
+        incoming = protocol.encode(relay.send(0, prev.estimate(y_prev)).message)
+        t0 = time.perf_counter()
+        y = add_sensor_noise(simulate_response(car.true_plant, w), cfg.sensor_noise_std, rng=rng)
+        _, W_hat = naive_paper_step(car, incoming, y, cfg.obfuscation, rng)
+        times.append((time.perf_counter() - t0) * 1e3)
+        ref = car.estimate(y, protocol.decode(incoming)).W_hat
+        worst = max(worst, float(np.max(np.abs(W_hat - ref)) / np.max(np.abs(ref))))
+    return {"ms_min": min(times), "ms_median": statistics.median(times), "max_rel_vs_library": worst}
+
+
+def bench_exactness(*, segments: int = 10, n_samples: int = 4000, seed: int = 0) -> dict:
+    """Theorem 1 on ``segments`` segments of a 3-vehicle fleet (every vehicle's estimate with
+    ``paper`` vs ``none``), the largest figures of
+    :func:`~roadcollab.experiments.bench_naive.exactness_figures`.
+
+    Parameters
+    ----------
+    segments : int
+        Relayed segments (a new road each).
+    n_samples : int
+        Samples per segment.
+    seed : int
+
+    Returns
+    -------
+    dict
+        The keys of ``exactness_figures``, each its largest value over the segments.
+    """
+    cfg = dataclasses.replace(_config_for(n_samples), n_vehicles=3)
+    rng = np.random.default_rng(seed)
+    pipe = FleetPipeline(cfg, sample_fleet(3, cfg.fleet, rng=rng))
+    out: dict[str, float] = {}
+    for _ in range(check_int("segments", segments, low=1)):
+        w = pipe.road(rng).velocity[:pipe.grid.n_samples]
+        ys = simulate_measurements(pipe.estimators, w, cfg.sensor_noise_std, rng=rng)
+        clear = Relay(pipe.estimators, "none").run(ys)
+        paper = Relay(pipe.estimators, Exchange("paper", cfg.obfuscation), rng=rng).run(ys)
+        for k, v in exactness_figures(pipe.estimators, clear, paper, pipe.grid).items():
+            out[k] = max(out.get(k, 0.0), v)
+    return out
 
 
 def run_bench(*, sizes=(1000, 2000, 4000, 8000, 16000, 32000, 64000), repeats: int = 30, seed: int = 0) -> dict:
     """The benchmark record printed by ``roadcollab bench --json``.
 
     Single-threaded (BLAS limited to one thread): :func:`bench_segment` at 4000 samples for every
-    mechanism, then the ``paper`` and ``hardened`` mechanisms at every size of ``sizes``.
+    mechanism, the naive ``paper`` chain (:func:`bench_naive`), the floor
+    (:func:`~roadcollab.experiments.bench_naive.floor_ms`), Theorem 1 measured
+    (:func:`bench_exactness`), then the ``paper`` and ``hardened`` mechanisms at every size of ``sizes``.
 
     Parameters
     ----------
@@ -110,22 +185,31 @@ def run_bench(*, sizes=(1000, 2000, 4000, 8000, 16000, 32000, 64000), repeats: i
         Samples per segment of the scaling points (non-empty, each in [64, 2**20]). The 4000-sample
         point (else the first) is the reference of the normalised costs.
     repeats : int
-        Timed segments (>= 1) of the 4000-sample measurement; the scaling points use
+        Timed segments (>= 1) of the 4000-sample measurements; the scaling points use
         ``max(3, repeats // 3)``.
     seed : int
-        Seed of every :func:`bench_segment` call (fleet, roads, sensor noise, obfuscators).
+        Seed of every measurement (fleet, roads, sensor noise, obfuscators).
 
     Returns
     -------
     dict
-        ``ms_per_vehicle_segment`` (``paper`` mechanism, ms), ``ms_per_vehicle_segment_by_mechanism``
-        (``{mechanism: ms}``), ``ms_per_vehicle_setup`` (ms), ``samples_per_segment``, ``nfft``,
-        ``scaling`` (one dict per size: ``n_samples``, ``ms_paper``, ``ms_hardened`` in ms, and
-        ``paper_per_nlogn_rel``, ``hardened_per_nlogn_rel``: cost per ``N log2 N`` relative to the
-        reference point, 1 everywhere for ``N log N`` scaling) and ``threads`` (1).
+        ``by_mechanism`` (``{mechanism: {"ms_min", "ms_median", "floor_multiple_min",
+        "floor_multiple_median"}}``), ``floor`` (``fft_pair_ms``, ``matvec_ms``, ``floor_ms``),
+        ``naive_paper`` (``ms_min``, ``ms_median``, ``max_rel_vs_library``), ``speedup_paper_vs_naive``
+        (``min``: naive min / paper min, ``median``: the same for medians), ``exactness`` (see
+        :func:`bench_exactness`), ``ms_per_vehicle_segment`` (``paper``, median, ms),
+        ``ms_per_vehicle_segment_by_mechanism`` (medians), ``ms_per_vehicle_setup`` (ms),
+        ``samples_per_segment``, ``nfft``, ``scaling`` (one dict per size: ``n_samples``,
+        ``ms_paper``, ``ms_hardened`` (medians, ms), and ``paper_per_nlogn_rel``,
+        ``hardened_per_nlogn_rel``: cost per ``N log2 N`` relative to the reference point, 1
+        everywhere for ``N log N`` scaling), ``repeats`` and ``threads`` (1).
     """
     with threadpool_limits(limits=1):
         main = {m: bench_segment(4000, mechanism=m, repeats=repeats, seed=seed) for m in MECHANISMS}
+        naive = bench_naive(4000, repeats=repeats, seed=seed)
+        cfg = _config_for(4000)
+        floor = floor_ms(FleetPipeline(cfg, sample_fleet(2, cfg.fleet, rng=seed)).grid)
+        exact = bench_exactness(seed=seed)
         scaling = []
         for n in sizes:
             rec = {"n_samples": int(n)}
@@ -140,12 +224,23 @@ def run_bench(*, sizes=(1000, 2000, 4000, 8000, 16000, 32000, 64000), repeats: i
             nl = s["n_samples"] * np.log2(s["n_samples"])
             nl0 = ref["n_samples"] * np.log2(ref["n_samples"])
             s[f"{m}_per_nlogn_rel"] = (s[f"ms_{m}"] / nl) / (ref[f"ms_{m}"] / nl0)
+    f = floor["floor_ms"]
+    by_mech = {m: {"ms_min": r["ms_min"], "ms_median": r["ms_per_vehicle_segment"],
+                   "floor_multiple_min": r["ms_min"] / f, "floor_multiple_median": r["ms_per_vehicle_segment"] / f}
+               for m, r in main.items()}
     return {
+        "by_mechanism": by_mech,
+        "floor": floor,
+        "naive_paper": naive,
+        "speedup_paper_vs_naive": {"min": naive["ms_min"] / main["paper"]["ms_min"],
+                                   "median": naive["ms_median"] / main["paper"]["ms_per_vehicle_segment"]},
+        "exactness": exact,
         "ms_per_vehicle_segment": main["paper"]["ms_per_vehicle_segment"],
         "ms_per_vehicle_segment_by_mechanism": {m: main[m]["ms_per_vehicle_segment"] for m in MECHANISMS},
         "ms_per_vehicle_setup": main["paper"]["ms_per_vehicle_setup"],
         "samples_per_segment": main["paper"]["samples_per_segment"],
         "nfft": main["paper"]["nfft"],
         "scaling": scaling,
+        "repeats": repeats,
         "threads": 1,
     }

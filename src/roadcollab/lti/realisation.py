@@ -2,12 +2,14 @@
 
 from __future__ import annotations
 
+import hashlib
 from dataclasses import dataclass
 
 import numpy as np
 import scipy.linalg
 
 from .response import dlti_frequency_response
+from .stability import spectral_radius_and_gain
 
 __all__ = ["StateSpaceData", "continuous_poles", "series", "random_orthogonal", "similarity"]
 
@@ -78,6 +80,27 @@ class StateSpaceData:
         (M, p, m) complex ndarray
         """
         return dlti_frequency_response(self.A, self.B, self.C, self.D, omega_dt)
+
+    def stability(self) -> tuple[float, float]:
+        """Spectral radius of ``A`` and its certified transient gain (:mod:`~roadcollab.lti.stability`).
+
+        Memoised on this object by a digest of ``A``'s content, so a message validated when it is
+        built is not certified again when it is encoded (0.3-0.6 ms per system measured), while a
+        changed ``A`` (arrays are mutable) is certified afresh.
+
+        Returns
+        -------
+        radius, gain : float
+            As :func:`~roadcollab.lti.stability.spectral_radius_and_gain`.
+        """
+        A = np.ascontiguousarray(self.A, dtype=float)
+        key = hashlib.blake2b(A.tobytes() + repr(A.shape).encode(), digest_size=16).digest()
+        memo = self.__dict__.get("_stability")
+        if memo is not None and memo[0] == key:
+            return memo[1]
+        out = spectral_radius_and_gain(A)
+        object.__setattr__(self, "_stability", (key, out))   # frozen dataclass: a private memo, not a field
+        return out
 
     def to_control(self):
         """The realisation as a discrete :class:`control.StateSpace`."""

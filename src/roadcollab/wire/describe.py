@@ -182,5 +182,9 @@ def validate_message(message) -> tuple[Header | SecAggHeader, dict]:
     """
     h, arrays = message_fields(message)
     check_header(h)
-    check_payload(h, arrays)
+    # The systems' own memo of their certificate (keyed by A's content): building a message and
+    # encoding it certify each system once.
+    systems = {name: getattr(message, name) for name in ("T", "S") if hasattr(message, name)}
+    check_payload(h, arrays, certificates={name: sys.stability for name, sys in systems.items()
+                                           if isinstance(sys, StateSpaceData)})
     return h, arrays

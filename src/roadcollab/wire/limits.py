@@ -9,12 +9,12 @@ refusal is a :class:`~roadcollab.errors.MessageError`.
 from __future__ import annotations
 
 import math
-import warnings
+from typing import Callable
 
 import numpy as np
-import scipy.linalg
 
 from ..errors import MessageError
+from ..lti.stability import LYAPUNOV_RTOL, spectral_radius_and_gain
 from .layout import (MECHANISM_CODES, MECHANISM_TYPE, MESSAGE_TYPE_EXCHANGE, MESSAGE_TYPE_KEY_ADVERT,
                      MESSAGE_TYPE_MASKED_INPUT, MESSAGE_TYPE_REVEAL, MESSAGE_TYPE_SEALED_SHARES, SECAGG_MECHANISM,
                      TYPE_NAMES, Header, SecAggHeader, exchange_nbytes, inversion_nbytes)
@@ -46,8 +46,7 @@ DT_RTOL = 1e-12
 RADIUS_MARGIN = 1e-6
 #: Largest certified transient gain ``sup_k ||A^k||_2 <= sqrt(cond X)`` (Lyapunov certificate).
 MAX_TRANSIENT_GAIN = 1e8
-#: Largest relative residual of the Lyapunov solution ``A^T X A - X + I``.
-LYAPUNOV_RTOL = 1e-8
+# LYAPUNOV_RTOL (largest relative residual of the Lyapunov solution) lives with the kernel in lti.stability.
 
 #: Secure aggregation: most vehicles in one session, so most shares in one reveal.
 MAX_VEHICLES = 10_000
@@ -160,61 +159,32 @@ def _check_finite(name: str, arr: np.ndarray) -> None:
         raise MessageError(f"{name} must be finite, got {bad} non-finite entries (NaN or inf)")
 
 
-def _lyapunov_gain(A: np.ndarray) -> float:
-    """Certified bound on ``sup_k ||A^k||_2`` from the discrete Lyapunov equation.
-
-    Solve ``A^T X A - X = -I``. If the residual is small and ``X`` is positive definite, then
-    ``V(x) = x^T X x`` decreases along ``x_{k+1} = A x_k`` and
-    ``lambda_min(X) |A^k x|^2 <= V(A^k x) <= V(x) <= lambda_max(X) |x|^2``, so
-    ``||A^k||_2 <= sqrt(lambda_max(X) / lambda_min(X))`` for every ``k``: a bound that rests on the
-    solved ``X`` and its verified residual, not on computed eigenvalues of ``A``. Returns inf when no
-    certificate is found (``X`` not positive definite, residual too large, non-finite ``X``, or the
-    solver failed).
-    """
-    n = A.shape[0]
-    eye = np.eye(n)
-    try:
-        with np.errstate(all="ignore"), warnings.catch_warnings():
-            warnings.simplefilter("ignore", scipy.linalg.LinAlgWarning)   # judged by the residual below
-            X = scipy.linalg.solve_discrete_lyapunov(A.T, eye)
-            X = 0.5 * (X + X.T)
-            if not np.isfinite(X).all():
-                return math.inf
-            resid = np.linalg.norm(A.T @ X @ A - X + eye)
-            scale = np.linalg.norm(X) * (1.0 + np.linalg.norm(A) ** 2)
-            ev = np.linalg.eigvalsh(X)
-    except (np.linalg.LinAlgError, ValueError):
-        return math.inf     # overflow inside the solver (inf/NaN): no certificate
-    if not (resid <= LYAPUNOV_RTOL * scale and ev[0] > 0.0):
-        return math.inf
-    return float(math.sqrt(ev[-1] / ev[0]))
-
-
-def _check_system(name: str, A: np.ndarray, B: np.ndarray, C: np.ndarray, D: np.ndarray) -> None:
+def _check_system(name: str, A: np.ndarray, B: np.ndarray, C: np.ndarray, D: np.ndarray,
+                  certify: Callable[[], tuple[float, float]] | None = None) -> None:
     """Finite entries and a discrete-time stable A: a margin on the computed spectral radius and a
     Lyapunov certificate of bounded transient growth (which non-normal matrices cannot fool:
-    a 64x64 Jordan block with a 1e-16 corner computes as radius 0.99 but has none)."""
+    a 64x64 Jordan block with a 1e-16 corner computes as radius 0.99 but has none).
+    ``certify`` returns ``(radius, gain)`` of this ``A`` (a memo held by the system object,
+    :meth:`~roadcollab.lti.realisation.StateSpaceData.stability`); by default they are computed."""
     for part, arr in (("A", A), ("B", B), ("C", C), ("D", D)):
         _check_finite(f"{name}.{part}", arr)
     if A.shape[0] == 0:
         return
     try:
-        # Huge but finite entries may overflow inside LAPACK; the result is checked below.
-        with np.errstate(all="ignore"):
-            radius = float(np.max(np.abs(np.linalg.eigvals(A))))
+        radius, gain = certify() if certify is not None else spectral_radius_and_gain(A)
     except (np.linalg.LinAlgError, ValueError) as err:
         raise MessageError(f"{name}.A: eigenvalues could not be computed ({err})") from err
     if not radius < 1.0 - RADIUS_MARGIN:
         raise MessageError(f"{name} must be discrete-time stable (spectral radius of A < 1 - {RADIUS_MARGIN:g}), "
                            f"got {radius:.6g}")
-    gain = _lyapunov_gain(A)
     if not gain <= MAX_TRANSIENT_GAIN:
         raise MessageError(f"{name} must be discrete-time stable with a Lyapunov certificate: {name}.A has no "
                            f"certified bound sup_k ||A^k|| <= {MAX_TRANSIENT_GAIN:g} (got {gain:.3g}); "
                            f"a non-normal A whose computed eigenvalues mislead")
 
 
-def check_payload(h: Header, arrays: dict[str, np.ndarray]) -> None:
+def check_payload(h: Header, arrays: dict[str, np.ndarray], *,
+                  certificates: dict[str, Callable[[], tuple[float, float]]] | None = None) -> None:
     """Check the arrays of a message whose header passed :func:`check_header`.
 
     Parameters
@@ -223,6 +193,9 @@ def check_payload(h: Header, arrays: dict[str, np.ndarray]) -> None:
     arrays : dict of str to numpy.ndarray
         The payload arrays by wire name (see :func:`~.layout.payload_shapes`), float64; for secure
         aggregation the fields of :func:`~.describe.message_fields`.
+    certificates : dict of str to callable, optional
+        ``{"T": f, "S": g}``: each returns ``(radius, gain)`` of that system's ``A`` (the memo of
+        :meth:`~roadcollab.lti.realisation.StateSpaceData.stability`); missing ones are computed.
 
     Raises
     ------
@@ -237,7 +210,8 @@ def check_payload(h: Header, arrays: dict[str, np.ndarray]) -> None:
         return
     if h.msg_type == MESSAGE_TYPE_EXCHANGE:
         for name in ("T", "S"):
-            _check_system(name, *(arrays[f"{name}.{p}"] for p in "ABCD"))
+            _check_system(name, *(arrays[f"{name}.{p}"] for p in "ABCD"),
+                          certify=None if certificates is None else certificates.get(name))
         _check_finite("e", arrays["e"])
         _check_finite("wf", arrays["wf"])
     else:

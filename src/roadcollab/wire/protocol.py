@@ -134,7 +134,7 @@ import numpy as np
 
 from ..errors import MessageError
 from .examples import example_message
-from .describe import message_fields
+from .describe import message_fields, validate_message
 from .fields import Message, build_message
 from .framing import as_buffer, check_frame_size, pack_message, read_header
 # _decode calls it through this module's namespace, so a test can replace protocol._read_array
@@ -224,9 +224,7 @@ def encode(message: Message) -> bytes:
         ...
     roadcollab.errors.MessageError: ...
     """
-    h, arrays = message_fields(message)
-    check_header(h)
-    check_payload(h, arrays)
+    h, arrays = validate_message(message)
     return pack_message(h, arrays)
 
 
