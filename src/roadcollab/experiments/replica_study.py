@@ -131,7 +131,8 @@ def replica_messages(config: AttackStudyConfig, seed: int, run: int, *, epsilons
     dict
         ``"z"``: ``{mechanism: [z_j (nfft, 2) m/s per target]}``; ``"road"``: ``{"true": [(N, 2)], "fused":
         [(N, 2)]}`` road velocity per target, m/s; ``"grid"``, ``"targets"`` (poles per target, rad/s),
-        ``"sigmas"`` (``{epsilon: sigma}``, m/s) and ``"z_all"`` (every vehicle's ``z``, (V, nfft, 2) m/s).
+        ``"sigmas"`` (``{epsilon: sigma}``, m/s), ``"z_all"`` (every vehicle's ``z``, (V, nfft, 2) m/s) and
+        ``"post_all"`` (every vehicle's posterior inversion, the same shape).
     """
     seed = check_int("seed", seed, low=0)
     run = check_int("run", run, low=0)
@@ -155,7 +156,7 @@ def replica_messages(config: AttackStudyConfig, seed: int, run: int, *, epsilons
     total = np.sum(post, axis=0)
     fused = [((total - post[j]) / (len(ests) - 1))[:grid.n_samples] for j in range(n_targets)]
     return {"z": zs, "road": {"true": [w] * n_targets, "fused": fused}, "grid": grid,
-            "targets": target_poles(pipe)[:n_targets], "sigmas": sigmas, "z_all": z_all}
+            "targets": target_poles(pipe)[:n_targets], "sigmas": sigmas, "z_all": z_all, "post_all": np.array(post)}
 
 
 def _score(fits: list[tuple[np.ndarray, float]], targets: list[np.ndarray]) -> tuple[float, float, int, float]:

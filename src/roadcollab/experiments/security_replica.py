@@ -8,7 +8,8 @@ sender's model to what a message hands it. Per mechanism:
   fits on ``z`` scores all four. Roads: ``true`` and ``fused`` (the fleet's published map: the
   average of the *other* vehicles' posterior inversions); one message and 3 linked segments.
 - ``dp(eps=e)``: ``z`` plus the Gaussian mechanism, true road; linked rows carry the composed epsilon.
-- ``fused``: vehicle ``j``'s relayed message is the average of vehicles ``1..j``'s ``z``.
+- ``fused`` (``fused_posterior``): vehicle ``j``'s relayed message is the average of vehicles ``1..j``'s
+  ``z`` (posterior inversions).
 - ``secure_aggregation``: the aggregator learns the average of all ``n`` inputs (exact to the
   fixed-point resolution); with ``c`` colluding vehicles it learns the average of the other
   ``n - c``. The protocol enforces ``k`` *inputs*, not ``k`` *honest* inputs: with ``c = n - 1``
@@ -96,6 +97,10 @@ def _cells(config: AttackStudyConfig, n: int, T: int, R: int) -> list[tuple]:
             cells.append((key, "replica_linked", "true", _LINK, lambda s, j, k=key: s["z"][k][j], range(T),
                           composed_epsilon(m, _LINK, config.dp_delta)))
     cells.append(("fused", "replica", "true", 1, lambda s, j: s["z_all"][:j + 1].mean(axis=0), range(T), np.nan))
+    # The replica model inverts the nominal plant; fitting it to a posterior inversion is the attacker's
+    # approximation (the posterior mean plant has no closed form in theta_hat).
+    cells.append(("fused_posterior", "replica", "true", 1, lambda s, j: s["post_all"][:j + 1].mean(axis=0), range(T),
+                  np.nan))
     agg = lambda s, j: s["z_all"].mean(axis=0)  # noqa: E731
     cells.append(("secure_aggregation", "replica", "true", 1, agg, range(T), np.nan))
     if R >= _LINK:
