@@ -54,8 +54,8 @@ class ReplicaOutcome:
     secagg_clipped : bool
         Whether any honest input reached the clipping bound (exactness then fails by design).
     mse : dict
-        Receivers' road-velocity MSE, (m/s)^2: ``"fused"`` (vehicles 2..3 of the relayed average)
-        and ``"secure_aggregation"`` (the average of all vehicles).
+        Receivers' road-velocity MSE, (m/s)^2: ``"fused"`` and ``"fused_posterior"`` (vehicles 2..3 of
+        the relayed averages) and ``"secure_aggregation"`` (the average of all vehicles).
     secagg_cost : dict
         :func:`~roadcollab.privacy.secagg_run.secure_aggregation_cost` of one segment.
     spec : SecAggSpec
@@ -152,13 +152,15 @@ def _mse(pipe, segs) -> dict:
     """Receivers' MSE of the relayed average (vehicles 2..3) and of the aggregate of all vehicles."""
     g, sl = pipe.grid, pipe.config.scored
     n = g.n_samples
-    fused, agg = [], []
+    fused, post, agg = [], [], []
     for s in segs:
         truth = g.band_limited(g.rfft(s["road"]["true"][0]), n)[sl]
-        z = s["z_all"]
+        z, zp = s["z_all"], s["post_all"]
         fused += [np.mean((z[:j + 1].mean(axis=0)[:n][sl] - truth) ** 2) for j in (1, 2) if j < len(z)]
+        post += [np.mean((zp[:j + 1].mean(axis=0)[:n][sl] - truth) ** 2) for j in (1, 2) if j < len(z)]
         agg.append(np.mean((z.mean(axis=0)[:n][sl] - truth) ** 2))
-    return {"fused": float(np.mean(fused)), "secure_aggregation": float(np.mean(agg))}
+    return {"fused": float(np.mean(fused)), "fused_posterior": float(np.mean(post)),
+            "secure_aggregation": float(np.mean(agg))}
 
 
 def run_replica_attacks(config: AttackStudyConfig, seed: int, pipe, *,

@@ -148,5 +148,5 @@ def run_attack_study(config: AttackStudyConfig, seed: int, *, progress: Callable
         config=config, seed=seed, attack_rows=tuple(attacks), exactness_rows=tuple(exactness_rows(runs, replica)),
         linkability_rows=tuple(linkability_rows(runs, config.experiment.n_vehicles)), baseline_rows=tuple(base),
         poisoning_rows=tuple(_poisoning(config, seed, pipe)), composition_rows=tuple(composition_rows(config)),
-        frontier=tuple(frontier_points(attacks, base, replica)), pole_examples=tuple(runs[0].pole_examples),
+        frontier=tuple(frontier_points(attacks, base, replica, config.experiment.n_vehicles)), pole_examples=tuple(runs[0].pole_examples),
         secagg_clipped=replica.secagg_clipped)

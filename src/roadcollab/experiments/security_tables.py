@@ -197,8 +197,8 @@ def composition_rows(config: AttackStudyConfig, segments=(1, 3, 10, 100)) -> lis
                            r["epsilon_total"]) for r in composition_table(spec, segments)]
 
 
-def frontier_points(attacks: list[AttackRow], baselines: list[BaselineRow], replica: ReplicaOutcome
-                    ) -> list[FrontierPoint]:
+def frontier_points(attacks: list[AttackRow], baselines: list[BaselineRow], replica: ReplicaOutcome,
+                    n_vehicles: int) -> list[FrontierPoint]:
     """Each mechanism's strongest attack (highest success, then lowest error) against its MSE.
 
     Parameters
@@ -207,6 +207,8 @@ def frontier_points(attacks: list[AttackRow], baselines: list[BaselineRow], repl
     baselines : list of BaselineRow
     replica : ReplicaOutcome
         MSE of the fused relay and of secure aggregation.
+    n_vehicles : int
+        Fleet size (secure aggregation's ``n - 1`` colluders case is outside its guarantee and left out).
 
     Returns
     -------
@@ -220,8 +222,10 @@ def frontier_points(attacks: list[AttackRow], baselines: list[BaselineRow], repl
     for mech in dict.fromkeys(a.mechanism for a in attacks):
         if mech not in mse:
             continue
-        best = min((a for a in attacks if a.mechanism == mech),
-                   key=lambda a: (-a.success_rate, a.median_rel_pole_error))
+        # Secure aggregation's guarantee assumes k honest inputs: the n - 1 colluders row is outside it.
+        inside = [a for a in attacks if a.mechanism == mech and not (
+            mech == "secure_aggregation" and a.attack == f"replica_collusion_c{n_vehicles - 1}")]
+        best = min(inside, key=lambda a: (-a.success_rate, a.median_rel_pole_error))
         out.append(FrontierPoint(mech, best.attack, best.road, best.segments, best.success_rate,
                                  best.median_rel_pole_error, float(mse[mech])))
     return out

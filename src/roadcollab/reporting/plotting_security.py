@@ -18,6 +18,18 @@ __all__ = ["plot_attack_success", "plot_privacy_frontier"]
 _NUMBER = re.compile(r"(\d+(?:\.\d+)?)")
 
 
+def _attack_label(row) -> str:
+    """``attack`` plus, where the row says so, the road given and the segments combined."""
+    label = str(_field(row, "attack"))
+    try:
+        road, segments = _field(row, "road"), int(_field(row, "segments"))
+    except (KeyError, AttributeError, TypeError, ValueError):
+        return label
+    extra = [f"road {road}"] if road not in ("-", "") else []
+    extra += [f"{segments} seg"] if segments > 1 else []
+    return f"{label} ({', '.join(extra)})" if extra else label
+
+
 def _field(row, name: str):
     """``row[name]`` of a dict row or ``row.name`` of a row object."""
     return row[name] if isinstance(row, dict) else getattr(row, name)
@@ -104,7 +116,7 @@ def plot_attack_success(rows: Sequence, path) -> Path:
     _error_panel(a2, x, err)
     a2.set_ylabel("median relative\npole error")
     a2.set_xticks(x)
-    a2.set_xticklabels([str(_field(r, "attack")) for r in rows], rotation=60, ha="right", fontsize=8)
+    a2.set_xticklabels([_attack_label(r) for r in rows], rotation=60, ha="right", fontsize=8)
     for ax in (a1, a2):
         ax.grid(True, axis="y", alpha=0.3)
         for (_, _, last), (_, first, _) in zip(groups[:-1], groups[1:]):
@@ -134,14 +146,16 @@ def plot_privacy_frontier(points: Sequence, path) -> Path:
     Path
         ``path``.
     """
-    fig, (a1, a2) = plt.subplots(1, 2, figsize=(11, 4.5))
-    cmap = plt.get_cmap("tab10")
+    fig, (a1, a2) = plt.subplots(1, 2, figsize=(12, 4.5))
+    cmap = plt.get_cmap("tab20")
+    markers = "osD^vP*Xhp<>"
     for i, p in enumerate(points):
-        c = cmap(i % 10)
+        c, m = cmap(i % 20), markers[i % len(markers)]
         err = float(p.median_rel_pole_error)
-        shown = min(err, 10.0) if np.isfinite(err) else 10.0
-        a1.scatter(p.mse, p.success_rate, color=c, s=40, label=p.mechanism)
-        a2.scatter(p.mse, shown, color=c, s=40, marker="^" if shown != err else "o")
+        # Log axis: exact recovery (error 0) is drawn at 1e-16, nothing found (inf) and >= 10 at 10.
+        shown = 10.0 if not np.isfinite(err) else min(max(err, 1e-16), 10.0)
+        a1.scatter(p.mse, p.success_rate, color=c, marker=m, s=45, label=f"{p.mechanism} ({p.attack})")
+        a2.scatter(p.mse, shown, color=c, marker=m, s=45)
     a1.set_xscale("log")
     a1.set_ylim(-0.03, 1.03)
     a1.set_xlabel("receivers' road-velocity MSE ((m/s)$^2$)")
@@ -153,7 +167,7 @@ def plot_privacy_frontier(points: Sequence, path) -> Path:
     a2.set_yscale("log")
     a2.axhline(0.1, color="k", ls="--", lw=1)
     a2.set_xlabel("receivers' road-velocity MSE ((m/s)$^2$)")
-    a2.set_ylabel("strongest attack: median relative pole error\n(triangles: >= 10, clipped)")
-    a2.set_title("Attacker's error vs accuracy (up and left = better)")
+    a2.set_ylabel("strongest attack: median relative pole error\n(0 drawn at 1e-16, >= 10 or none found at 10)")
+    a2.set_title("Attacker's error vs accuracy")
     a2.grid(True, which="both", alpha=0.3)
     return save_figure(fig, path)
