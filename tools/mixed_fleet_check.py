@@ -16,9 +16,15 @@ from roadcollab.experiments.mixed_fleet import MIXED_SPEEDS, mixed_fleet_check
 def main() -> None:
     """Run the check for every seed and print one line per seed."""
     p = argparse.ArgumentParser(description=__doc__)
-    p.add_argument("--seeds", default="0-4", help="first-last seed (default 0-4)")
+    p.add_argument("--seeds", default="0-4", help="one seed N or a range first-last (default 0-4)")
     args = p.parse_args()
-    lo, hi = (int(v) for v in args.seeds.split("-"))
+    try:
+        parts = [int(v) for v in args.seeds.split("-")]
+    except ValueError:
+        p.error(f"--seeds: expected N or FIRST-LAST, got {args.seeds!r}")
+    if len(parts) not in (1, 2):
+        p.error(f"--seeds: expected N or FIRST-LAST, got {args.seeds!r}")
+    lo, hi = parts[0], parts[-1]
     errors = (2.5, -3.0, 1.2, 3.0)
     print("seed  fused  single_mean  ratio  same_speed_fused  fused_posterior  max|offset error| (m)  done")
     for seed in range(lo, hi + 1):
