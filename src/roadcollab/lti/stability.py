@@ -61,7 +61,9 @@ def _schur_lyapunov(R: np.ndarray, U: np.ndarray) -> np.ndarray:
     """``X`` of ``A^T X A - X = -I`` from ``A = U R U^H`` (module docstring; the caller verifies it)."""
     n = R.shape[0]
     eye = np.eye(n)
-    Rp_inv = scipy.linalg.solve_triangular(R + eye, eye.astype(complex))        # (R + I)^-1, upper
+    Rp_inv, info = scipy.linalg.lapack.ztrtri(R + eye)        # (R + I)^-1, upper (solve_triangular: 3x slower)
+    if info != 0:
+        raise np.linalg.LinAlgError(f"ztrtri failed (info={info})")
     Rc = (R - eye) @ Rp_inv
     rhs = -2.0 * (Rp_inv.conj().T @ Rp_inv)
     Y, scale, info = scipy.linalg.lapack.ztrsyl(Rc, Rc, rhs, trana="C", tranb="N")

@@ -289,7 +289,9 @@ def draw_obfuscator(spec: ObfuscationSpec, grid: SegmentGrid, *, rng=None,
                 # Scale so |N_ab(j w)/d(j w)| ~ gain at high frequency and O(gain) at DC.
                 gain = diag_gain[a] if a == b else spec.coupling * rng.uniform(-1, 1) * np.sqrt(np.prod(diag_gain))
                 num[a, b] = gain * _poly(zeros)
-        det = np.polysub(np.polymul(num[0, 0], num[1, 1]), np.polymul(num[0, 1], num[1, 0]))
+        # np.polymul is np.convolve and the operands have one length: the same values without
+        # poly1d's checks (0.1 ms per candidate).
+        det = np.convolve(num[0, 0], num[1, 1]) - np.convolve(num[0, 1], num[1, 0])
         z = np.roots(np.trim_zeros(det, "f"))
         if z.size != 2 * n or np.max(z.real) > -spec.min_zero_distance:
             continue
