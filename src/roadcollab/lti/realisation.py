@@ -123,15 +123,10 @@ class StateSpaceData:
         if memo is not None and memo[0] == key:
             return memo[1]
         A = np.asarray(self.A, dtype=float)
-        if self.order == 0:
+        if self.order == 0 or not np.isfinite(A).all():
             out = spectral_radius_and_gain(A)
         else:
-            try:
-                with np.errstate(all="ignore"):
-                    schur = self.schur() if np.isfinite(A).all() else None
-            except (np.linalg.LinAlgError, ValueError):
-                schur = None
-            out = spectral_radius_and_gain(A, schur=schur)
+            out = spectral_radius_and_gain(A, schur=self.schur)
         object.__setattr__(self, "_stability", (key, out))   # frozen dataclass: a private memo, not a field
         return out
 

