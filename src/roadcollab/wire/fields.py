@@ -10,7 +10,7 @@ from typing import Union
 
 import numpy as np
 
-from ..lti.realisation import StateSpaceData
+from ..lti.realisation import StateSpaceData, SystemCache
 from .layout import (MESSAGE_TYPE_INVERSION, MESSAGE_TYPE_KEY_ADVERT, MESSAGE_TYPE_MASKED_INPUT,
                      MESSAGE_TYPE_SEALED_SHARES, Header, SecAggHeader)
 from .message import ExchangeMessage, InversionMessage
@@ -32,7 +32,7 @@ def _build_secagg(h: SecAggHeader, fields: dict) -> Message:
     return Reveal(h.vehicle, dict(fields["self_mask_shares"]), dict(fields["key_shares"]), session=h.session)
 
 
-def build_message(h: Header | SecAggHeader, arrays: dict) -> Message:
+def build_message(h: Header | SecAggHeader, arrays: dict, *, systems: SystemCache | None = None) -> Message:
     """The message described by a checked header and its payload arrays.
 
     Parameters
@@ -40,6 +40,9 @@ def build_message(h: Header | SecAggHeader, arrays: dict) -> Message:
     h : Header | SecAggHeader
     arrays : dict
         Payload arrays (or secure-aggregation fields) by wire name, as read from the bytes.
+    systems : SystemCache, optional
+        The receiver's systems by content: ``T`` and ``S`` identical to bytes seen before come back
+        as the same objects, with their stability certificate memoised.
 
     Returns
     -------
@@ -51,7 +54,8 @@ def build_message(h: Header | SecAggHeader, arrays: dict) -> Message:
     if h.msg_type == MESSAGE_TYPE_INVERSION:
         return InversionMessage(mechanism=h.mechanism, sample_rate=h.sample_rate, n_samples=h.n_samples,
                                 z=arrays["z"], count=h.count)
-    T, S = (StateSpaceData(*(arrays[f"{name}.{p}"] for p in "ABCD"), dt=dt)
+    make = StateSpaceData if systems is None else systems.get
+    T, S = (make(*(arrays[f"{name}.{p}"] for p in "ABCD"), dt)
             for name, dt in (("T", h.dt_T), ("S", h.dt_S)))
     return ExchangeMessage(mechanism=h.mechanism, sample_rate=h.sample_rate, n_samples=h.n_samples,
                            T=T, S=S, e=arrays["e"], wf=arrays["wf"])

@@ -135,6 +135,7 @@ import numpy as np
 from ..errors import MessageError
 from .examples import example_message
 from .describe import message_fields, validate_message
+from ..lti.realisation import SystemCache
 from .fields import Message, build_message
 from .framing import as_buffer, check_frame_size, pack_message, read_header
 # _decode calls it through this module's namespace, so a test can replace protocol._read_array
@@ -228,7 +229,7 @@ def encode(message: Message) -> bytes:
     return pack_message(h, arrays)
 
 
-def _decode(data) -> Message:
+def _decode(data, systems: SystemCache | None = None) -> Message:
     """:func:`decode` without the final conversion of unexpected exceptions."""
     buf = as_buffer(data)
     h = read_header(buf)
@@ -244,10 +245,10 @@ def _decode(data) -> Message:
         arrays[name] = _read_array(buf, offset, shape)
         offset += FLOAT_NBYTES * shape[0] * shape[1]
     # The message validates its content on construction (check_payload, once).
-    return build_message(h, arrays)
+    return build_message(h, arrays, systems=systems)
 
 
-def decode(data: bytes | bytearray | memoryview) -> Message:
+def decode(data: bytes | bytearray | memoryview, *, systems: SystemCache | None = None) -> Message:
     """Parse and validate an untrusted byte string produced by :func:`encode`.
 
     Parameters
@@ -255,6 +256,10 @@ def decode(data: bytes | bytearray | memoryview) -> Message:
     data : bytes | bytearray | memoryview
         The received bytes. Nothing is allocated from the declared sizes until the header has
         passed every limit check and the byte count matches it exactly.
+    systems : SystemCache, optional
+        The receiver's cache of systems by content (:class:`~roadcollab.lti.realisation.SystemCache`):
+        a ``T`` or ``S`` with exactly the bytes of one decoded before is that same object, so its
+        stability certificate is not computed again (every check still runs on it).
 
     Returns
     -------
@@ -270,7 +275,7 @@ def decode(data: bytes | bytearray | memoryview) -> Message:
         values; unstable dynamics). No other exception escapes, whatever the input.
     """
     try:
-        return _decode(data)
+        return _decode(data, systems)
     except MessageError:
         raise
     except (struct.error, ValueError, TypeError, IndexError, OverflowError, MemoryError,

@@ -1,0 +1,112 @@
+"""The block-diagonalised Schur evaluation against dense solves, and the caches keyed by content."""
+
+import numpy as np
+import pytest
+import scipy.linalg
+
+from roadcollab.experiments.bench_naive import direct_response
+from roadcollab.lti.blockdiag import block_response, block_schur
+from roadcollab.lti.realisation import StateSpaceData, SystemCache, random_orthogonal, series, similarity
+from roadcollab.lti.response import FrequencyResponseCache
+from roadcollab.lti.stability import spectral_radius_and_gain
+
+
+def _rel(a, b):
+    return float(np.max(np.abs(a - b)) / np.max(np.abs(b)))
+
+
+def _hidden(A, B, C, D, rng):
+    Q = random_orthogonal(A.shape[0], rng)
+    return StateSpaceData(Q.T @ A @ Q, Q.T @ B, C @ Q, D, 0.005)
+
+
+@pytest.mark.parametrize("case", ["distinct", "doubled", "jordan", "series"])
+def test_block_response_agrees_with_dense_solves(case):
+    rng = np.random.default_rng(7)
+    om = np.linspace(1e-3, np.pi - 1e-3, 400)
+    if case == "distinct":
+        lam = rng.uniform(0.2, 0.95, 6)
+        A = np.diag(lam)
+    elif case == "doubled":     # exactly repeated eigenvalues (the obfuscators' modal form)
+        A = np.kron(np.diag([0.9, 0.5, -0.3]), np.eye(2))
+    elif case == "jordan":      # defective: one block of 3, decoupling impossible inside it
+        A = scipy.linalg.block_diag(0.97 * np.eye(3) + np.diag([1.0, 1.0], 1), np.diag([0.2, -0.5]))
+    else:                       # a system in series with itself: its poles twice
+        base = _hidden(np.diag([0.98, 0.9, 0.6]) + np.diag([0.3, 0.1], 1), rng.standard_normal((3, 2)),
+                       rng.standard_normal((2, 3)), np.eye(2), rng)
+        s = series(base, base)
+        A = s.A
+    n = A.shape[0]
+    sys = _hidden(A, rng.standard_normal((n, 2)), rng.standard_normal((2, n)), rng.standard_normal((2, 2)), rng)
+    bs = block_schur(sys.A, sys.B, sys.C)
+    got = block_response(bs, sys.D, np.exp(1j * om))
+    assert _rel(got, direct_response(sys, om)) < 1e-11
+    assert sum(b - a for a, b in bs.blocks) == n
+    if case == "jordan":
+        assert max(b - a for a, b in bs.blocks) >= 3
+
+
+def test_merged_clusters_still_exact():
+    """A tight coupling bound forces merges (down to one block): the result is the Schur back
+    substitution, equally exact."""
+    rng = np.random.default_rng(3)
+    sys = similarity(_hidden(np.diag([0.99, 0.985, 0.7, 0.3]) + np.diag([0.5, 0.2, 0.1], 1),
+                             rng.standard_normal((4, 2)), rng.standard_normal((2, 4)), np.eye(2), rng),
+                     np.eye(4), balance=True)
+    om = np.linspace(1e-3, 3.0, 300)
+    bs = block_schur(sys.A, sys.B, sys.C, max_coupling=1e-6)
+    assert bs.blocks == [(0, 4)]
+    assert _rel(block_response(bs, sys.D, np.exp(1j * om)), direct_response(sys, om)) < 1e-11
+
+
+def test_schur_certificate_agrees_with_the_eigen_one():
+    rng = np.random.default_rng(5)
+    A = _hidden(np.diag([0.99, 0.9, 0.5, -0.4]) + np.diag([2.0, 0.0, 1.0], 1), np.zeros((4, 2)),
+                np.zeros((2, 4)), np.eye(2), rng).A
+    r0, g0 = spectral_radius_and_gain(A)
+    r1, g1 = spectral_radius_and_gain(A, schur=scipy.linalg.schur(A, output="complex"))
+    assert abs(r0 - r1) < 1e-12 and abs(g0 - g1) < 1e-6 * g0
+    jordan = 0.99 * np.eye(64) + np.diag(np.ones(63), 1)
+    jordan[-1, 0] = 1e-16        # computed radius 0.99, true radius 1.55: no certificate
+    assert spectral_radius_and_gain(jordan, schur=scipy.linalg.schur(jordan, output="complex"))[1] == np.inf
+
+
+def test_caches_hit_only_on_identical_bytes():
+    rng = np.random.default_rng(1)
+    A = np.diag([0.9, 0.5])
+    B, C, D = rng.standard_normal((2, 2)), rng.standard_normal((2, 2)), np.eye(2)
+    systems = SystemCache()
+    first = systems.get(A, B, C, D, 0.01)
+    assert systems.get(A.copy(), B.copy(), C.copy(), D.copy(), 0.01) is first
+    A2 = A.copy()
+    A2[0, 0] = np.nextafter(0.9, 1.0)          # one ulp: a different system
+    assert systems.get(A2, B, C, D, 0.01) is not first
+    assert systems.get(A, B, C, D, 0.02) is not first
+    cache = FrequencyResponseCache()
+    om = np.linspace(0.1, 1.0, 5)
+    H = cache.response(first, om)
+    assert cache.response(StateSpaceData(A.copy(), B, C, D, 0.01), om) is H
+    assert not np.array_equal(cache.response(StateSpaceData(A2, B, C, D, 0.01), om), H)
+    assert np.allclose(cache.response(first, om, inverse=True) @ H, np.eye(2))
+
+
+def test_decode_reuses_a_certified_system_only_for_the_same_bytes():
+    from roadcollab.errors import MessageError
+    from roadcollab.wire import protocol
+    from roadcollab.wire.examples import example_message
+
+    data = protocol.encode(example_message("none", rng=0))
+    systems = SystemCache()
+    first = protocol.decode(data, systems=systems)
+    again = protocol.decode(data, systems=systems)
+    assert again.T is first.T and again.S is first.S
+    assert first.T.__dict__.get("_stability") is not None       # certified once, memo kept
+    # An unstable T with the same shape is not served from the cache: it is refused.
+    T = first.T
+    bad = bytearray(data)
+    A = np.array(T.A, copy=True)
+    A[0, 0] += 5.0
+    off = protocol.EXCHANGE_HEADER_NBYTES
+    bad[off:off + A.nbytes] = A.astype("<f8").tobytes()
+    with pytest.raises(MessageError, match="stable"):
+        protocol.decode(bytes(bad), systems=systems)
