@@ -1,20 +1,65 @@
-"""Dask runs give bit-identical results to serial runs (real LocalCluster)."""
+"""Parallel runs (local process pool, real Dask LocalCluster) give bit-identical results to serial runs."""
 
 import dataclasses
+import os
 
 import numpy as np
 import pytest
 
 from roadcollab import ExperimentConfig, ParameterError, run_reproduction
-from roadcollab.experiments.runner import map_runs
+from roadcollab.experiments.runner import local_dask_cluster, map_runs
 
 CFG = ExperimentConfig(n_vehicles=3, n_runs=4, segment_length=90.0)
 
 
-def test_local_cluster_matches_serial_bit_for_bit():
+def test_process_pool_matches_serial_bit_for_bit():
     serial = run_reproduction(CFG, 7).table()
-    dask = run_reproduction(CFG, 7, workers=2).table()
+    pool = run_reproduction(CFG, 7, workers=2).table()
+    assert serial == pool
+
+
+def test_local_dask_cluster_matches_serial_bit_for_bit():
+    cfg = dataclasses.replace(CFG, n_runs=3)
+    serial = run_reproduction(cfg, 7).table()
+    with local_dask_cluster(2) as address:
+        dask = run_reproduction(cfg, 7, scheduler=address).table()
     assert serial == dask
+
+
+def test_pool_keeps_shared_per_worker_not_per_chunk():
+    """Six one-run chunks on two workers: each worker process holds one shared object for all its
+    chunks (a copy per chunk would count 1 every time)."""
+    seen = map_runs(_CountChunks(), 6, workers=2, chunk_size=1, shared=_Counter())
+    per_worker = {}
+    for pid, calls in seen:
+        per_worker.setdefault(pid, []).append(calls)
+    assert len(per_worker) <= 2 and max(len(v) for v in per_worker.values()) >= 3
+    assert all(sorted(v) == list(range(1, len(v) + 1)) for v in per_worker.values())
+
+
+class _Counter:
+    """A shared object that counts the chunks its worker ran."""
+
+    def __init__(self):
+        self.calls = 0
+
+
+class _CountChunks:
+    def __call__(self, indices, counter):
+        counter.calls += 1
+        return [(os.getpid(), counter.calls) for _ in indices]
+
+
+def test_pool_propagates_task_errors():
+    with pytest.raises(ParameterError, match="run 3 refused"):
+        map_runs(_Refuse(), 5, workers=2, chunk_size=1)
+
+
+class _Refuse:
+    def __call__(self, indices):
+        if 3 in indices:
+            raise ParameterError("run 3 refused")
+        return list(indices)
 
 
 def test_chunking_does_not_change_results():

@@ -162,7 +162,7 @@ def add_dask_options(p: argparse.ArgumentParser) -> None:
     """``--workers N`` or ``--scheduler ADDRESS`` (mutually exclusive): where the runs are computed."""
     g = p.add_mutually_exclusive_group()
     g.add_argument("--workers", type=positive_int, default=None,
-                   help="run on a local Dask cluster with N worker processes (results are identical)")
+                   help="run on a local process pool with N worker processes (results are identical)")
     g.add_argument("--scheduler", default=None, metavar="ADDRESS",
                    help="run on an existing Dask cluster, e.g. tcp://host:8786")
 

@@ -105,7 +105,7 @@ def calibrate_anomalies(config: AnomalyCalibrationConfig, *, progress: Callable[
     progress : callable, optional
         Called with the number of finished runs (of ``len(seeds) * runs_per_seed``).
     workers : int, optional
-        Local Dask cluster with this many worker processes (identical results).
+        Local process pool with this many worker processes (identical results).
     scheduler : str, optional
         Address of an existing Dask scheduler.
 

@@ -132,7 +132,7 @@ def run_anomaly_study(config: AnomalyStudyConfig, seed: int, *, progress: Callab
     progress : callable, optional
         Called with the number of finished runs.
     workers : int, optional
-        Local Dask cluster with this many worker processes.
+        Local process pool with this many worker processes (identical results).
     scheduler : str, optional
         Address of an existing Dask scheduler.
 

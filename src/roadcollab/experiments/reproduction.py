@@ -331,7 +331,7 @@ def run_reproduction(config: ExperimentConfig, seed: int, *, progress: Callable[
     privacy : bool
         Run the obfuscated chain too.
     workers : int, optional
-        Local Dask cluster with this many worker processes.
+        Local process pool with this many worker processes (identical results).
     scheduler : str, optional
         Address of an existing Dask scheduler.
     iri_segment_length : float, optional
