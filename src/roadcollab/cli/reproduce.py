@@ -6,6 +6,7 @@ import argparse
 
 from rich.console import Console
 
+from ..experiments.pipeline import PipelineCache
 from ..experiments.reproduction import run_reproduction
 from ..experiments.reproduction_iri import IRI_SEGMENT_LENGTH
 from ..reporting.records import staged_output
@@ -59,8 +60,11 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
     return p
 
 
-def _measured(args: argparse.Namespace):
+def _measured(args: argparse.Namespace, cache):
     """The extra runs on the shipped measured profile for the report, or None if not wanted.
+
+    ``cache`` (the reproduction's :class:`~roadcollab.experiments.pipeline.PipelineCache`) already holds
+    the fleet's estimators, which the measured road shares.
 
     Returns
     -------
@@ -73,7 +77,7 @@ def _measured(args: argparse.Namespace):
     mcfg = config_from_args(margs)
     return run_with_progress(mcfg.n_runs, "measured profile",
                              lambda cb: run_reproduction(mcfg, args.seed, progress=cb, **dask_options(args),
-                                                         iri_segment_length=IRI_SEGMENT_LENGTH))
+                                                         iri_segment_length=IRI_SEGMENT_LENGTH, cache=cache))
 
 
 def run(args: argparse.Namespace, command_line: str) -> int:
@@ -94,10 +98,14 @@ def run(args: argparse.Namespace, command_line: str) -> int:
     check_dask_options(args)
     with staged_output(args.out) as out:
         cfg = config_from_args(args)
+        cache = PipelineCache()
         result, elapsed = run_with_progress(cfg.n_runs, NAME, lambda cb: run_reproduction(
-            cfg, args.seed, progress=cb, **dask_options(args)))
-        measured = _measured(args)
-        summary = write_reproduction(result, out, command=command_line, elapsed=elapsed, measured=measured)
+            cfg, args.seed, progress=cb, **dask_options(args), cache=cache))
+        measured = _measured(args, cache)
+        timings = {"workers": args.workers or 1 if args.scheduler is None else args.scheduler, "runs_s": elapsed,
+                   "measured_runs_s": 0.0 if measured is None else measured[1]}
+        summary = write_reproduction(result, out, command=command_line, elapsed=elapsed, measured=measured,
+                                     timings=timings)
     headers, values = headline_table(result.table())
     print_table(f"MSE per vehicle ((m/s)^2), {cfg.n_runs} runs, {elapsed:.1f} s", headers,
                 [(str(v[0]), *(f"{x:.3g}" for x in v[1:])) for v in values])
