@@ -5,7 +5,6 @@ from __future__ import annotations
 import argparse
 import json
 
-from ..experiments.bench import run_bench
 from ._common import command_parser, positive_int, print_table
 
 __all__ = ["NAME", "add_parser", "run"]
@@ -55,6 +54,8 @@ def run(args: argparse.Namespace, command_line: str) -> int:
     int
         Exit status 0.
     """
+    from ..experiments.bench import run_bench
+
     rec = run_bench(sizes=_QUICK_SIZES if args.quick else _SIZES, repeats=args.repeats)
     if args.json:
         print(json.dumps(rec))

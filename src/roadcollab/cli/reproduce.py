@@ -4,13 +4,6 @@ from __future__ import annotations
 
 import argparse
 
-from rich.console import Console
-
-from ..experiments.pipeline import PipelineCache
-from ..experiments.reproduction import run_reproduction
-from ..experiments.reproduction_iri import IRI_SEGMENT_LENGTH
-from ..reporting.records import staged_output
-from ..reporting.reproduction_report import headline_table, write_reproduction
 from ._common import (command_parser, add_dask_options, add_road_options, add_study_options, check_dask_options,
                       config_from_args, dask_options, nonneg_int, positive_float, print_table, run_with_progress)
 
@@ -71,6 +64,9 @@ def _measured(args: argparse.Namespace, cache):
     (ReproductionResult, float) or None
         The result and its wall time, s.
     """
+    from ..experiments.reproduction import run_reproduction
+    from ..experiments.reproduction_iri import IRI_SEGMENT_LENGTH
+
     if args.road_profile is not None or args.measured_runs <= 0:
         return None
     margs = argparse.Namespace(**{**vars(args), "road_profile": "packaged", "runs": args.measured_runs})
@@ -95,6 +91,12 @@ def run(args: argparse.Namespace, command_line: str) -> int:
     int
         Exit status 0.
     """
+    from rich.console import Console
+    from ..experiments.pipeline import PipelineCache
+    from ..experiments.reproduction import run_reproduction
+    from ..reporting.records import staged_output
+    from ..reporting.reproduction_report import headline_table, write_reproduction
+
     check_dask_options(args)
     with staged_output(args.out) as out:
         cfg = config_from_args(args)
