@@ -106,3 +106,20 @@ def test_seed_plan_streams_are_stateless_and_match_spawn():
     assert descendant(plan.root, 1, 3).spawn_key == (1, 3)
     with pytest.raises(ValueError, match="name must be one of"):
         run_stream(plan.run(0), "weather")
+
+
+def test_fleet_scale_run_matches_serial_on_pool_and_dask():
+    from roadcollab.experiments.scale import run_scale, run_segments
+
+    cfg = ExperimentConfig(n_vehicles=2, n_runs=1, segment_length=60.0)
+    serial = run_segments(cfg, 3, 4)
+    pool = run_segments(cfg, 3, 4, workers=2)
+    assert [s.index for s in pool] == [0, 1, 2, 3]
+    assert all(np.array_equal(a.mse, b.mse) for a, b in zip(serial, pool))
+    assert not np.array_equal(serial[0].mse, serial[1].mse)   # segments differ: the check can fail
+    res = run_scale([2, 3], n_vehicles=2, workers=2, seed=3, segment_length=60.0, check_segments=2)
+    assert res.identical_to_serial is True and res.serial_check_segments == 2
+    assert [p.segments for p in res.points] == [2, 3] and all(1 <= p.worker_processes <= 2 for p in res.points)
+    assert all(p.peak_rss_mb_per_worker > 0 for p in res.points)
+    with pytest.raises(ParameterError, match="mechanism must be one of"):
+        run_segments(cfg, 0, 1, mechanism="rot13")
