@@ -56,8 +56,13 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
 def _measured(args: argparse.Namespace, cache):
     """The extra runs on the shipped measured profile for the report, or None if not wanted.
 
-    ``cache`` (the reproduction's :class:`~roadcollab.experiments.pipeline.PipelineCache`) already holds
-    the fleet's estimators, which the measured road shares.
+    Parameters
+    ----------
+    args : argparse.Namespace
+        The command's options (``--measured-runs``, ``--road-profile``, the fleet and the workers).
+    cache : PipelineCache
+        The reproduction's :class:`~roadcollab.experiments.pipeline.PipelineCache`: it already holds the
+        fleet's estimators, which the measured road shares.
 
     Returns
     -------
@@ -92,6 +97,7 @@ def run(args: argparse.Namespace, command_line: str) -> int:
         Exit status 0.
     """
     from rich.console import Console
+
     from ..experiments.pipeline import PipelineCache
     from ..experiments.reproduction import run_reproduction
     from ..reporting.records import staged_output
@@ -104,7 +110,7 @@ def run(args: argparse.Namespace, command_line: str) -> int:
         result, elapsed = run_with_progress(cfg.n_runs, NAME, lambda cb: run_reproduction(
             cfg, args.seed, progress=cb, **dask_options(args), cache=cache))
         measured = _measured(args, cache)
-        timings = {"workers": args.workers or 1 if args.scheduler is None else args.scheduler, "runs_s": elapsed,
+        timings = {"workers": (args.workers or 1) if args.scheduler is None else args.scheduler, "runs_s": elapsed,
                    "measured_runs_s": 0.0 if measured is None else measured[1]}
         summary = write_reproduction(result, out, command=command_line, elapsed=elapsed, measured=measured,
                                      timings=timings)
