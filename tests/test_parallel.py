@@ -123,3 +123,24 @@ def test_fleet_scale_run_matches_serial_on_pool_and_dask():
     assert all(p.peak_rss_mb_per_worker > 0 for p in res.points)
     with pytest.raises(ParameterError, match="mechanism must be one of"):
         run_segments(cfg, 0, 1, mechanism="rot13")
+
+
+def test_pipeline_cache_shares_estimators_across_roads_only():
+    """The same fleet on the measured profile reuses the synthetic road's estimators, not its road moment;
+    another design (gamma) builds its own; both give the results of a fresh cache."""
+    from roadcollab.experiments.pipeline import PipelineCache, design_key
+
+    cfg = ExperimentConfig(n_vehicles=2, n_runs=1, segment_length=60.0)
+    measured = dataclasses.replace(cfg, road_profile="packaged", n_runs=5)
+    other = dataclasses.replace(cfg, gamma=32.0)
+    assert design_key(cfg) == design_key(measured) != design_key(other)
+    cache = PipelineCache()
+    a, b, c = cache.pipeline(cfg, 4), cache.pipeline(measured, 4), cache.pipeline(other, 4)
+    assert all(x is y for x, y in zip(a.estimators, b.estimators))
+    assert not any(x is y for x, y in zip(a.estimators, c.estimators))
+    assert not np.array_equal(a.road_moment, b.road_moment)
+    assert b.profile_file is b.profile_file and a.profile_file is None
+    shared = run_reproduction(measured, 4, cache=cache).table()
+    assert shared == run_reproduction(measured, 4).table()
+    with pytest.raises(ParameterError, match="cache must be a PipelineCache"):
+        run_reproduction(cfg, 4, cache={})
