@@ -218,12 +218,12 @@ def test_failed_or_interrupted_run_leaves_previous_results(tmp_path, capsys, mon
     (out / "report.md").write_text("previous")
     bad = _drive(tmp_path, rows=_with_row(3, "0.015,nan,0"))
     assert _cli(capsys, ["estimate", "--drive", str(bad), "--out", str(out)])[0] == 2
-    import roadcollab.cli.estimate as cmd
+    import roadcollab.reporting.drives_report as report   # the command imports it when it runs
 
     def killed(*args, **kw):
         raise KeyboardInterrupt
 
-    monkeypatch.setattr(cmd, "write_estimates", killed)
+    monkeypatch.setattr(report, "write_estimates", killed)
     with pytest.raises(KeyboardInterrupt):
         main(["estimate", "--drive", str(path), "--out", str(out)])
     assert [p.name for p in out.iterdir()] == ["report.md"] and (out / "report.md").read_text() == "previous"

@@ -363,3 +363,13 @@ def test_other_bad_parameters():
         RoadProfile(np.array([0.0, 1.0, 1.0]), np.zeros((3, 2)))
     with pytest.raises(ParameterError, match=r"elevation must have shape \(3, 2\)"):
         RoadProfile(np.arange(3.0), np.zeros((3, 1)))
+
+
+def test_measured_road_from_a_profile_already_read_equals_reading_the_file():
+    profile = load_profile(packaged_profile_path())
+    for kw in ({}, {"spacing": 0.05}, {"second_track": "synthetic", "detrend": False}):
+        a = measured_road(profile, rng=3, **kw)
+        b = measured_road(None, rng=3, **kw)
+        assert np.array_equal(a.elevation, b.elevation) and np.array_equal(a.distance, b.distance)
+        assert a.source == b.source == "profile_1.txt"
+    assert np.array_equal(profile.elevation, load_profile(packaged_profile_path()).elevation)   # not modified

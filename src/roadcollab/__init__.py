@@ -4,27 +4,53 @@ After Gao, Li and Wang, "Privacy-Preserved Collaborative Estimation for Networke
 with Application to Road Anomaly Detection". See the README for the architecture.
 """
 
+import importlib as _importlib
 from importlib import metadata as _metadata
 
-from .wire import protocol
-from .detection.detector import Detection, DetectorSpec, detect_anomalies
-from .detection.scoring import MatchResult, match_detections
-from .collaboration.algorithm1 import CollaborativeEstimator, VehicleEstimate, learning_filters
 from .errors import FileFormatError, MessageError, ParameterError
-from .estimation.estimator import JDPNoise, RoadInputEstimator, build_road_input_estimator, jdp_estimator_gain
-from .experiments.config import ExperimentConfig
-from .experiments.pipeline import FleetPipeline
-from .experiments.reproduction import ReproductionResult, run_reproduction
-from .collaboration.fusion import LinearMMSE
-from .wire.message import ExchangeMessage, InversionMessage
-from .lti.realisation import StateSpaceData
-from .privacy.obfuscation import ObfuscationSpec, obfuscate
-from .collaboration.relay import Exchange, Relay, simulate_measurements
-from .io.profiles import measured_road
-from .models.road import RoadSpec, generate_road
-from .models.simulation import discretize_plant, simulate_response
-from .estimation.grid import SegmentGrid
-from .models.vehicle import FleetSpec, HalfCarParameters, Vehicle, half_car_model, sample_fleet
+
+#: Where each re-exported name lives (``name -> module``); imported on first use (PEP 562), so
+#: ``import roadcollab`` and ``roadcollab --help`` do not load SciPy's signal and statistics modules,
+#: matplotlib or Dask. ``protocol`` is the module :mod:`roadcollab.wire.protocol` itself.
+_LAZY = {
+    "protocol": "wire.protocol",
+    "Detection": "detection.detector",
+    "DetectorSpec": "detection.detector",
+    "detect_anomalies": "detection.detector",
+    "MatchResult": "detection.scoring",
+    "match_detections": "detection.scoring",
+    "CollaborativeEstimator": "collaboration.algorithm1",
+    "VehicleEstimate": "collaboration.algorithm1",
+    "learning_filters": "collaboration.algorithm1",
+    "JDPNoise": "estimation.estimator",
+    "RoadInputEstimator": "estimation.estimator",
+    "build_road_input_estimator": "estimation.estimator",
+    "jdp_estimator_gain": "estimation.estimator",
+    "ExperimentConfig": "experiments.config",
+    "FleetPipeline": "experiments.pipeline",
+    "ReproductionResult": "experiments.reproduction",
+    "run_reproduction": "experiments.reproduction",
+    "LinearMMSE": "collaboration.fusion",
+    "ExchangeMessage": "wire.message",
+    "InversionMessage": "wire.message",
+    "StateSpaceData": "lti.realisation",
+    "ObfuscationSpec": "privacy.obfuscation",
+    "obfuscate": "privacy.obfuscation",
+    "Exchange": "collaboration.relay",
+    "Relay": "collaboration.relay",
+    "simulate_measurements": "collaboration.relay",
+    "measured_road": "io.profiles",
+    "RoadSpec": "models.road",
+    "generate_road": "models.road",
+    "discretize_plant": "models.simulation",
+    "simulate_response": "models.simulation",
+    "SegmentGrid": "estimation.grid",
+    "FleetSpec": "models.vehicle",
+    "HalfCarParameters": "models.vehicle",
+    "Vehicle": "models.vehicle",
+    "half_car_model": "models.vehicle",
+    "sample_fleet": "models.vehicle",
+}
 
 try:
     __version__ = _metadata.version("roadcollab")
@@ -46,3 +72,36 @@ __all__ = [
     "FleetSpec", "HalfCarParameters", "Vehicle", "half_car_model", "sample_fleet",
     "protocol", "__version__",
 ]
+
+
+def __getattr__(name: str):
+    """Import a re-exported name on first use (PEP 562).
+
+    Parameters
+    ----------
+    name : str
+        One of ``__all__``.
+
+    Returns
+    -------
+    object
+        The class, function or module ``name``.
+
+    Raises
+    ------
+    AttributeError
+        ``name`` is not re-exported by :mod:`roadcollab`.
+    """
+    where = _LAZY.get(name)
+    if where is None:
+        raise AttributeError(f"module 'roadcollab' has no attribute {name!r}")
+    if name == "protocol":
+        value = _importlib.import_module(f"{__name__}.{where}")
+    else:
+        value = getattr(_importlib.import_module(f"{__name__}.{where}"), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(__all__))

@@ -10,17 +10,10 @@ import time
 from pathlib import Path
 from typing import Callable, Sequence
 
-from rich.console import Console
-from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
-from rich.table import Table
-
 import re
 
 from ..errors import ParameterError
-from ..experiments.config import ExperimentConfig
 from ..io.limits import DEFAULT_MAX_FILE_MB, DEFAULT_MAX_ROWS, FileLimits
-from ..io.profiles import measured_road
-from ..models.vehicle import FleetSpec
 
 __all__ = ["positive_int", "nonneg_int", "positive_float", "paillier_bits", "add_out_option", "add_dask_options",
            "add_road_options", "add_limit_options", "file_limits", "dask_options", "check_dask_options",
@@ -162,7 +155,7 @@ def add_dask_options(p: argparse.ArgumentParser) -> None:
     """``--workers N`` or ``--scheduler ADDRESS`` (mutually exclusive): where the runs are computed."""
     g = p.add_mutually_exclusive_group()
     g.add_argument("--workers", type=positive_int, default=None,
-                   help="run on a local Dask cluster with N worker processes (results are identical)")
+                   help="run on a local process pool with N worker processes (results are identical)")
     g.add_argument("--scheduler", default=None, metavar="ADDRESS",
                    help="run on an existing Dask cluster, e.g. tcp://host:8786")
 
@@ -264,6 +257,9 @@ def progress(total: int, description: str) -> tuple[Progress, Callable[[int], No
     advance : callable
         ``advance(done)`` sets the number of completed steps.
     """
+    from rich.console import Console
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+
     prog = Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
                     console=Console(stderr=True), transient=False)
     task = prog.add_task(description, total=total)
@@ -309,6 +305,9 @@ def print_table(title: str, columns: Sequence[str], rows: Sequence[Sequence[str]
     rows : sequence of sequence of str
         Cell texts, one sequence per row.
     """
+    from rich.console import Console
+    from rich.table import Table
+
     table = Table(title=title)
     for col in columns:
         table.add_column(col, justify="right")
@@ -337,6 +336,10 @@ def config_from_args(args: argparse.Namespace) -> ExperimentConfig:
     ParameterError
         ``--road-profile`` names no existing file, or a value the configuration rejects.
     """
+    from ..experiments.config import ExperimentConfig
+    from ..io.profiles import measured_road
+    from ..models.vehicle import FleetSpec
+
     kw = dict(n_runs=args.runs, n_vehicles=args.vehicles, speed=args.speed, oracle=args.oracle,
               road_profile=args.road_profile, redraw_fleet=getattr(args, "redraw_fleet", False),
               profile_limits=file_limits(args))

@@ -4,10 +4,6 @@ from __future__ import annotations
 
 import argparse
 
-from ..experiments.anomaly_config import AnomalyStudyConfig
-from ..experiments.anomaly_study import run_anomaly_study
-from ..reporting.anomaly_report import write_anomalies
-from ..reporting.records import staged_output
 from ._common import (command_parser, add_dask_options, add_road_options, add_study_options, check_dask_options, config_from_args,
                       dask_options, print_table, run_with_progress)
 
@@ -60,6 +56,11 @@ def run(args: argparse.Namespace, command_line: str) -> int:
     int
         Exit status 0.
     """
+    from ..experiments.anomaly_config import AnomalyStudyConfig
+    from ..experiments.anomaly_study import run_anomaly_study
+    from ..reporting.anomaly_report import write_anomalies
+    from ..reporting.records import staged_output
+
     # The study draws one road per run itself: the experiment describes a single run.
     ns = argparse.Namespace(runs=1, vehicles=args.vehicles, speed=args.speed, oracle=False,
                             road_profile=args.road_profile, noise=args.noise, iso_class=args.iso_class,

@@ -4,11 +4,6 @@ from __future__ import annotations
 
 import argparse
 
-from ..experiments.config import ExperimentConfig
-from ..experiments.security_replica import replica_fit_count
-from ..experiments.security_study import AttackStudyConfig, run_attack_study
-from ..reporting.attack_report import write_attack
-from ..reporting.records import staged_output
 from ._common import (command_parser, add_dask_options, add_study_options, check_dask_options, dask_options, paillier_bits, positive_int, print_table,
                       run_with_progress)
 
@@ -68,6 +63,12 @@ def run(args: argparse.Namespace, command_line: str) -> int:
     int
         Exit status 0.
     """
+    from ..experiments.config import ExperimentConfig
+    from ..experiments.security_replica import replica_fit_count
+    from ..experiments.security_study import AttackStudyConfig, run_attack_study
+    from ..reporting.attack_report import write_attack
+    from ..reporting.records import staged_output
+
     cfg = AttackStudyConfig(experiment=ExperimentConfig(n_vehicles=args.vehicles, n_runs=1), n_runs=args.runs,
                             paillier_bits=args.paillier_bits, replica_runs=args.replica_runs,
                             poisoning_runs=args.poisoning_runs)

@@ -1,12 +1,12 @@
-"""``roadcollab bench``: per-segment cost of one vehicle, and its scaling with segment length."""
+"""``roadcollab bench``: per-segment cost of one vehicle, and its scaling with segment length; with
+``--scale``, fleet-scale runs on a local Dask cluster (throughput, memory per worker, linearity)."""
 
 from __future__ import annotations
 
 import argparse
 import json
 
-from ..experiments.bench import run_bench
-from ._common import command_parser, positive_int, print_table
+from ._common import command_parser, positive_float, positive_int, print_table, progress
 
 __all__ = ["NAME", "add_parser", "run"]
 
@@ -37,7 +37,58 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
     p.add_argument("--json", action="store_true", help="print one JSON line")
     p.add_argument("--repeats", type=positive_int, default=30, help="timed segments per point (default 30)")
     p.add_argument("--quick", action="store_true", help="only up to 16k samples")
+    g = p.add_argument_group("fleet scale (a local Dask cluster)")
+    g.add_argument("--scale", type=_sizes, default=None, metavar="SEGMENTS",
+                   help="instead of the per-segment benchmark: drive this many road segments (comma-separated "
+                        "for several runs, e.g. 100,300,1000) with a fleet on a local Dask cluster and report "
+                        "vehicle-segments per second, peak memory per worker and a linear fit of the cost")
+    g.add_argument("--vehicles", type=positive_int, default=20, help="fleet size for --scale (default 20)")
+    g.add_argument("--workers", type=positive_int, default=2, help="Dask worker processes for --scale (default 2)")
+    g.add_argument("--segment-length", type=positive_float, default=300.0,
+                   help="scored metres per segment for --scale (default 300: 4000 samples at 15 m/s)")
+    g.add_argument("--check-segments", type=int, default=4,
+                   help="segments also run serially and compared bit for bit with the cluster (default 4)")
     return p
+
+
+def _sizes(text: str) -> list[int]:
+    """argparse type: comma-separated positive segment counts."""
+    out = [positive_int(part) for part in text.split(",") if part.strip()]
+    if not out:
+        raise argparse.ArgumentTypeError(f"expected segment counts such as 100,300,1000, got {text!r}")
+    return out
+
+
+def _run_scale(args: argparse.Namespace) -> int:
+    """``--scale``: the fleet-scale runs, printed as a table or one JSON line."""
+    from ..experiments.scale import run_scale
+
+    total = sum(args.scale)
+    bar, advance = progress(total, f"{args.vehicles} vehicles x {total} segments")
+    base = {"done": 0}
+
+    def step(label: str, done: int, n: int) -> None:
+        advance(base["done"] + done)
+        if done == n:
+            base["done"] += n
+
+    with bar:
+        res = run_scale(args.scale, n_vehicles=args.vehicles, workers=args.workers,
+                        segment_length=args.segment_length, check_segments=max(0, args.check_segments),
+                        progress=step)
+    if args.json:
+        print(json.dumps(res.to_dict()))
+        return 0
+    print_table(f"fleet scale: {args.vehicles} vehicles, {res.samples_per_segment} samples per segment, "
+                f"{args.workers} Dask workers, mechanism {res.mechanism}",
+                ("segments", "wall s", "vehicle-segments / s", "s / segment", "peak MB / worker"),
+                [(str(p.segments), f"{p.wall_s:.1f}", f"{p.vehicle_segments_per_s:.1f}", f"{p.s_per_segment:.3f}",
+                  f"{p.peak_rss_mb_per_worker:.0f}") for p in res.points])
+    print(f"linear fit: wall = {res.fixed_s:.2f} s + {res.per_segment_s:.4f} s x segments (worst residual "
+          f"{100 * res.max_fit_residual:.1f} %); cluster start {res.cluster_start_s:.1f} s, warm-up "
+          f"{res.warmup_s:.1f} s; first "
+          f"{res.serial_check_segments} segments identical to serial: {res.identical_to_serial}")
+    return 0
 
 
 def run(args: argparse.Namespace, command_line: str) -> int:
@@ -55,6 +106,10 @@ def run(args: argparse.Namespace, command_line: str) -> int:
     int
         Exit status 0.
     """
+    from ..experiments.bench import run_bench
+
+    if args.scale is not None:
+        return _run_scale(args)
     rec = run_bench(sizes=_QUICK_SIZES if args.quick else _SIZES, repeats=args.repeats)
     if args.json:
         print(json.dumps(rec))

@@ -4,11 +4,6 @@ from __future__ import annotations
 
 import argparse
 
-from ..experiments.calibration_config import AnomalyCalibrationConfig, parse_seeds
-from ..experiments.anomaly_calibration import calibrate_anomalies
-from ..reporting.calibration_report import write_calibration
-from ..reporting.records import staged_output
-from ..experiments.config import ExperimentConfig
 from ._common import (command_parser, add_dask_options, add_out_option, check_dask_options, dask_options, positive_float, positive_int,
                       progress)
 
@@ -64,6 +59,12 @@ def run(args: argparse.Namespace, command_line: str) -> int:
     int
         Exit status 0.
     """
+    from ..experiments.anomaly_calibration import calibrate_anomalies
+    from ..experiments.calibration_config import AnomalyCalibrationConfig, parse_seeds
+    from ..experiments.config import ExperimentConfig
+    from ..reporting.calibration_report import write_calibration
+    from ..reporting.records import staged_output
+
     kw = {}
     if args.snr_thresholds is not None:
         kw["snr_thresholds"] = tuple(args.snr_thresholds)

@@ -12,15 +12,6 @@ import time
 from dataclasses import asdict
 
 from ..errors import ParameterError
-from ..detection.detector import DetectorSpec
-from ..experiments.drive_estimation import estimate_drives, find_anomalies
-from ..experiments.fleet_estimation import estimate_fleet, find_fleet_anomalies, fused_iri
-from ..io.drives import common_time_grid, load_drives
-from ..io.limits import FileLimits
-from ..models.iri import iri_segments
-from ..reporting.drives_report import write_estimates
-from ..reporting.fleet_report import write_fleet_estimates
-from ..reporting.records import staged_output
 from ._common import add_limit_options, command_parser, file_limits, positive_float
 
 __all__ = ["NAME", "add_estimate_arguments", "estimate_command", "add_parser", "run"]
@@ -30,11 +21,17 @@ NAME = "estimate"
 
 def _detector_config() -> dict | None:
     """The anomaly detector's default settings for ``config.json``."""
+    from ..detection.detector import DetectorSpec
+
     return asdict(DetectorSpec())
 
 
 def _time_grid(drives, out, *, command: str, segment_length: float, t0: float) -> dict:
     """The drives share one time grid: relay in time as the simulations do, then IRI of the fused elevation."""
+    from ..experiments.drive_estimation import estimate_drives, find_anomalies
+    from ..models.iri import iri_segments
+    from ..reporting.drives_report import write_estimates
+
     est = estimate_drives(drives)
     note = None
     try:
@@ -53,6 +50,9 @@ def _time_grid(drives, out, *, command: str, segment_length: float, t0: float) -
 def _distance_grid(drives, out, *, command: str, segment_length: float, align: bool, max_offset: float,
                    spacing: float, t0: float) -> dict:
     """Drives on different grids (or aligned): every estimate on one distance grid."""
+    from ..experiments.fleet_estimation import estimate_fleet, find_fleet_anomalies, fused_iri
+    from ..reporting.fleet_report import write_fleet_estimates
+
     est = estimate_fleet(drives, spacing=spacing, align=align, max_offset=max_offset)
     notes = []
     try:
@@ -111,6 +111,10 @@ def estimate_command(drive_paths: list[str], out_dir, *, command: str, limits: F
         An unusable ``out_dir`` (before anything is read) or bad input files
         (:class:`~roadcollab.errors.FileFormatError`); ``out_dir`` is untouched then.
     """
+    from ..io.drives import common_time_grid, load_drives
+    from ..io.limits import FileLimits
+    from ..reporting.records import staged_output
+
     t0 = time.perf_counter()
     with staged_output(out_dir) as out:
         drives = load_drives(drive_paths, limits=limits)

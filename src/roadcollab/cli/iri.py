@@ -5,9 +5,6 @@ from __future__ import annotations
 import argparse
 import time
 
-from ..io.profiles import load_profile, packaged_profile_path
-from ..models.iri import GOLDEN_CAR, iri_segments
-from ..reporting.iri_report import write_iri
 from ._common import add_out_option, positive_float
 
 __all__ = ["NAME", "add_parser", "run"]
@@ -62,6 +59,10 @@ def run(args: argparse.Namespace, command_line: str) -> int:
     ParameterError
         Unreadable or bad profile file, or a profile shorter than one segment.
     """
+    from ..io.profiles import load_profile, packaged_profile_path
+    from ..models.iri import GOLDEN_CAR, iri_segments
+    from ..reporting.iri_report import write_iri
+
     path = packaged_profile_path() if args.road_profile in (None, "packaged") else args.road_profile
     profile = load_profile(path)
     t0 = time.perf_counter()

@@ -5,8 +5,6 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from ..reporting.records import staged_file
-from ..wire.protocol import MECHANISM_CODES, decode, write_example
 from ._common import command_parser, nonneg_int
 
 __all__ = ["NAME", "add_parser", "run"]
@@ -27,6 +25,8 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
     argparse.ArgumentParser
         The subcommand's parser.
     """
+    from ..wire.layout import MECHANISM_CODES
+
     p = command_parser(subparsers, NAME, summary="message utilities (see 'roadcollab message example --help')",
                        does="Tools for the versioned binary wire format that vehicles exchange.",
                        writes="see the subcommands.", example="roadcollab message example --out msg.bin")
@@ -60,6 +60,9 @@ def run(args: argparse.Namespace, command_line: str) -> int:
     int
         Exit status 0.
     """
+    from ..reporting.records import staged_file
+    from ..wire.protocol import decode, write_example
+
     with staged_file(args.out) as tmp:
         n = write_example(tmp, mechanism=args.mechanism, seed=args.seed)
     msg = decode(args.out.read_bytes())

@@ -4,12 +4,6 @@ from __future__ import annotations
 
 import argparse
 
-from rich.console import Console
-
-from ..experiments.reproduction import run_reproduction
-from ..experiments.reproduction_iri import IRI_SEGMENT_LENGTH
-from ..reporting.records import staged_output
-from ..reporting.reproduction_report import headline_table, write_reproduction
 from ._common import (command_parser, add_dask_options, add_road_options, add_study_options, check_dask_options,
                       config_from_args, dask_options, nonneg_int, positive_float, print_table, run_with_progress)
 
@@ -59,21 +53,32 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
     return p
 
 
-def _measured(args: argparse.Namespace):
+def _measured(args: argparse.Namespace, cache):
     """The extra runs on the shipped measured profile for the report, or None if not wanted.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        The command's options (``--measured-runs``, ``--road-profile``, the fleet and the workers).
+    cache : PipelineCache
+        The reproduction's :class:`~roadcollab.experiments.pipeline.PipelineCache`: it already holds the
+        fleet's estimators, which the measured road shares.
 
     Returns
     -------
     (ReproductionResult, float) or None
         The result and its wall time, s.
     """
+    from ..experiments.reproduction import run_reproduction
+    from ..experiments.reproduction_iri import IRI_SEGMENT_LENGTH
+
     if args.road_profile is not None or args.measured_runs <= 0:
         return None
     margs = argparse.Namespace(**{**vars(args), "road_profile": "packaged", "runs": args.measured_runs})
     mcfg = config_from_args(margs)
     return run_with_progress(mcfg.n_runs, "measured profile",
                              lambda cb: run_reproduction(mcfg, args.seed, progress=cb, **dask_options(args),
-                                                         iri_segment_length=IRI_SEGMENT_LENGTH))
+                                                         iri_segment_length=IRI_SEGMENT_LENGTH, cache=cache))
 
 
 def run(args: argparse.Namespace, command_line: str) -> int:
@@ -91,13 +96,24 @@ def run(args: argparse.Namespace, command_line: str) -> int:
     int
         Exit status 0.
     """
+    from rich.console import Console
+
+    from ..experiments.pipeline import PipelineCache
+    from ..experiments.reproduction import run_reproduction
+    from ..reporting.records import staged_output
+    from ..reporting.reproduction_report import headline_table, write_reproduction
+
     check_dask_options(args)
     with staged_output(args.out) as out:
         cfg = config_from_args(args)
+        cache = PipelineCache()
         result, elapsed = run_with_progress(cfg.n_runs, NAME, lambda cb: run_reproduction(
-            cfg, args.seed, progress=cb, **dask_options(args)))
-        measured = _measured(args)
-        summary = write_reproduction(result, out, command=command_line, elapsed=elapsed, measured=measured)
+            cfg, args.seed, progress=cb, **dask_options(args), cache=cache))
+        measured = _measured(args, cache)
+        timings = {"workers": (args.workers or 1) if args.scheduler is None else args.scheduler, "runs_s": elapsed,
+                   "measured_runs_s": 0.0 if measured is None else measured[1]}
+        summary = write_reproduction(result, out, command=command_line, elapsed=elapsed, measured=measured,
+                                     timings=timings)
     headers, values = headline_table(result.table())
     print_table(f"MSE per vehicle ((m/s)^2), {cfg.n_runs} runs, {elapsed:.1f} s", headers,
                 [(str(v[0]), *(f"{x:.3g}" for x in v[1:])) for v in values])

@@ -5,10 +5,6 @@ from __future__ import annotations
 import argparse
 
 from ..errors import ParameterError
-from ..experiments.sweep_config import SweepConfig
-from ..experiments.sweep import run_sweep
-from ..reporting.records import staged_output
-from ..reporting.sweep_report import write_sweep
 from ._common import (command_parser, add_dask_options, add_out_option, check_dask_options, dask_options, nonneg_int, positive_int,
                       print_table, run_with_progress)
 
@@ -61,6 +57,8 @@ def _floats(option: str, text: str) -> tuple[float, ...]:
 
 def _config(args: argparse.Namespace) -> SweepConfig:
     """The sweep's grid and run counts; options not given keep the :class:`SweepConfig` defaults."""
+    from ..experiments.sweep_config import SweepConfig
+
     kw = {key: _floats(option, text) for key, option, text in (
         ("gammas", "--gammas", args.gammas), ("sensor_noise_stds", "--noise", args.noise),
         ("parameter_uncertainties", "--uncertainty", args.uncertainty)) if text is not None}
@@ -82,6 +80,10 @@ def run(args: argparse.Namespace, command_line: str) -> int:
     int
         Exit status 0.
     """
+    from ..experiments.sweep import run_sweep
+    from ..reporting.records import staged_output
+    from ..reporting.sweep_report import write_sweep
+
     cfg = _config(args)
     check_dask_options(args)
     with staged_output(args.out) as out:

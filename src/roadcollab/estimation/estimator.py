@@ -24,7 +24,6 @@ from dataclasses import dataclass
 
 import numpy as np
 import scipy.linalg
-import scipy.signal
 
 from .._validation import check_matrix, check_nonnegative, check_positive, check_psd, check_signal
 from ..errors import ParameterError
@@ -267,6 +266,8 @@ class RoadInputEstimator:
         w_hat : (N, 2) ndarray
             Road-velocity estimate, m/s (zero initial state).
         """
+        import scipy.signal  # heavy (about 1 s): imported when first used, not with the package
+
         y = check_signal("y", y, 2)
         u = np.hstack([y, np.ones((y.shape[0], 1))]) if include_bias else y
         B = np.hstack([self.Bd, self.bias_d[:, None]]) if include_bias else self.Bd

@@ -105,7 +105,7 @@ def calibrate_anomalies(config: AnomalyCalibrationConfig, *, progress: Callable[
     progress : callable, optional
         Called with the number of finished runs (of ``len(seeds) * runs_per_seed``).
     workers : int, optional
-        Local Dask cluster with this many worker processes (identical results).
+        Local process pool with this many worker processes (identical results).
     scheduler : str, optional
         Address of an existing Dask scheduler.
 
@@ -139,8 +139,12 @@ def calibrate_anomalies(config: AnomalyCalibrationConfig, *, progress: Callable[
     keys = [(g, c, e) for g in range(n_grid) for c in range(n_cond) for e in ESTIMATORS]
     per_seed = [{key: MatchTally() for key in keys} for _ in range(S)]
     total = {key: MatchTally() for key in keys}
+    cache = PipelineCache()
+    if scheduler is None:   # every seed's fleet built here once, inherited by a forked pool
+        for seed in config.seeds:
+            condition_roads(config.study_config(), seed, cache)
     runs = map_runs(_CalibrationTask(config), S * R, workers=workers, scheduler=scheduler, progress=progress,
-                    shared=PipelineCache())
+                    shared=cache)
     for k, rec in enumerate(runs):
         for key in keys:
             per_seed[k // R][key].merge(rec[key])

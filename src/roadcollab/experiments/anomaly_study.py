@@ -132,7 +132,7 @@ def run_anomaly_study(config: AnomalyStudyConfig, seed: int, *, progress: Callab
     progress : callable, optional
         Called with the number of finished runs.
     workers : int, optional
-        Local Dask cluster with this many worker processes.
+        Local process pool with this many worker processes (identical results).
     scheduler : str, optional
         Address of an existing Dask scheduler.
 
@@ -154,8 +154,11 @@ def run_anomaly_study(config: AnomalyStudyConfig, seed: int, *, progress: Callab
     by_depth = {(i, name): MatchTally() for i in range(len(config.depths)) for name in ESTIMATORS}
     by_noise = {(i, name): MatchTally() for i in range(len(config.noise_levels)) for name in ESTIMATORS}
     pooled = range(1, V)   # vehicles 2..V
+    cache = PipelineCache()
+    if scheduler is None:   # the fleet's setup built here once, inherited by a forked pool
+        condition_roads(config, seed, cache)
     runs = map_runs(_AnomalyTask(config, seed), config.n_runs, workers=workers, scheduler=scheduler,
-                    progress=progress, shared=PipelineCache())
+                    progress=progress, shared=cache)
     for rec in runs:
         for (name, j), m in rec["main"].items():
             per_vehicle[name, j].add(m)

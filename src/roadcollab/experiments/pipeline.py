@@ -10,6 +10,7 @@ stream and one seed per run).
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 
 import numpy as np
@@ -20,12 +21,12 @@ from ..collaboration.relay import simulate_measurements
 from ..errors import ParameterError
 from ..models.profile import TimeRoad
 from ..models.road import RoadSpec, generate_road, with_anomalies
-from ..io.profiles import measured_road
+from ..io.profiles import MeasuredProfile, load_profile, measured_road, packaged_profile_path
 from ..models.vehicle import Vehicle, sample_fleet
 from .config import ExperimentConfig
 from .seeds import SeedPlan
 
-__all__ = ["FleetPipeline", "PipelineCache", "fleet_and_run_seeds", "record_run"]
+__all__ = ["FleetPipeline", "PipelineCache", "design_key", "fleet_and_run_seeds", "record_run"]
 
 #: Pipelines a :class:`PipelineCache` keeps (the oldest is dropped beyond this).
 _MAX_PIPELINES = 8
@@ -43,6 +44,10 @@ class FleetPipeline:
     road_moment : (n_bins, 2) ndarray, optional
         The configuration's per-bin road second moment if already computed (another fleet of the
         same configuration, :class:`PipelineCache`); computed on first use otherwise.
+    estimators : list of CollaborativeEstimator, optional
+        The fleet's estimators if already built for a configuration with the same design
+        (:func:`design_key`, e.g. the same fleet on a measured instead of a synthetic road); built
+        otherwise.
 
     Attributes
     ----------
@@ -52,16 +57,22 @@ class FleetPipeline:
         One per vehicle, designed for ``config.noise_model()``.
     """
 
-    def __init__(self, config: ExperimentConfig, fleet: list[Vehicle], *, road_moment: np.ndarray | None = None
-                 ) -> None:
+    def __init__(self, config: ExperimentConfig, fleet: list[Vehicle], *, road_moment: np.ndarray | None = None,
+                 estimators: list[CollaborativeEstimator] | None = None) -> None:
         if len(fleet) != config.n_vehicles:
             raise ParameterError(f"fleet must have n_vehicles={config.n_vehicles} vehicles, got {len(fleet)}")
         self.config = config
         self.fleet = fleet
-        self.grid = config.grid()
-        noise = config.noise_model()
-        self.estimators = [CollaborativeEstimator(v, noise, self.grid, gamma=config.gamma, oracle=config.oracle,
-                                                  fleet=config.fleet) for v in fleet]
+        if estimators is None:
+            self.grid = config.grid()
+            noise = config.noise_model()
+            self.estimators = [CollaborativeEstimator(v, noise, self.grid, gamma=config.gamma, oracle=config.oracle,
+                                                      fleet=config.fleet) for v in fleet]
+        else:
+            if len(estimators) != len(fleet) or any(e.vehicle is not v for e, v in zip(estimators, fleet)):
+                raise ParameterError("estimators must hold one CollaborativeEstimator per vehicle of fleet, in order")
+            self.grid = estimators[0].grid
+            self.estimators = list(estimators)
         if road_moment is not None:
             self.__dict__["road_moment"] = road_moment   # the cached_property's slot
 
@@ -86,6 +97,29 @@ class FleetPipeline:
                    for e in self.estimators]
         return LinearMMSE(self.grid, S, moments, [self.config.sensor_noise_std] * len(self.fleet))
 
+    @functools.cached_property
+    def profile_file(self) -> MeasuredProfile | None:
+        """The measured profile file of ``config.road_profile``, read once (None for a synthetic road)."""
+        cfg = self.config
+        if cfg.road_profile is None:
+            return None
+        path = packaged_profile_path() if cfg.road_profile == "packaged" else cfg.road_profile
+        return load_profile(path, limits=cfg.profile_limits)
+
+    def warm(self) -> FleetPipeline:
+        """Build everything the runs share now (road moment, centralized and oracle estimators).
+
+        A study calls it before its runs so that a forked worker pool inherits it instead of
+        building it once per worker; serially it only moves the same work earlier.
+
+        Returns
+        -------
+        FleetPipeline
+            ``self``.
+        """
+        _ = self.centralized, self.oracle_bound
+        return self
+
     def road(self, rng: np.random.Generator, spec: RoadSpec | None = None) -> TimeRoad:
         """Draw the run's road and sample it for the fleet's speed.
 
@@ -108,14 +142,12 @@ class FleetPipeline:
             if cfg.road_profile is None:
                 profile = generate_road(spec, rng=rng)
             else:
-                path = None if cfg.road_profile == "packaged" else cfg.road_profile
-                measured = measured_road(path, spacing=spec.spacing, rng=rng, limits=cfg.profile_limits)
+                measured = measured_road(self.profile_file, spacing=spec.spacing, rng=rng)
                 profile = with_anomalies(measured, spec, rng=rng)
         elif cfg.road_profile is None:
             profile = generate_road(cfg.road_spec(), rng=rng)
         else:
-            path = None if cfg.road_profile == "packaged" else cfg.road_profile
-            profile = measured_road(path, rng=rng, limits=cfg.profile_limits)
+            profile = measured_road(self.profile_file, rng=rng)
             if profile.length < cfg.window_length:
                 raise ParameterError(f"road_profile covers {profile.length:.1f} m, the window needs "
                                      f"segment_length + 2 * margin = {cfg.window_length:.1f} m")
@@ -148,6 +180,28 @@ def record_run(pipe: FleetPipeline, road_ss: np.random.SeedSequence, noise_ss: n
     road = pipe.road(np.random.default_rng(road_ss), road_spec)
     ys = simulate_measurements(pipe.estimators, road.velocity, sensor_noise_std, rng=np.random.default_rng(noise_ss))
     return road, ys, [pipe.grid.rfft(y) for y in ys]
+
+
+def design_key(config: ExperimentConfig) -> str:
+    """What a fleet's estimators depend on: the configuration without the road actually driven.
+
+    The estimators are designed for the configuration's *synthetic* road statistics
+    (:meth:`~roadcollab.experiments.config.ExperimentConfig.noise_model`), whatever road the runs drive, so
+    configurations that differ only in ``road_profile``, ``n_runs``, ``redraw_fleet``, the obfuscation or
+    the file limits share them.
+
+    Parameters
+    ----------
+    config : ExperimentConfig
+
+    Returns
+    -------
+    str
+        Equal for configurations whose fleets (from one root seed) have identical estimators.
+    """
+    return repr(dataclasses.replace(config, n_runs=1, road_profile=None, redraw_fleet=False,
+                                    obfuscation=ExperimentConfig().obfuscation,
+                                    profile_limits=ExperimentConfig().profile_limits))
 
 
 def fleet_and_run_seeds(config: ExperimentConfig, seed: int) -> tuple[list[Vehicle], list[np.random.SeedSequence]]:
@@ -191,6 +245,7 @@ class PipelineCache:
     def __init__(self) -> None:
         self._pipelines: dict = {}
         self._moments: dict = {}
+        self._estimators: dict = {}
 
     def __getstate__(self) -> dict:
         return {}
@@ -216,7 +271,15 @@ class PipelineCache:
         if key not in self._pipelines:
             if len(self._pipelines) >= _MAX_PIPELINES:
                 self._pipelines.pop(next(iter(self._pipelines)))
-            self._pipelines[key] = FleetPipeline(config, fleet_and_run_seeds(config, seed)[0])
+            shared = self._estimators.get((design_key(config), seed))
+            if shared is None:
+                pipe = FleetPipeline(config, fleet_and_run_seeds(config, seed)[0])
+                if len(self._estimators) >= _MAX_PIPELINES:
+                    self._estimators.pop(next(iter(self._estimators)))
+                self._estimators[(design_key(config), seed)] = pipe.estimators
+            else:   # the same fleet on another road: same estimators
+                pipe = FleetPipeline(config, [e.vehicle for e in shared], estimators=shared)
+            self._pipelines[key] = pipe
         return self._pipelines[key]
 
     def fleet_pipeline(self, config: ExperimentConfig, fleet: list[Vehicle]) -> FleetPipeline:

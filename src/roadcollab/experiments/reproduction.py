@@ -317,7 +317,8 @@ class _ReproductionTask:
 
 def run_reproduction(config: ExperimentConfig, seed: int, *, progress: Callable[[int], None] | None = None,
                      privacy: bool = True, workers: int | None = None, scheduler: str | None = None,
-                     iri_segment_length: float | None = None) -> ReproductionResult:
+                     iri_segment_length: float | None = None, cache: PipelineCache | None = None
+                     ) -> ReproductionResult:
     """Run the Monte Carlo reproduction, serially or on Dask.
 
     Parameters
@@ -331,11 +332,14 @@ def run_reproduction(config: ExperimentConfig, seed: int, *, progress: Callable[
     privacy : bool
         Run the obfuscated chain too.
     workers : int, optional
-        Local Dask cluster with this many worker processes.
+        Local process pool with this many worker processes (identical results).
     scheduler : str, optional
         Address of an existing Dask scheduler.
     iri_segment_length : float, optional
         Compare true and estimated IRI per segment of this length, m (:meth:`ReproductionResult.iri_rows`).
+    cache : PipelineCache, optional
+        Per-fleet setup to use and keep (e.g. shared by the reproduction and its measured-profile runs,
+        whose fleet and estimators are the same); a new one by default.
 
     Returns
     -------
@@ -354,10 +358,14 @@ def run_reproduction(config: ExperimentConfig, seed: int, *, progress: Callable[
     if not isinstance(config, ExperimentConfig):
         raise ParameterError(f"config must be an ExperimentConfig, got {type(config).__name__}")
     seed = check_int("seed", seed, low=0)
+    if cache is not None and not isinstance(cache, PipelineCache):
+        raise ParameterError(f"cache must be a PipelineCache, got {type(cache).__name__}")
     fleet = fleet_and_run_seeds(config, seed)[0]
     if iri_segment_length is not None:
         iri_segment_length = check_positive("iri_segment_length", iri_segment_length)
+    cache = PipelineCache() if cache is None else cache
+    if not config.redraw_fleet and scheduler is None:   # built here once, inherited by a forked pool
+        cache.pipeline(config, seed).warm()
     runs = map_runs(_ReproductionTask(config, seed, privacy, iri_segment_length), config.n_runs, workers=workers,
-                    scheduler=scheduler,
-                    progress=progress, shared=PipelineCache())
+                    scheduler=scheduler, progress=progress, shared=cache)
     return ReproductionResult(config=config, seed=seed, fleet=fleet, runs=runs)

@@ -117,7 +117,7 @@ def run_attack_study(config: AttackStudyConfig, seed: int, *, progress: Callable
     progress : callable, optional
         Called with the number of finished steps: the ``n_runs`` segments, then the replica fits.
     workers : int, optional
-        Run the segments on a local Dask cluster with this many worker processes.
+        Run the segments on a local process pool with this many worker processes.
     scheduler : str, optional
         Address of an existing Dask scheduler (e.g. ``tcp://host:8786``); not with ``workers``.
 

@@ -100,7 +100,7 @@ def run_sweep(config: SweepConfig, seed: int, *, progress: Callable[[int], None]
         Called with the number of finished (grid point, run) pairs, out of
         ``len(config.points()) * config.n_runs``.
     workers : int, optional
-        Local Dask cluster with this many worker processes (the result is identical).
+        Local process pool with this many worker processes (the result is identical).
     scheduler : str, optional
         Address of an existing Dask scheduler.
 

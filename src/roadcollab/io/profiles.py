@@ -196,8 +196,9 @@ def measured_road(path=None, *, second_track="lateral", lateral_class="A", detre
 
     Parameters
     ----------
-    path : str, PathLike or None
-        Profile file (see :func:`load_profile`); None uses :func:`packaged_profile_path`.
+    path : str, PathLike, MeasuredProfile or None
+        Profile file (see :func:`load_profile`), or one already read (a study drawing many roads
+        from one file reads it once); None uses :func:`packaged_profile_path`.
     second_track : {"lateral", "same", "synthetic"}
         Right track: ``"lateral"`` = left + an independent ISO ``lateral_class`` random walk
         high-passed by subtracting its 20 m centred moving average (coherent at long, independent
@@ -228,7 +229,10 @@ def measured_road(path=None, *, second_track="lateral", lateral_class="A", detre
     if not isinstance(detrend, (bool, np.bool_)):
         raise ParameterError(f"detrend must be a bool, got {detrend!r}")
     rng = np.random.default_rng(rng)
-    measured = load_profile(packaged_profile_path() if path is None else path, limits=limits)
+    if isinstance(path, MeasuredProfile):
+        measured = path
+    else:
+        measured = load_profile(packaged_profile_path() if path is None else path, limits=limits)
     distance = measured.distance - measured.distance[0]
     left = _detrend(distance, measured.elevation) if detrend else measured.elevation.copy()
     step = measured.spacing

@@ -210,12 +210,17 @@ def rectified_slope(elevation, spacing, *, car: GoldenCar = GOLDEN_CAR) -> tuple
     start = (float(np.interp(car.initial_length, x, z)) - z[0]) / car.initial_length
     A, B = car.state_space()
     Phi, Gamma, _, _ = zoh_discretize(A, B, np.zeros((1, 4)), np.zeros((1, 1)), dx / car.speed)
-    Gamma = Gamma[:, 0]
-    state = np.array([start, 0.0, start, 0.0])
-    rate = np.empty(m)
+    # Z'[i+1] = Phi Z'[i] + Gamma s[i]: the same matrix-vector product and sum per step as the
+    # plain loop (bit for bit), written in place through bound methods (about 2x faster).
+    drive = Gamma[:, 0][None, :] * slope[:, None]          # (m, 4): Gamma s[i]
+    states = np.empty((m + 1, 4))
+    states[0] = (start, 0.0, start, 0.0)
+    step = np.empty(4)
+    dot, add = Phi.dot, np.add
     for i in range(m):
-        state = Phi @ state + Gamma * slope[i]
-        rate[i] = state[0] - state[2]
+        dot(states[i], step)
+        add(step, drive[i], out=states[i + 1])
+    rate = states[1:, 0] - states[1:, 2]
     return x[:m] + 0.5 * base + 0.5 * dx, rate
 
 

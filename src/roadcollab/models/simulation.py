@@ -12,7 +12,6 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
-import scipy.signal
 
 from .._validation import check_nonnegative, check_positive, check_signal
 from ..lti.response import dlti_frequency_response
@@ -128,6 +127,8 @@ def simulate_response(plant: DiscretePlant, w, *, x0=None) -> np.ndarray:
     >>> y.shape, float(np.abs(y).max())
     ((200, 2), 0.0)
     """
+    import scipy.signal  # heavy (about 1 s); imported when a response is simulated, not with the package
+
     w = check_signal("w", w, 2)
     x0 = np.zeros(4) if x0 is None else np.asarray(x0, dtype=float).reshape(4)
     if not plant._modal:  # defective Ad: plain recursion

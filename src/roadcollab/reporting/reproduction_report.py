@@ -5,6 +5,7 @@ Every sentence of the report's summary is worded from the numbers (:func:`reprod
 
 from __future__ import annotations
 
+import time
 from pathlib import Path
 
 import numpy as np
@@ -158,14 +159,28 @@ def _headline_table(rows: list[MseRow]) -> str:
     return markdown_table([dict(zip(headers, v)) for v in values], headers)
 
 
-def _write_trace_figures(traces: RunTraces, out: Path) -> list[str]:
+class _FigureClock:
+    """Draws figures and adds up the wall time they take (``seconds``)."""
+
+    def __init__(self) -> None:
+        self.seconds = 0.0
+
+    def __call__(self, plot, *args, **kwargs):
+        t0 = time.perf_counter()
+        try:
+            return plot(*args, **kwargs)
+        finally:
+            self.seconds += time.perf_counter() - t0
+
+
+def _write_trace_figures(traces: RunTraces, out: Path, clock: _FigureClock) -> list[str]:
     """Figs. 5-7 (a 3 s window of run 1) with their CSVs; returns the file stems written."""
     names = []
     for j in range(min(_N_TRACE_FIGURES, len(traces.plain))):
         name = f"fig{5 + j}_vehicle{j + 1}"
         write_rows(out / f"{name}.csv", traces.to_rows(j), TraceRow)
         t0 = float(traces.time[0])
-        plotting.plot_estimates(traces.time, traces.truth, traces.plain[j], traces.private[j], j + 1,
+        clock(plotting.plot_estimates, traces.time, traces.truth, traces.plain[j], traces.private[j], j + 1,
                                 out / f"{name}.png", window=(t0 + 5.0, t0 + 8.0))
         names.append(name)
     return names
@@ -273,7 +288,7 @@ def _iri_lines(rows: list[IriRow], estimators, config) -> list[str]:
     ]
 
 
-def _measured_section(measured, out: Path) -> list[str]:
+def _measured_section(measured, out: Path, clock: _FigureClock) -> list[str]:
     """The run on the shipped measured profile: writes ``mse_measured.csv`` and its figure, returns report lines."""
     mres, mel = measured
     mrows = mres.table()
@@ -283,7 +298,7 @@ def _measured_section(measured, out: Path) -> list[str]:
     irows = mres.iri_rows()
     if irows:
         write_rows(out / "iri_measured.csv", irows, IriRow)
-    plotting.plot_fusion(frows, out / "fig_measured_mse.png", title=(
+    clock(plotting.plot_fusion, frows, out / "fig_measured_mse.png", title=(
         f"Measured profile: MSE per vehicle of the fleet estimates (mean over {mres.config.n_runs} runs; "
         "bars: 95 % CI)"))
     ms = reproduction_summary(mrows, mres.bound_check())
@@ -311,7 +326,8 @@ def _fleet_lines(fleet_rows: list[FleetRow]) -> list[str]:
     return ["## Fleet (`fleet.csv`)", "", markdown_table(fleet_rows, _FLEET_REPORT_COLUMNS), ""]
 
 
-def write_reproduction(result, out, *, command: str, elapsed: float, measured=None) -> dict:
+def write_reproduction(result, out, *, command: str, elapsed: float, measured=None, timings: dict | None = None
+                       ) -> dict:
     """Write every output of ``roadcollab reproduce`` to the folder ``out``.
 
     Files: ``mse.csv``, ``bound_check.csv``, ``fig4_mse.png``, ``fig_fusion.png`` with ``fig_fusion.csv``,
@@ -331,31 +347,45 @@ def write_reproduction(result, out, *, command: str, elapsed: float, measured=No
         Wall-clock time of the reproduction, s.
     measured : (ReproductionResult, float), optional
         The run on the measured road profile and its wall-clock time, s.
+    timings : dict of str to float, optional
+        Wall time of the command's phases, s; recorded in ``config.json`` (``timings_s``) and the report
+        with the time spent here writing the outputs (``report_s``) and the figures in it (``figures_s``).
 
     Returns
     -------
     dict
         :func:`reproduction_summary` of ``result``.
     """
+    t0, clock = time.perf_counter(), _FigureClock()
     out = output_dir(out)
     rows = result.table()
     bound = result.bound_check()
     write_rows(out / "mse.csv", rows, MseRow)
     write_rows(out / "bound_check.csv", bound, BoundRow)
-    plotting.plot_mse(rows, out / "fig4_mse.png")
+    clock(plotting.plot_mse, rows, out / "fig4_mse.png")
     fusion_rows = result.fusion_rows()
     write_rows(out / "fig_fusion.csv", fusion_rows, FusionRow)
-    plotting.plot_fusion(fusion_rows, out / "fig_fusion.png")
-    trace_figures = _write_trace_figures(result.runs[0].traces, out)
+    clock(plotting.plot_fusion, fusion_rows, out / "fig_fusion.png")
+    trace_figures = _write_trace_figures(result.runs[0].traces, out, clock)
     fleet_rows = result.fleet_rows()
     write_rows(out / "fleet.csv", fleet_rows, FleetRow)
     summary = reproduction_summary(rows, bound)
-    write_config(out / "config.json", command=command, seed=result.seed, config=result.config.to_dict(),
-                 extra={"elapsed_s": elapsed, "summary": summary})
     lines = _intro_lines(result, command, elapsed)
     lines += _results_lines(summary, rows, result.config.n_vehicles, trace_figures)
     if measured is not None:
-        lines += _measured_section(measured, out)
+        lines += _measured_section(measured, out, clock)
     lines += _fleet_lines(fleet_rows)
+    timings = {**(timings or {}), "figures_s": clock.seconds,
+               "report_s": time.perf_counter() - t0}
+    lines += _timing_lines(timings)
     (out / "report.md").write_text("\n".join(lines))
+    write_config(out / "config.json", command=command, seed=result.seed, config=result.config.to_dict(),
+                 extra={"elapsed_s": elapsed, "timings_s": timings, "summary": summary})
     return summary
+
+
+def _timing_lines(timings: dict) -> list[str]:
+    """The report's timing section (wall time per phase, s)."""
+    return ["## Timings (wall clock, s)", "",
+            "; ".join(f"{k.removesuffix('_s').replace('_', ' ')} {v:.2f}" if isinstance(v, float) else f"{k} {v}"
+                      for k, v in timings.items()) + ".", ""]

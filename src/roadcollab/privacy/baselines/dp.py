@@ -35,7 +35,6 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.optimize
 import scipy.special
-from scipy.stats import norm
 
 from ..._validation import check_matrix, check_nonnegative, check_positive, check_real
 from ...errors import ParameterError
@@ -173,6 +172,8 @@ def _log_b_minus(u: float, eps: float) -> float:
 
 def _b_plus(v: float, eps: float) -> float:
     """``Phi(sqrt(eps v)) - e^eps Phi(-sqrt(eps (v + 2)))`` (terms of order 1, no cancellation issue)."""
+    from scipy.stats import norm  # heavy: imported when a DP budget is computed
+
     return float(norm.cdf(math.sqrt(eps * v)) - math.exp(eps + scipy.special.log_ndtr(-math.sqrt(eps * (v + 2.0)))))
 
 
