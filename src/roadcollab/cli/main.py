@@ -11,7 +11,9 @@ Each subcommand is a module of this package with ``NAME``, ``add_parser(subparse
 from __future__ import annotations
 
 import argparse
+import os
 import sys
+from pathlib import Path
 
 from .. import __version__
 from . import anomalies, attack, bench, calibrate, estimate, iri, message, reproduce, sweep
@@ -81,6 +83,8 @@ def main(argv: list[str] | None = None) -> int:
         parser.error(f"unknown command {args.command!r}")
         return 2
     try:
+        if args.command != "message":
+            _check_out_folder(getattr(args, "out", None))
         return run(args, command_line(argv))
     except ValueError as err:  # ParameterError / FileFormatError / MessageError: a clear message, no traceback
         print(f"roadcollab {args.command}: error: {_one_line(str(err))}", file=sys.stderr)
@@ -89,6 +93,22 @@ def main(argv: list[str] | None = None) -> int:
         where = f"{err.filename}: " if getattr(err, "filename", None) else ""
         print(f"roadcollab {args.command}: error: {where}{_one_line(err.strerror or str(err))}", file=sys.stderr)
         return 2
+
+
+def _check_out_folder(out) -> None:
+    """Refuse an unusable ``--out`` folder before the command imports its study (a second or more):
+    an existing non-folder, or a nearest existing ancestor that is not a writable folder. The
+    command's staged output checks again when it creates its folder."""
+    if out is None:
+        return
+    out = Path(out)
+    if out.exists() and not out.is_dir():
+        raise ValueError(f"--out {out}: expected a folder, got an existing file")
+    parent = out.absolute().parent
+    while not parent.exists():
+        parent = parent.parent
+    if not parent.is_dir() or not os.access(parent, os.W_OK | os.X_OK):
+        raise ValueError(f"--out {out}: cannot write there ({parent} is not a writable folder)")
 
 
 def _one_line(text: str, width: int = 2000) -> str:
