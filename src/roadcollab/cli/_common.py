@@ -310,10 +310,16 @@ def print_table(title: str, columns: Sequence[str], rows: Sequence[Sequence[str]
 
     table = Table(title=title)
     for col in columns:
-        table.add_column(col, justify="right")
+        table.add_column(col, justify="right", overflow="fold")
     for row in rows:
         table.add_row(*row)
-    Console().print(table)
+    console = Console()
+    # Piped or in a narrow terminal rich assumes 80 columns and cuts numbers to "0.0…": give the table
+    # the width it needs (headers may wrap, numbers never).
+    need = sum(max([len(c)] + [len(r[i]) for r in rows]) + 3 for i, c in enumerate(columns)) + 1
+    if console.width < need:
+        console = Console(width=min(need, 250))
+    console.print(table)
 
 
 # --- simulation options --------------------------------------------------------------------------
