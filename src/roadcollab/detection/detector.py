@@ -85,13 +85,13 @@ from .._validation import check_matrix, check_positive, check_probability, check
 from ..errors import ParameterError
 from ..models.anomaly import check_anomaly_fields
 
-__all__ = ["Detection", "DetectorSpec", "detect_anomalies"]
+__all__ = ["MAX_ROAD_VELOCITY", "Detection", "DetectorSpec", "detect_anomalies"]
 
 _SIDE_TRACKS = {"left": (0,), "right": (1,), "both": (0, 1)}
 _MAD_TO_STD = 1.4826            # sigma of a Gaussian per median absolute deviation
 _TEMPLATE_STEP = 0.005          # m, fine grid on which templates are built before sampling
 #: Larger road velocities are not a road (and overflow the float32 matched filter), m/s.
-_MAX_ROAD_VELOCITY = 1e6
+MAX_ROAD_VELOCITY = 1e6
 
 
 @dataclass(frozen=True)
@@ -365,8 +365,8 @@ def detect_anomalies(w_hat, *, positions, speed, sample_rate, spec: DetectorSpec
     if not isinstance(spec, DetectorSpec):
         raise ParameterError(f"spec must be a DetectorSpec, got {type(spec).__name__}")
     w = check_signal("w_hat", w_hat, 2, min_length=2)
-    if np.max(np.abs(w)) > _MAX_ROAD_VELOCITY:
-        raise ParameterError(f"w_hat must be a road velocity below {_MAX_ROAD_VELOCITY:g} m/s in magnitude, got "
+    if np.max(np.abs(w)) > MAX_ROAD_VELOCITY:
+        raise ParameterError(f"w_hat must be a road velocity below {MAX_ROAD_VELOCITY:g} m/s in magnitude, got "
                              f"{np.max(np.abs(w)):.3g} m/s")
     n = w.shape[0]
     pos = check_matrix("positions", positions, (n,))

@@ -42,7 +42,7 @@ import numpy as np
 from ..collaboration.algorithm1 import CollaborativeEstimator
 from ..collaboration.guard import ReceiverGuard
 from ..collaboration.relay import Exchange, Relay
-from ..detection.detector import detect_anomalies
+from ..detection.detector import MAX_ROAD_VELOCITY, detect_anomalies
 from ..detection.scoring import lost_anomalies, new_false_detections
 from ..errors import MessageError, ParameterError
 from ..lti.batch2x2 import inv2x2, matvec
@@ -381,7 +381,7 @@ def poisoning_rows(config: ExperimentConfig | None = None, *, seed: int = 0, n_r
             w = grid.band_limited(X, n)
             with np.errstate(all="ignore"):
                 m = float(np.mean((w[sl] - truth) ** 2))
-            if not np.all(np.abs(w) < 1e6):
+            if not np.all(np.abs(w) < MAX_ROAD_VELOCITY):
                 return m, []
             return m, detect_anomalies(w, positions=road.positions[:n], speed=config.speed,
                                        sample_rate=config.sample_rate)

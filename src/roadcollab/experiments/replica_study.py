@@ -27,13 +27,14 @@ import numpy as np
 from .._validation import check_int
 from ..errors import ParameterError
 from ..models.simulation import add_sensor_noise, simulate_response
-from ..privacy.attacks import SUCCESS_TOLERANCE, pole_errors
+from ..privacy.attacks import pole_errors
 from ..privacy.baselines.dp import gaussian_sigma, l2_sensitivity
 from ..privacy.baselines.dp_composition import composed_epsilon
 from ..privacy.replica import replica_fit
 from .security_segment import target_poles
 from .pipeline import PipelineCache
 from .security_config import AttackStudyConfig
+from .security_rows import attack_row
 from .seeds import SeedPlan, run_stream
 
 __all__ = ["ReplicaRow", "ReplicaStudyResult", "run_replica_study", "replica_messages"]
@@ -161,9 +162,8 @@ def replica_messages(config: AttackStudyConfig, seed: int, run: int, *, epsilons
 
 def _score(fits: list[tuple[np.ndarray, float]], targets: list[np.ndarray]) -> tuple[float, float, int, float]:
     """(median of per-fit median error, success rate, fits, median seconds) of ``[(poles, seconds)]``."""
-    E = np.array([pole_errors(p, t) for (p, _), t in zip(fits, targets)])
-    return (float(np.median(np.median(E, axis=1))), float(np.mean(np.all(E < SUCCESS_TOLERANCE, axis=1))),
-            int(E.shape[0]), float(np.median([s for _, s in fits])))
+    row = attack_row("", "", "", 1, [pole_errors(p, t) for (p, _), t in zip(fits, targets)])
+    return row.median_rel_pole_error, row.success_rate, row.n_messages, float(np.median([s for _, s in fits]))
 
 
 def _timed_fit(segments, grid, nominal, max_nfev: int) -> tuple[np.ndarray, float]:
