@@ -86,6 +86,26 @@ def test_rectified_slope_positions():
     assert pos[0] == 0.25 and pos[-1] == pytest.approx(59 * 0.25) and rate.shape == (59,)
 
 
+@pytest.mark.parametrize("dx", [0.025, 0.25, 1.0])
+def test_modal_run_equals_the_per_step_state_transition(dx):
+    # Oracle: Sayers' recursion Z'[i+1] = Phi Z'[i] + Gamma s[i] stepped one sample at a time.
+    from roadcollab.lti.discretisation import zoh_discretize
+    x = dx * np.arange(int(120 / dx))
+    z = _broadband(x)
+    pos, rate = rectified_slope(z, dx)
+    A, B = GOLDEN_CAR.state_space()
+    Phi, Gamma, _, _ = zoh_discretize(A, B, np.zeros((1, 4)), np.zeros((1, 1)), dx / GOLDEN_CAR.speed)
+    base = max(GOLDEN_CAR.smoothing_length, dx)
+    slope = (np.interp(x[:rate.size] + base, x, z) - z[:rate.size]) / base
+    start = (np.interp(GOLDEN_CAR.initial_length, x, z) - z[0]) / GOLDEN_CAR.initial_length
+    state, ref = np.array([start, 0.0, start, 0.0]), []
+    for s in slope:
+        state = Phi @ state + Gamma[:, 0] * s
+        ref.append(state[0] - state[2])
+    ref = np.array(ref)
+    assert np.max(np.abs(rate - ref)) <= 1e-11 * np.max(np.abs(ref))
+
+
 # --- independent implementation ----------------------------------------------------------------------
 
 #: IRI (m/km) per 100 m of the packaged profile (michalsorel/iri data/profile_1.txt, 0.25 m spacing) from

