@@ -14,7 +14,8 @@ __all__ = ["dlti_frequency_response", "ss_response", "content_key", "FrequencyRe
 
 
 def dlti_frequency_response(Ad, Bd, Cd, Dd, omega_dt: np.ndarray, *,
-                            schur: tuple[np.ndarray, np.ndarray] | None = None) -> np.ndarray:
+                            schur: tuple[np.ndarray, np.ndarray] | None = None,
+                            eig: tuple[np.ndarray, np.ndarray] | None = None) -> np.ndarray:
     """Frequency response ``C (zI - A)^-1 B + D`` at ``z = exp(j omega dt)``.
 
     Parameters
@@ -25,15 +26,18 @@ def dlti_frequency_response(Ad, Bd, Cd, Dd, omega_dt: np.ndarray, *,
         Normalised frequencies, rad/sample.
     schur : (T, U), optional
         A complex Schur form of ``Ad`` already computed: the block-diagonal path is taken with it.
+    eig : (lam, V), optional
+        ``np.linalg.eig(Ad)`` if already computed (see :func:`ss_response`).
 
     Returns
     -------
     (M, p, m) complex ndarray
     """
-    return ss_response(Ad, Bd, Cd, Dd, np.exp(1j * np.asarray(omega_dt, dtype=float)), schur=schur)
+    return ss_response(Ad, Bd, Cd, Dd, np.exp(1j * np.asarray(omega_dt, dtype=float)), schur=schur, eig=eig)
 
 
-def ss_response(A, B, C, D, points: np.ndarray, *, schur: tuple[np.ndarray, np.ndarray] | None = None) -> np.ndarray:
+def ss_response(A, B, C, D, points: np.ndarray, *, schur: tuple[np.ndarray, np.ndarray] | None = None,
+                eig: tuple[np.ndarray, np.ndarray] | None = None) -> np.ndarray:
     """``C (x I - A)^-1 B + D`` at complex points ``x`` (``s`` or ``z``), shape (M, p, m).
 
     Parameters
@@ -47,6 +51,9 @@ def ss_response(A, B, C, D, points: np.ndarray, *, schur: tuple[np.ndarray, np.n
     schur : (T, U), optional
         A complex Schur form ``A = U T U^H`` already computed (a certified message's systems carry
         one): the block-diagonal path is taken directly.
+    eig : (lam, V), optional
+        ``np.linalg.eig(A)`` if already computed (a system's stability certificate memoises it):
+        used instead of computing it again to choose between the pole-residue and Schur paths.
 
     Returns
     -------
@@ -70,7 +77,7 @@ def ss_response(A, B, C, D, points: np.ndarray, *, schur: tuple[np.ndarray, np.n
     if A.shape[0] == 0:
         return np.broadcast_to(D.astype(complex), (x.size, p, m)).copy()
     if schur is None:
-        lam, V = np.linalg.eig(A)
+        lam, V = np.linalg.eig(A) if eig is None else eig
         if np.linalg.cond(V) < 1e2:
             Cv = C @ V
             Bv = np.linalg.solve(V, B)
