@@ -170,6 +170,26 @@ def test_max_message_bytes_is_the_largest_valid_message():
     assert MAX_MESSAGE_BYTES == 56 + 8 * (2 * (MAX_ORDER + 2) ** 2 + 4 * MAX_SIGNAL_LENGTH)
 
 
+def test_a_validated_message_is_frozen_and_not_checked_again_unless_it_could_have_changed():
+    msg = small_exchange()
+    for name, arr in arrays_of(msg).items():
+        assert not arr.flags.writeable, name        # what was checked cannot change in place
+    assert encode(msg) == encode(msg)
+    # Unfrozen by hand and poisoned: the memo no longer applies and encode refuses.
+    msg.e.setflags(write=True)
+    msg.e[0, 0] = np.nan
+    with pytest.raises(MessageError, match="e must be finite"):
+        encode(msg)
+    # A message holding a view of a writable array is validated at every encode.
+    base = np.random.default_rng(3).standard_normal((12, 2))
+    inv = InversionMessage("hardened", FS, 6, base[:], 1)
+    assert base.flags.writeable
+    encode(inv)
+    base[1, 1] = np.inf
+    with pytest.raises(MessageError, match="z must be finite"):
+        encode(inv)
+
+
 def test_decoded_arrays_are_owned_read_only_copies():
     buf = bytearray(encode(small_exchange()))
     out = decode(buf)

@@ -163,8 +163,8 @@ class CollaborativeEstimator:
         I_minus_PD = StateSpaceData(PD.A, PD.B, -PD.C, np.eye(2) - PD.D, dt)
         T_full = series(P, I_minus_PD)
         T_min = control.minreal(T_full.to_control(), tol=1e-9, verbose=False)
-        T = StateSpaceData(np.asarray(T_min.A), np.asarray(T_min.B), np.asarray(T_min.C),
-                           np.asarray(T_min.D), dt)
+        # Own copies (python-control returns views): a message holding them freezes and validates them once.
+        T = StateSpaceData(*(np.array(a, dtype=float) for a in (T_min.A, T_min.B, T_min.C, T_min.D)), dt)
         S = StateSpaceData(p.Ad.copy(), p.Bd.copy(), -p.C, -p.D, dt)
         return T, S
 

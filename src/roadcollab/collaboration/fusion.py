@@ -265,7 +265,7 @@ class LinearMMSE:
         j = len(spectra)
         if not 1 <= j <= len(self.gains):
             raise ParameterError(f"spectra must hold 1..{len(self.gains)} records, got {j}")
-        act = self.grid.active
+        act = self.grid.active_index       # a slice when the band is contiguous: views, not copies
         Ystack = np.concatenate([np.asarray(Y)[act] for Y in spectra], axis=1)     # (K_act, 2j)
         out = np.zeros((self.grid.n_bins, 2), complex)
         out[act] = np.einsum("kij,kj->ki", self.gains[j - 1], Ystack)

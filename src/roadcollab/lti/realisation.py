@@ -68,7 +68,10 @@ class StateSpaceData:
         """Response at ``z = exp(j omega_dt)``, shape (M, p, m).
 
         A pure function of the realisation; a receiver that sees the same realisation again
-        keeps its responses in a :class:`~roadcollab.lti.response.FrequencyResponseCache`.
+        keeps its responses in a :class:`~roadcollab.lti.response.FrequencyResponseCache`. The
+        last response is also memoised on this object, keyed by the exact bytes of the matrices
+        and the frequencies (a sender's ``Psi`` is evaluated once for obfuscating and again, on the
+        same bins, when Theorem 1 is measured: 2.9 s of the default reproduction, measured).
 
         Parameters
         ----------
@@ -79,11 +82,18 @@ class StateSpaceData:
         -------
         (M, p, m) complex ndarray
         """
+        omega_dt = np.asarray(omega_dt, dtype=float)
+        full_key = content_key(self.A, self.B, self.C, self.D, omega_dt)
+        last = self.__dict__.get("_response")
+        if last is not None and last[0] == full_key:
+            return last[1].copy()
         key = self._digest()
         memo, eig = self.__dict__.get("_schur"), self.__dict__.get("_eig")
         schur = memo[1] if memo is not None and memo[0] == key else None
         eig = eig[1] if eig is not None and eig[0] == key else None
-        return dlti_frequency_response(self.A, self.B, self.C, self.D, omega_dt, schur=schur, eig=eig)
+        H = dlti_frequency_response(self.A, self.B, self.C, self.D, omega_dt, schur=schur, eig=eig)
+        object.__setattr__(self, "_response", (full_key, H.copy()))
+        return H
 
     def _digest(self) -> bytes:
         """The exact bytes of ``A`` (with its shape): the key of this object's memos. The bytes
