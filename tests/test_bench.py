@@ -11,6 +11,9 @@ def test_bench_segment_reports_its_fields(mechanism):
     rec = bench_segment(1000, mechanism=mechanism, repeats=2)
     assert rec["samples_per_segment"] == 1000 and rec["nfft"] >= 1500
     assert rec["ms_per_vehicle_segment"] > 0 and rec["ms_per_vehicle_setup"] > 0
+    # The split covers the timed work: each part below the whole (medians of the same segments).
+    assert 0 < rec["ms_receive_median"] < rec["ms_per_vehicle_segment"]
+    assert 0 < rec["ms_send_median"] < rec["ms_per_vehicle_segment"]
 
 
 def test_bench_rejects_unknown_mechanism():

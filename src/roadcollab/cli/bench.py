@@ -116,8 +116,10 @@ def run(args: argparse.Namespace, command_line: str) -> int:
         return 0
     f = rec["floor"]
     print_table(f"ms per vehicle-segment ({rec['samples_per_segment']} samples, 1 thread, {rec['repeats']} repeats; "
-                f"floor {f['floor_ms']:.3f} ms)", ("mechanism", "min ms", "median ms", "x floor (min)", "x floor (median)"),
-                [(m, f"{v['ms_min']:.2f}", f"{v['ms_median']:.2f}", f"{v['floor_multiple_min']:.1f}",
+                f"floor {f['floor_ms']:.3f} ms)", ("mechanism", "min ms", "median ms", "receive (median)", "send (median)",
+                                           "x floor (min)", "x floor (median)"),
+                [(m, f"{v['ms_min']:.2f}", f"{v['ms_median']:.2f}", f"{v['ms_receive_median']:.2f}",
+                  f"{v['ms_send_median']:.2f}", f"{v['floor_multiple_min']:.1f}",
                   f"{v['floor_multiple_median']:.1f}") for m, v in rec["by_mechanism"].items()])
     nv, sp = rec["naive_paper"], rec["speedup_paper_vs_naive"]
     print(f"naive paper chain: min {nv['ms_min']:.2f} ms, median {nv['ms_median']:.2f} ms; paper is "
