@@ -24,7 +24,6 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-import scipy.signal
 
 from .._validation import check_matrix, check_nonnegative, check_positive
 from ..errors import ParameterError
@@ -174,6 +173,9 @@ def _modal_run(Phi: np.ndarray, gamma: np.ndarray, state0: np.ndarray, drive: np
     replaces took 5-6 ms per track of 6000 steps (4.5 s of the default reproduction's 40 s,
     measured); this takes about 0.2 ms and agrees with it to round-off (tests/test_iri.py).
     """
+    import scipy.signal  # heavy (about 1 s); imported when an IRI is computed, not with the package
+
+    # The same modal recursion as models.simulation.simulate_response (which takes two inputs).
     lam, V = np.linalg.eig(Phi)
     g = np.linalg.solve(V, gamma.astype(complex))
     q0 = np.linalg.solve(V, state0.astype(complex))
