@@ -25,6 +25,7 @@ def test_naive_chain_agrees_with_the_library_and_exactness_is_measured():
     from roadcollab.experiments.bench import bench_exactness, bench_naive
 
     naive = bench_naive(1000, repeats=2)
+    assert naive["library_ms_min"] > 0 and naive["speedup_min"] == naive["ms_min"] / naive["library_ms_min"]
     assert naive["ms_min"] > 0 and naive["max_rel_vs_library"] < 1e-9
     ex = bench_exactness(segments=1, n_samples=1000)
     assert set(ex) == {"privacy_vs_clear", "privacy_vs_clear_direct_receiver", "receiver_algorithms",
