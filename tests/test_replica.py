@@ -8,7 +8,7 @@ import pytest
 
 from roadcollab.errors import ParameterError
 from roadcollab.experiments.config import ExperimentConfig
-from roadcollab.experiments.replica_study import ReplicaRow, run_replica_study
+from roadcollab.experiments.replica_study import replica_messages
 from roadcollab.experiments.security_segment import target_poles
 from roadcollab.experiments.pipeline import PipelineCache
 from roadcollab.experiments.security_study import AttackStudyConfig
@@ -128,14 +128,26 @@ def test_composition_rejects_bad_arguments():
         composed_epsilon(1.0, 1, 1.5)
 
 
-def test_replica_study_rows():
+def test_replica_messages_are_what_the_attacker_sees():
     small = AttackStudyConfig(experiment=ExperimentConfig(n_vehicles=3, segment_length=100.0))
-    res = run_replica_study(small, 0, n_runs=2, n_targets=1, epsilons=(10.0,), linked_segments=(2,), max_nfev=3)
-    rows = res.to_rows()
-    assert {(r["mechanism"], r["road"], r["segments"]) for r in rows} == {
-        (m, road, s) for m in ("hardened", "dp(eps=10)") for road in ("true", "fused") for s in (1, 2)}
-    keys = {"mechanism", "attack", "road", "segments", "median_rel_pole_error", "success_rate", "n_messages"}
-    assert all(keys <= set(r) for r in rows)
-    assert all(isinstance(r, ReplicaRow) for r in res.rows)
-    dp2 = [r for r in rows if r["mechanism"] == "dp(eps=10)" and r["segments"] == 2][0]
-    assert dp2["epsilon_total"] > 10.0
+    seg = replica_messages(small, 0, 1, epsilons=(10.0,), n_targets=2)
+    n = seg["grid"].n_samples
+    assert set(seg["z"]) == {"hardened", "dp(eps=10)"} and len(seg["z"]["hardened"]) == 2
+    # hardened z is each vehicle's own inversion; dp adds noise of the calibrated sigma (5 sigma bound on
+    # the sample standard deviation of 2 x nfft draws)
+    for j in range(2):
+        assert np.array_equal(seg["z"]["hardened"][j], seg["z_all"][j])
+        noise = seg["z"]["dp(eps=10)"][j] - seg["z"]["hardened"][j]
+        sd = seg["sigmas"][10.0]
+        assert abs(noise.std() / sd - 1) < 5 / math.sqrt(2 * noise.size)
+    # the fused road is the mean of the *other* vehicles' posterior inversions, cut to N samples
+    post = seg["post_all"]
+    for j in range(2):
+        others = np.delete(post, j, axis=0).mean(axis=0)[:n]
+        np.testing.assert_allclose(seg["road"]["fused"][j], others, rtol=0, atol=1e-15 * np.abs(others).max())
+    assert seg["road"]["true"][0].shape[1] == 2 and len(seg["targets"]) == 2
+    # the same segment seed gives the same messages (the attack study's roads)
+    again = replica_messages(small, 0, 1, epsilons=(10.0,), n_targets=2)
+    assert np.array_equal(again["z"]["dp(eps=10)"][1], seg["z"]["dp(eps=10)"][1])
+
+
