@@ -40,6 +40,13 @@ class ExchangeMessage:
     MessageError
         On construction, if the message fails any check the codec applies (types, shapes, limits,
         finite values, stable dynamics): a message that exists can be encoded and decoded.
+
+    Notes
+    -----
+    Once checked, the arrays it holds that own their data (``e``, ``wf`` and the systems' matrices)
+    are made read-only, and :func:`~roadcollab.wire.protocol.encode` reuses the check while the
+    message holds those same frozen arrays; a message holding a view of a writable array is
+    checked again at every encode.
     """
 
     WIRE_TYPE = MESSAGE_TYPE_EXCHANGE     # class attribute (not a field): the codec's message type
@@ -81,6 +88,10 @@ class InversionMessage:
     ------
     MessageError
         On construction, if the message fails any check the codec applies.
+
+    Notes
+    -----
+    ``z`` is made read-only once checked, as for :class:`ExchangeMessage`.
     """
 
     WIRE_TYPE = MESSAGE_TYPE_INVERSION    # class attribute (not a field): the codec's message type
