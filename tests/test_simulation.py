@@ -41,3 +41,18 @@ def test_sensor_noise_is_seeded_and_has_the_requested_std():
     a = add_sensor_noise(y, 0.05, rng=3)
     np.testing.assert_array_equal(a, add_sensor_noise(y, 0.05, rng=3))
     assert abs(a.std() - 0.05) < 0.05 * 0.01
+
+
+def test_modal_states_equal_the_stepped_recursion():
+    # Oracle: xi[k+1] = lam xi[k] + u[k] stepped one sample at a time, xi[0] = xi0.
+    from roadcollab.lti.modal import modal_states
+    rng = np.random.default_rng(4)
+    lam = np.array([0.9 + 0.3j, 0.5, -0.2j])
+    u = rng.standard_normal((50, 3)) + 1j * rng.standard_normal((50, 3))
+    xi0 = np.array([1.0, -2.0 + 1j, 0.5j])
+    ref = [xi0]
+    for k in range(50):
+        ref.append(lam * ref[-1] + u[k])
+    got = modal_states(lam, u, xi0)
+    assert got.shape == (51, 3)
+    np.testing.assert_allclose(got, np.array(ref), rtol=0, atol=1e-13)

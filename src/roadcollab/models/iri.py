@@ -28,6 +28,7 @@ import numpy as np
 from .._validation import check_matrix, check_nonnegative, check_positive
 from ..errors import ParameterError
 from ..lti.discretisation import zoh_discretize
+from ..lti.modal import modal_states
 
 __all__ = ["GoldenCar", "GOLDEN_CAR", "golden_car_response", "rectified_slope", "iri", "IRISegments",
            "iri_segments"]
@@ -168,24 +169,16 @@ def _modal_run(Phi: np.ndarray, gamma: np.ndarray, state0: np.ndarray, drive: np
     """``Z1' - Z3'`` after each step of ``Z'[i+1] = Phi Z'[i] + gamma s[i]`` from ``Z'[0] = state0``, (m,).
 
     In the eigenbasis of ``Phi`` (four distinct eigenvalues, well conditioned for the Golden Car
-    at any step) each mode is a first-order recursion ``q[i+1] = lam q[i] + g s[i]``, run by
-    ``scipy.signal.lfilter`` with the initial state as its ``zi``. The per-sample Python loop it
-    replaces took 5-6 ms per track of 6000 steps (4.5 s of the default reproduction's 40 s,
-    measured); this takes about 0.2 ms and agrees with it to round-off (tests/test_iri.py).
+    at any step) each mode is a first-order recursion (:func:`~roadcollab.lti.modal.modal_states`).
+    The per-sample Python loop it replaces took 5-6 ms per track of 6000 steps (4.5 s of the default
+    reproduction's 40 s, measured); this takes about 0.2 ms and agrees with it to round-off
+    (tests/test_iri.py).
     """
-    import scipy.signal  # heavy (about 1 s); imported when an IRI is computed, not with the package
-
-    # The same modal recursion as models.simulation.simulate_response (which takes two inputs).
     lam, V = np.linalg.eig(Phi)
     g = np.linalg.solve(V, gamma.astype(complex))
     q0 = np.linalg.solve(V, state0.astype(complex))
-    out = (V[0] - V[2]).astype(complex)        # Z1' - Z3' in modal coordinates
-    rate = np.zeros(drive.shape[0], complex)
-    x = drive.astype(complex)
-    for k in range(lam.size):
-        q, _ = scipy.signal.lfilter([1.0], [1.0, -lam[k]], g[k] * x, zi=[lam[k] * q0[k]])
-        rate += out[k] * q
-    return rate.real
+    q = modal_states(lam, drive[:, None] * g[None, :], q0)[1:]
+    return (q @ (V[0] - V[2])).real            # Z1' - Z3' in modal coordinates
 
 
 def rectified_slope(elevation, spacing, *, car: GoldenCar = GOLDEN_CAR) -> tuple[np.ndarray, np.ndarray]:

@@ -16,6 +16,7 @@ import numpy as np
 from .._validation import check_nonnegative, check_positive, check_signal
 from ..lti.response import dlti_frequency_response
 from ..lti.discretisation import zoh_discretize
+from ..lti.modal import modal_states
 from ..models.vehicle import HalfCarModel
 
 __all__ = ["DiscretePlant", "discretize_plant", "simulate_response", "add_sensor_noise"]
@@ -127,23 +128,17 @@ def simulate_response(plant: DiscretePlant, w, *, x0=None) -> np.ndarray:
     >>> y.shape, float(np.abs(y).max())
     ((200, 2), 0.0)
     """
-    import scipy.signal  # heavy (about 1 s); imported when a response is simulated, not with the package
-
     w = check_signal("w", w, 2)
     x0 = np.zeros(4) if x0 is None else np.asarray(x0, dtype=float).reshape(4)
     if not plant._modal:  # defective Ad: plain recursion
+        import scipy.signal  # heavy (about 1 s); imported when needed, not with the package
+
         _, y, _ = scipy.signal.dlsim((plant.Ad, plant.Bd, plant.C, plant.D, plant.dt), w, x0=x0)
         return y
-    # Modal form: one first-order complex recursion per mode, run by lfilter (C speed):
-    # xi[k+1] = lam xi[k] + u[k], x = V xi. About 20x faster than scipy.signal.dlsim.
+    # Modal form: one first-order complex recursion per mode, x = V xi (lti.modal).
     keep = plant._keep
     u = w @ plant._VinvB[keep].T                            # (N, k) complex
-    xi0 = (plant._Vinv @ x0)[keep]
-    xi = np.empty_like(u)
-    for i, lam in enumerate(plant._lam[keep]):
-        # Transposed direct form: out[0] = zi = xi0, out[k] = lam out[k-1] + u[k-1].
-        out, _ = scipy.signal.lfilter([0.0, 1.0], [1.0, -lam], u[:, i], zi=[xi0[i]])
-        xi[:, i] = out
+    xi = modal_states(plant._lam[keep], u, (plant._Vinv @ x0)[keep])[:-1]
     # y = C V xi: a conjugate pair contributes 2 Re(c v xi) of the kept mode.
     return (xi @ (plant._CV[:, keep] * plant._weight).T).real + w @ plant.D.T
 
