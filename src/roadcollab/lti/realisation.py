@@ -84,14 +84,12 @@ class StateSpaceData:
         """
         omega_dt = np.asarray(omega_dt, dtype=float)
         full_key = content_key(self.A, self.B, self.C, self.D, omega_dt)
-        last = self.__dict__.get("_response")
-        if last is not None and last[0] == full_key:
-            return last[1].copy()
+        last = self._memo_get("_response", full_key)
+        if last is not None:
+            return last.copy()
         key = self._digest()
-        memo, eig = self.__dict__.get("_schur"), self.__dict__.get("_eig")
-        schur = memo[1] if memo is not None and memo[0] == key else None
-        eig = eig[1] if eig is not None and eig[0] == key else None
-        H = dlti_frequency_response(self.A, self.B, self.C, self.D, omega_dt, schur=schur, eig=eig)
+        H = dlti_frequency_response(self.A, self.B, self.C, self.D, omega_dt, schur=self._memo_get("_schur", key),
+                                    eig=self._memo_get("_eig", key))
         object.__setattr__(self, "_response", (full_key, H.copy()))
         return H
 
@@ -100,6 +98,21 @@ class StateSpaceData:
         themselves, not a hash of them, so a memo can never be applied to another matrix."""
         A = np.ascontiguousarray(self.A, dtype=float)
         return repr(A.shape).encode() + A.tobytes()
+
+    def _memo_get(self, name: str, key: bytes):
+        """The value memoised as ``name`` under exactly ``key``, else None."""
+        memo = self.__dict__.get(name)
+        return memo[1] if memo is not None and memo[0] == key else None
+
+    def _memo(self, name: str, compute):
+        """The value memoised as ``name`` for the current ``A``, computing (and keeping) it if needed
+        (a frozen dataclass: a private memo, not a field)."""
+        key = self._digest()
+        value = self._memo_get(name, key)
+        if value is None:
+            value = compute()
+            object.__setattr__(self, name, (key, value))
+        return value
 
     def schur(self) -> tuple[np.ndarray, np.ndarray]:
         """Complex Schur form ``A = U T U^H``, memoised on this object (keyed by ``A``'s bytes).
@@ -110,12 +123,7 @@ class StateSpaceData:
         -------
         T, U : (n, n) complex ndarray
         """
-        key = self._digest()
-        memo = self.__dict__.get("_schur")
-        if memo is None or memo[0] != key:
-            memo = (key, scipy.linalg.schur(np.asarray(self.A, dtype=float), output="complex"))
-            object.__setattr__(self, "_schur", memo)
-        return memo[1]
+        return self._memo("_schur", lambda: scipy.linalg.schur(np.asarray(self.A, dtype=float), output="complex"))
 
     def eig(self) -> tuple[np.ndarray, np.ndarray]:
         """``np.linalg.eig(A)``, memoised on this object (keyed by ``A``'s bytes).
@@ -129,12 +137,7 @@ class StateSpaceData:
         lam : (n,) complex ndarray
         V : (n, n) complex ndarray
         """
-        key = self._digest()
-        memo = self.__dict__.get("_eig")
-        if memo is None or memo[0] != key:
-            memo = (key, np.linalg.eig(np.asarray(self.A, dtype=float)))
-            object.__setattr__(self, "_eig", memo)
-        return memo[1]
+        return self._memo("_eig", lambda: np.linalg.eig(np.asarray(self.A, dtype=float)))
 
     def stability(self) -> tuple[float, float]:
         """Spectral radius of ``A`` and its certified transient gain (:mod:`~roadcollab.lti.stability`).
@@ -145,27 +148,24 @@ class StateSpaceData:
         memoised eigendecomposition (:meth:`eig`) or, when that fails, the memoised Schur form
         (:meth:`schur`); the frequency response reuses whichever exists. A system a receiver got
         through its :class:`SystemCache` is certified from the Schur form directly: the receiver
-        evaluates it through that form anyway, and the eigen route would be wasted work (for an
-        obfuscated ``T~``, whose doubled poles defeat it, always).
+        evaluates an obfuscated system through that form anyway (its eigenvectors are too ill
+        conditioned for the pole-residue path), so the eigen route would be extra work.
 
         Returns
         -------
         radius, gain : float
             As :func:`~roadcollab.lti.stability.spectral_radius_and_gain`.
         """
-        key = self._digest()
-        memo = self.__dict__.get("_stability")
-        if memo is not None and memo[0] == key:
-            return memo[1]
+        return self._memo("_stability", self._certify)
+
+    def _certify(self) -> tuple[float, float]:
+        """:meth:`stability` without the memo."""
         A = np.asarray(self.A, dtype=float)
         if self.order == 0 or not np.isfinite(A).all():
-            out = spectral_radius_and_gain(A)
-        elif self.__dict__.get("_received"):
-            out = spectral_radius_and_gain(A, schur=self.schur())
-        else:
-            out = spectral_radius_and_gain(A, schur=self.schur, eig=self.eig())
-        object.__setattr__(self, "_stability", (key, out))   # frozen dataclass: a private memo, not a field
-        return out
+            return spectral_radius_and_gain(A)
+        if self.__dict__.get("_received"):
+            return spectral_radius_and_gain(A, schur=self.schur())
+        return spectral_radius_and_gain(A, schur=self.schur, eig=self.eig())
 
     def to_control(self):
         """The realisation as a discrete :class:`control.StateSpace`."""
