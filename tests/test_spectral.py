@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from roadcollab import ParameterError, SegmentGrid
-from roadcollab.lti.batch2x2 import inv2x2
+from roadcollab.lti.batch2x2 import inv2x2, matmul
 
 
 def test_band_weight_is_zero_at_dc_half_at_the_edge_and_one_in_band():
@@ -31,6 +31,20 @@ def test_closed_form_2x2_inverse():
     rng = np.random.default_rng(0)
     M = rng.standard_normal((50, 2, 2)) + 1j * rng.standard_normal((50, 2, 2))
     np.testing.assert_allclose(inv2x2(M), np.linalg.inv(M), rtol=1e-10)
+
+
+def test_written_out_2x2_products_match_numpy_with_broadcasting():
+    rng = np.random.default_rng(1)
+    P = rng.standard_normal((3, 40, 2, 2)) + 1j * rng.standard_normal((3, 40, 2, 2))
+    S = rng.standard_normal((40, 2, 2))
+    Q = rng.standard_normal((40, 2, 2)) + 1j * rng.standard_normal((40, 2, 2))
+    got = matmul(P, S[None], Q)
+    assert got.shape == (3, 40, 2, 2) and got.dtype == complex
+    np.testing.assert_allclose(got, P @ S[None] @ Q, rtol=1e-13, atol=1e-13)
+    np.testing.assert_allclose(matmul(np.eye(2), Q), Q, rtol=0, atol=0)
+    # Other sizes go through numpy's product.
+    R = rng.standard_normal((40, 2, 3))
+    np.testing.assert_allclose(matmul(Q, R), Q @ R, rtol=1e-13)
 
 
 def test_bad_grids():

@@ -41,7 +41,7 @@ from ..wire.message import ExchangeMessage, InversionMessage
 from ..lti.realisation import StateSpaceData, SystemCache, series
 from ..models.simulation import DiscretePlant, discretize_plant
 from ..estimation.grid import SegmentGrid
-from ..lti.batch2x2 import inv2x2, matvec, receiver_z
+from ..lti.batch2x2 import inv2x2, matmul, matvec, receiver_z
 from ..lti.response import FrequencyResponseCache
 from ..models.vehicle import FleetSpec, Vehicle
 from .vehicle_estimate import VehicleEstimate
@@ -63,8 +63,8 @@ def learning_filters(T_j, S_j, T_prev, S_prev, weight):
     -------
     L1, L2 : (K, 2, 2) complex ndarray
     """
-    G = -(inv2x2(S_j) @ T_j @ inv2x2(T_prev)) * weight[:, None, None]   # = L2
-    return -(G @ S_prev), G
+    G = -matmul(inv2x2(S_j), T_j, inv2x2(T_prev)) * weight[:, None, None]   # = L2
+    return -matmul(G, S_prev), G
 
 
 class CollaborativeEstimator:
@@ -125,13 +125,13 @@ class CollaborativeEstimator:
         self.D_f = self.estimator.frequency_response(om)            # (K, 2, 2)
         self.P_f = self.model_plant.frequency_response(om)         # P_hat_j (or P_j if oracle)
         eye = np.eye(2)
-        self.T_f = (eye - self.P_f @ self.D_f) @ self.P_f
+        self.T_f = matmul(eye - matmul(self.P_f, self.D_f), self.P_f)
         self.S_f = -self.P_f
         act = grid.active_index
         self._act = act
         self._w_act = grid.reg_weight[act]
         # -S_j^-1 T_j = P_hat^-1 (I - P_hat D) P_hat = (I - D P_hat): the map z_{j-1} -> w^f_j.
-        self._minus_Sinv_T = -(inv2x2(self.S_f[act]) @ self.T_f[act])
+        self._minus_Sinv_T = -matmul(inv2x2(self.S_f[act]), self.T_f[act])
         self._W_Pinv = self._w_act[:, None, None] * inv2x2(self.P_f[act])     # z = W P_hat^-1 y
         self.T_ss, self.S_ss = self._realisations()
         # Responses of the realisations that are sent; the obfuscator and the receiver both

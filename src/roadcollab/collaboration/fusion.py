@@ -38,6 +38,7 @@ from scipy.ndimage import uniform_filter1d
 
 from .._validation import check_int
 from ..errors import ParameterError
+from ..lti.batch2x2 import matmul
 from ..models.simulation import discretize_plant
 from ..estimation.grid import SegmentGrid
 from ..models.vehicle import FleetSpec, HalfCarParameters, half_car_model
@@ -184,7 +185,7 @@ def plant_moments(responses: np.ndarray, S: np.ndarray) -> tuple[np.ndarray, np.
     P = responses if responses.ndim == 4 else responses[None]
     if P.shape[1:] != S.shape:
         raise ParameterError(f"responses must have shape (n, {S.shape[0]}, 2, 2), got {responses.shape}")
-    second = np.mean(P @ S[None] @ P.conj().transpose(0, 1, 3, 2), axis=0)
+    second = np.mean(matmul(P, S[None], P.conj().transpose(0, 1, 3, 2)), axis=0)
     return P.mean(axis=0), second
 
 
@@ -235,11 +236,11 @@ class LinearMMSE:
         Cyy = np.zeros((K, 2 * V, 2 * V), complex)
         Cwy = np.zeros((K, 2, 2 * V), complex)
         for i, (mi, Mi) in enumerate(moments):
-            Cwy[:, :, 2 * i:2 * i + 2] = S @ H(mi)
+            Cwy[:, :, 2 * i:2 * i + 2] = matmul(S, H(mi))
             nv = grid.n_samples * max(float(noise_std[i]), 1e-3) ** 2
             Cyy[:, 2 * i:2 * i + 2, 2 * i:2 * i + 2] = Mi + nv * np.eye(2)
             for k in range(i):
-                block = mi @ S @ H(moments[k][0])
+                block = matmul(mi, S, H(moments[k][0]))
                 Cyy[:, 2 * i:2 * i + 2, 2 * k:2 * k + 2] = block
                 Cyy[:, 2 * k:2 * k + 2, 2 * i:2 * i + 2] = H(block)
         # G_j = Cwy Cyy^-1 on the leading 2j x 2j block: G_j^H = Cyy^-1 Cwy^H (Cyy Hermitian).

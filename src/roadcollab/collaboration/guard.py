@@ -50,7 +50,7 @@ import numpy as np
 
 from .._validation import check_int, check_nonnegative, check_positive
 from ..errors import MessageError, ParameterError
-from ..lti.batch2x2 import condition_2x2, inv2x2
+from ..lti.batch2x2 import condition_2x2, inv2x2, matmul
 from ..wire.message import ExchangeMessage, InversionMessage
 from .algorithm1 import CollaborativeEstimator
 
@@ -174,9 +174,9 @@ class ReceiverGuard:
         est = self.estimator
         act = est.grid.active
         Pinv = inv2x2(est.P_f[act])                              # P_hat_j^-1
-        A = Pinv[None] @ est.posterior_responses - np.eye(2)     # P_hat^-1 P - I per draw
-        param = np.mean(A @ S[None] @ A.conj().transpose(0, 1, 3, 2), axis=0)
-        noise = est.grid.n_samples * self.noise_std ** 2 * (Pinv @ Pinv.conj().transpose(0, 2, 1))
+        A = matmul(Pinv[None], est.posterior_responses) - np.eye(2)     # P_hat^-1 P - I per draw
+        param = np.mean(matmul(A, S[None], A.conj().transpose(0, 1, 3, 2)), axis=0)
+        noise = est.grid.n_samples * self.noise_std ** 2 * matmul(Pinv, Pinv.conj().transpose(0, 2, 1))
         w2 = est.grid.reg_weight[act] ** 2
         return 2.0 * w2 * np.real(np.trace(param + noise, axis1=1, axis2=2))
 

@@ -45,7 +45,7 @@ from ..collaboration.relay import Exchange, Relay
 from ..detection.detector import MAX_ROAD_VELOCITY, detect_anomalies
 from ..detection.scoring import lost_anomalies, new_false_detections
 from ..errors import MessageError, ParameterError
-from ..lti.batch2x2 import inv2x2, matvec
+from ..lti.batch2x2 import inv2x2, matmul, matvec
 from ..lti.realisation import StateSpaceData
 from ..models.vehicle import Vehicle
 from ..wire.message import ExchangeMessage, InversionMessage
@@ -186,7 +186,7 @@ def _pothole_dz(nominal: CollaborativeEstimator, config: ExperimentConfig) -> tu
     p = np.zeros((g.nfft, 2))
     p[:, 0] = np.gradient(h, 1.0 / fs)                             # left track, m/s
     act = g.active
-    M = np.eye(2) - nominal.D_f[act] @ nominal.P_f[act]
+    M = np.eye(2) - matmul(nominal.D_f[act], nominal.P_f[act])
     Wp = g.reg_weight[act][:, None] * g.rfft(p)[act]
     dZ = np.zeros((g.n_bins, 2), complex)
     dZ[act] = matvec(inv2x2(M), Wp)

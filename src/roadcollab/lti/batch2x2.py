@@ -60,21 +60,36 @@ def matvec(M: np.ndarray, x: np.ndarray) -> np.ndarray:
     return out
 
 
+def _mm2(A: np.ndarray, B: np.ndarray) -> np.ndarray:
+    """``A @ B`` for stacks of 2x2 matrices (broadcast leading axes), written out."""
+    out = np.empty(np.broadcast_shapes(A.shape, B.shape), dtype=np.result_type(A, B))
+    for i in range(2):
+        for j in range(2):
+            np.multiply(A[..., i, 0], B[..., 0, j], out=out[..., i, j])
+            out[..., i, j] += A[..., i, 1] * B[..., 1, j]
+    return out
+
+
 def matmul(*Ms: np.ndarray) -> np.ndarray:
     """Per-bin product of stacks of matrices, left to right.
 
+    Stacks of 2x2 matrices are multiplied written out: numpy's ``@`` loops over the stack with a
+    per-matrix kernel, 1.3 ms for two (3376, 2, 2) complex stacks against 0.1-0.2 ms here
+    (measured); the sums are the same two products per entry, so results agree to round-off.
+
     Parameters
     ----------
-    *Ms : (K, ., .) ndarray
-        At least one stack, with compatible inner dimensions.
+    *Ms : (..., p, q) ndarray
+        At least one stack, with compatible inner dimensions and broadcastable leading axes.
 
     Returns
     -------
     ndarray
     """
-    out = Ms[0]
+    out = np.asarray(Ms[0])
     for M in Ms[1:]:
-        out = out @ M
+        M = np.asarray(M)
+        out = _mm2(out, M) if out.shape[-2:] == (2, 2) and M.shape[-2:] == (2, 2) else out @ M
     return out
 
 
