@@ -152,6 +152,36 @@ def test_obfuscators_are_stable_invertible_and_well_conditioned(seed):
     assert np.max(sv[:, 0] / sv[:, -1]) <= spec.max_condition
 
 
+@settings(max_examples=30)
+@given(st.integers(0, 2**32 - 1))
+def test_condition_check_of_a_draw_equals_the_svd_of_its_numerators_on_the_warped_axis(seed):
+    """The check decides on ``max_w cond N(j w)`` from powers of ``w`` and ``r = F / (2 |det|)``;
+    here ``N(j w)`` is evaluated by ``np.polyval`` at complex ``s`` and conditioned by an SVD."""
+    from roadcollab.privacy.obfuscator_design import _max_condition_on_axis, _warped_powers
+
+    rng = np.random.default_rng(seed)
+    g = _PIPE.grid
+    n = int(rng.integers(1, 5))
+    num = rng.standard_normal((2, 2, n + 1)) * np.exp(rng.uniform(-3, 3, (2, 2, 1)))
+    om = np.minimum(g.omega_dt[g.active], np.pi * (1 - 1e-9))
+    s = 1j * (2.0 / g.dt) * np.tan(om / 2)
+    N = np.stack([[np.polyval(num[a, b], s) for b in range(2)] for a in range(2)]).transpose(2, 0, 1)
+    sv = np.linalg.svd(N, compute_uv=False)
+    expect = np.max(sv[:, 0] / sv[:, 1])
+    got = _max_condition_on_axis(num, _warped_powers(g, 4))
+    assert abs(got - expect) <= 1e-9 * expect
+
+
+def test_condition_check_is_infinite_where_the_numerator_is_singular():
+    from roadcollab.privacy.obfuscator_design import _max_condition_on_axis, _warped_powers
+
+    P = _warped_powers(_PIPE.grid, 4)
+    rank_one = np.array([[[1.0, 2.0, 3.0], [2.0, 4.0, 6.0]], [[0.5, 1.0, 1.5], [1.0, 2.0, 3.0]]])
+    assert _max_condition_on_axis(rank_one, P) == np.inf
+    assert _max_condition_on_axis(np.zeros((2, 2, 3)), P) == np.inf
+    assert _max_condition_on_axis(np.eye(2)[:, :, None] * np.array([1.0, 5.0]), P) == pytest.approx(1.0)
+
+
 def test_exact_models_without_noise_reconstruct_from_vehicle_2():
     """Oracle-free, noise-free, exact parameters: measured NMSE about 1e-6 from vehicle 2 on
     (edge effects of the offline filters); the bound asserted is 1e-4."""

@@ -205,39 +205,55 @@ def _realise(poles: np.ndarray, num: np.ndarray) -> tuple[np.ndarray, ...]:
     return A, np.vstack(blocks_B), np.hstack(blocks_C), D
 
 
-def _max_condition_on_axis(num: np.ndarray, w: np.ndarray) -> float:
-    """Largest 2-norm condition number of ``N(j w)`` over the frequencies ``w`` (rad/s).
+def _warped_powers(grid: SegmentGrid, degree: int) -> np.ndarray:
+    """``w^k`` for ``k = 0..degree`` at the warped frequencies of ``grid``'s active bins, (degree + 1, K).
 
-    ``N`` has real coefficients, so ``N(j w) = E(w^2) + j w O(w^2)`` with the even and odd parts
-    evaluated in real arithmetic on ``w^2`` (Horner, stacked over the four entries); then, as
-    :func:`~roadcollab.lti.batch2x2.condition_2x2`, ``cond = s1^2 / |det|`` with
-    ``s1^2 = (F + sqrt(F^2 - 4 |det|^2)) / 2``, ``F = ||N||_F^2``. The same value as the complex
-    evaluation up to round-off (a draw is decided differently only within ~1e-15 of the limit),
-    measured 0.2 -> 0.05 ms per candidate draw on 3000 bins.
+    The bilinear transform maps the bin at ``omega`` to ``s = j w`` with ``w = (2/dt) tan(omega/2)``
+    exactly. Kept per grid and degree (read-only, the last 8): every draw on a grid checks the same axis.
+    """
+    key = (grid.nfft, grid.sample_rate, grid.active.tobytes(), degree)
+    P = _POWERS.get(key)
+    if P is None:
+        om = np.minimum(grid.omega_dt[grid.active], np.pi * (1 - 1e-9))
+        w = (2.0 / grid.dt) * np.tan(om / 2)
+        P = np.empty((degree + 1, w.size))
+        P[0] = 1.0
+        for k in range(1, degree + 1):
+            P[k] = P[k - 1] * w
+        P.flags.writeable = False
+        while len(_POWERS) >= 8:
+            _POWERS.pop(next(iter(_POWERS)))
+        _POWERS[key] = P
+    return P
+
+
+_POWERS: dict[tuple, np.ndarray] = {}
+#: ``j^k`` for ``k mod 4``: the coefficient of ``w^k`` in ``N(j w)`` is ``c_k j^k``.
+_J_POWERS = np.array([1.0, 1j, -1.0, -1j])
+
+
+def _max_condition_on_axis(num: np.ndarray, powers: np.ndarray) -> float:
+    """Largest 2-norm condition number of ``N(j w)`` over the frequencies whose powers are given.
+
+    The four entries' real and imaginary parts are one (8, n+1) by (n+1, K) real product with the
+    powers ``w^k`` (:func:`_warped_powers`). For a 2x2 matrix ``s1 s2 = |det|`` and
+    ``s1^2 + s2^2 = F = ||N||_F^2``, so ``cond = r + sqrt(r^2 - 1)`` with ``r = F / (2 |det|)``:
+    increasing in ``r``, so only ``max r`` is needed. Measured 300 -> 75 us per candidate on 3375
+    bins against the Horner form this replaced; the two agree to 5e-14 relative (3000 random
+    numerators), so a draw is decided differently only that close to ``max_condition``.
     """
     deg = num.shape[-1] - 1
-    x = w * w
-    # Coefficient of s^k is num[..., deg - k]; (j w)^k = j^k w^k.
-    k = np.arange(deg + 1)
-    c = num[..., ::-1] * np.where(k % 4 < 2, 1.0, -1.0)        # j^k = 1, j, -1, -j -> signs of the even/odd parts
-    even, odd = c[..., 0::2], c[..., 1::2]
-
-    def horner(coef):        # coef[..., i] multiplies x^i
-        acc = np.zeros(num.shape[:-1] + x.shape)
-        for i in range(coef.shape[-1] - 1, -1, -1):
-            acc = acc * x + coef[..., i, None]
-        return acc
-
-    re = horner(even)
-    im = horner(odd) * w if odd.shape[-1] else np.zeros_like(re)
-    fro2 = np.sum(re * re + im * im, axis=(0, 1))
-    det_re = re[0, 0] * re[1, 1] - im[0, 0] * im[1, 1] - (re[0, 1] * re[1, 0] - im[0, 1] * im[1, 0])
-    det_im = re[0, 0] * im[1, 1] + im[0, 0] * re[1, 1] - (re[0, 1] * im[1, 0] + im[0, 1] * re[1, 0])
-    det2 = det_re * det_re + det_im * det_im
+    c = num.reshape(4, deg + 1)[:, ::-1] * _J_POWERS[np.arange(deg + 1) % 4]     # coefficient of w^k
+    H = np.concatenate([c.real, c.imag]) @ powers[:deg + 1]                       # Re N_ab, then Im N_ab
+    fro2 = np.einsum("ij,ij->j", H, H)
+    re, im = H[:4], H[4:]
+    det_re = re[0] * re[3] - im[0] * im[3] - (re[1] * re[2] - im[1] * im[2])
+    det_im = re[0] * im[3] + im[0] * re[3] - (re[1] * im[2] + im[1] * re[2])
     with np.errstate(divide="ignore", invalid="ignore"):
-        s1sq = (fro2 + np.sqrt(np.maximum(fro2 * fro2 - 4 * det2, 0.0))) / 2
-        cond = np.where(det2 > 0, s1sq / np.sqrt(det2), np.inf)
-    return float(np.max(cond))
+        r = float(np.max(fro2 / np.sqrt(det_re * det_re + det_im * det_im))) / 2
+    if not r < np.inf:          # singular on some bin (inf), or N = 0 there (nan)
+        return float("inf")
+    return float(r + np.sqrt(max(r * r - 1.0, 0.0)))
 
 
 def draw_obfuscator(spec: ObfuscationSpec, grid: SegmentGrid, *, rng=None,
@@ -273,8 +289,7 @@ def draw_obfuscator(spec: ObfuscationSpec, grid: SegmentGrid, *, rng=None,
         raise ParameterError(f"spec must be an ObfuscationSpec, got {type(spec).__name__}")
     rng = np.random.default_rng(rng)
     dt = grid.dt
-    om = np.minimum(grid.omega_dt[grid.active], np.pi * (1 - 1e-9))
-    w_warp = (2.0 / dt) * np.tan(om / 2)
+    powers = _warped_powers(grid, spec.order_range[1])
     for _ in range(max_attempts):
         n = int(rng.integers(spec.order_range[0], spec.order_range[1] + 1))
         poles = _random_roots(n, spec.pole_frequency_range, spec.pole_damping_range, spec.complex_fraction, rng)
@@ -299,7 +314,7 @@ def draw_obfuscator(spec: ObfuscationSpec, grid: SegmentGrid, *, rng=None,
         # the common denominator cancels in the condition number: cond(Psi_d) on the grid is
         # cond(N) at the warped frequencies, 4 polynomial evaluations instead of a realisation
         # and its response (measured 3.6 ms -> 1 ms per draw).
-        if _max_condition_on_axis(num, w_warp) > spec.max_condition:
+        if _max_condition_on_axis(num, powers) > spec.max_condition:
             continue
         A, B, C, D = _realise(poles, num)
         Ad, Bd, Cd, Dd = bilinear_discretize(A, B, C, D, dt)
