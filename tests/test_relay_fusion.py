@@ -83,6 +83,11 @@ def test_linear_mmse_uses_every_vehicle_and_matches_the_closed_form(pipe, record
     cen = pipe.centralized
     assert [G.shape[2] for G in cen.gains] == [2, 4, 6]
     base = cen.estimate(Ys)
+    # Every prefix from one stack of the records: the same as estimating from that prefix alone.
+    prefixes = cen.estimate_prefixes(Ys)
+    assert len(prefixes) == 3
+    for j in range(3):
+        np.testing.assert_array_equal(prefixes[j], cen.estimate(Ys[:j + 1]))
     for i in range(3):   # changing any one record changes the three-vehicle estimate
         Ys2 = list(Ys)
         Ys2[i] = Ys[i] * 1.5

@@ -84,14 +84,15 @@ class RunResult:
     iri: RunIri | None = None
 
 
-def _estimate_spectra(pipe: FleetPipeline, j: int, Ys: list, plain, priv, fused, fused_post) -> dict:
-    """Spectrum of every estimator in :data:`ESTIMATORS` at vehicle ``j`` (0-based) from the relays' steps."""
+def _estimate_spectra(pipe: FleetPipeline, j: int, Ys: list, plain, priv, fused, fused_post, central: list,
+                      oracle: list) -> dict:
+    """Spectrum of every estimator in :data:`ESTIMATORS` at vehicle ``j`` (0-based) from the relays' steps
+    and the linear MMSE estimates of every prefix of the fleet (``central``, ``oracle``)."""
     est, r = pipe.estimators[j], plain.result
     return {"observer_only": r.W_obs, "own_inversion": est.invert(Ys[j]),
             "own_posterior_inversion": est.invert(Ys[j], posterior=True), "algorithm1": r.W_hat,
             "algorithm1_private": priv.result.W_hat, "fused": fused.estimate_spectrum,
-            "fused_posterior": fused_post.estimate_spectrum, "centralized": pipe.centralized.estimate(Ys[:j + 1]),
-            "oracle_bound": pipe.oracle_bound.estimate(Ys[:j + 1])}
+            "fused_posterior": fused_post.estimate_spectrum, "centralized": central[j], "oracle_bound": oracle[j]}
 
 
 def simulate_run(pipe: FleetPipeline, rng, *, keep_traces: int = 0, privacy: bool = True,
@@ -135,9 +136,10 @@ def simulate_run(pipe: FleetPipeline, rng, *, keep_traces: int = 0, privacy: boo
     V = cfg.n_vehicles
     out = {k: np.zeros(V) for k in ESTIMATORS}
     rel, rel_h, t1e, t1w, t1e_b, t1w_b = (np.zeros(V) for _ in range(6))
+    central, oracle = pipe.centralized.estimate_prefixes(Ys), pipe.oracle_bound.estimate_prefixes(Ys)
     for j, est in enumerate(ests):
         r = plain[j].result
-        spectra = _estimate_spectra(pipe, j, Ys, plain[j], priv[j], fused[j], fused_post[j])
+        spectra = _estimate_spectra(pipe, j, Ys, plain[j], priv[j], fused[j], fused_post[j], central, oracle)
         for name, X in spectra.items():
             out[name][j] = mse(X)
         scale = max(float(np.max(np.abs(r.estimate))), 1e-300)

@@ -229,6 +229,9 @@ def theorem1_errors(clear: ExchangeMessage, sent: ExchangeMessage, psi1: Obfusca
         Over the band: ``||e~ - Psi1 e|| / ||Psi1 e||`` and the same for ``w~f``.
     """
     band = grid.weight >= band_weight
+    on = np.flatnonzero(band)
+    if on.size and on[-1] - on[0] + 1 == on.size:      # contiguous: index by a slice (views, not gathers)
+        band = slice(int(on[0]), int(on[-1]) + 1)
 
     def rel(got, ref):
         num = np.linalg.norm(got - ref, axis=1)
