@@ -110,3 +110,19 @@ def test_decode_reuses_a_certified_system_only_for_the_same_bytes():
     bad[off:off + A.nbytes] = A.astype("<f8").tobytes()
     with pytest.raises(MessageError, match="stable"):
         protocol.decode(bytes(bad), systems=systems)
+
+
+def test_unit_circle_is_exp_j_omega_and_kept_only_for_an_equal_vector():
+    from roadcollab.lti.response import unit_circle
+
+    om = np.linspace(0.0, np.pi, 3001)
+    z = unit_circle(om)
+    np.testing.assert_array_equal(z, np.exp(1j * om))
+    assert unit_circle(om.copy()) is z                     # an equal vector: the kept one
+    shifted = om.copy()
+    shifted[1000] = np.nextafter(shifted[1000], 4.0)       # one element one ulp away: computed anew
+    z2 = unit_circle(shifted)
+    assert z2 is not z and z2[1000] == np.exp(1j * shifted[1000])
+    np.testing.assert_array_equal(unit_circle(om[:10]), np.exp(1j * om[:10]))
+    with pytest.raises(ValueError):
+        z[0] = 0.0                                          # read-only: callers cannot spoil it
