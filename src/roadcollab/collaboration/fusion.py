@@ -263,10 +263,8 @@ class LinearMMSE:
         (K, 2) complex ndarray
             Road-velocity spectrum, zero outside the active bins.
         """
-        j = len(spectra)
-        if not 1 <= j <= len(self.gains):
-            raise ParameterError(f"spectra must hold 1..{len(self.gains)} records, got {j}")
-        return self.estimate_prefixes(spectra)[-1]
+        Ystack = self._stack(spectra)
+        return self._apply(Ystack, len(spectra))
 
     def estimate_prefixes(self, spectra: Sequence[np.ndarray]) -> list[np.ndarray]:
         """:meth:`estimate` from vehicles ``1..j`` for every ``j`` up to ``len(spectra)``, the
@@ -283,14 +281,20 @@ class LinearMMSE:
         list of (K, 2) complex ndarray
             The estimate from the first ``j`` records, ``j = 1..J``.
         """
+        Ystack = self._stack(spectra)
+        return [self._apply(Ystack, j) for j in range(1, len(spectra) + 1)]
+
+    def _stack(self, spectra: Sequence[np.ndarray]) -> np.ndarray:
+        """The records' active bins side by side, (K_act, 2 J), after checking ``J``."""
         J = len(spectra)
         if not 1 <= J <= len(self.gains):
             raise ParameterError(f"spectra must hold 1..{len(self.gains)} records, got {J}")
         act = self.grid.active_index       # a slice when the band is contiguous: views, not copies
-        Ystack = np.concatenate([np.asarray(Y)[act] for Y in spectra], axis=1)     # (K_act, 2J)
-        out = []
-        for j in range(1, J + 1):
-            X = np.zeros((self.grid.n_bins, 2), complex)
-            X[act] = np.einsum("kij,kj->ki", self.gains[j - 1], Ystack[:, :2 * j])
-            out.append(X)
-        return out
+        return np.concatenate([np.asarray(Y)[act] for Y in spectra], axis=1)
+
+    def _apply(self, Ystack: np.ndarray, j: int) -> np.ndarray:
+        """The estimate from the first ``j`` records of ``Ystack``, zero outside the active bins."""
+        act = self.grid.active_index
+        X = np.zeros((self.grid.n_bins, 2), complex)
+        X[act] = np.einsum("kij,kj->ki", self.gains[j - 1], Ystack[:, :2 * j])
+        return X

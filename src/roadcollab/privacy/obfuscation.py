@@ -33,7 +33,7 @@ import numpy as np
 from ..errors import ParameterError
 from ..wire.message import ExchangeMessage
 from ..lti.realisation import StateSpaceData, random_orthogonal, series, similarity
-from ..estimation.grid import SegmentGrid
+from ..estimation.grid import SegmentGrid, bin_index
 from ..lti.batch2x2 import inv2x2, matvec, receiver_z
 from .obfuscator_design import ObfuscationSpec, Obfuscator, draw_obfuscator
 
@@ -228,10 +228,7 @@ def theorem1_errors(clear: ExchangeMessage, sent: ExchangeMessage, psi1: Obfusca
         per bin; bins where the reference is below 1e-12 of its in-band maximum are skipped).
         Over the band: ``||e~ - Psi1 e|| / ||Psi1 e||`` and the same for ``w~f``.
     """
-    band = grid.weight >= band_weight
-    on = np.flatnonzero(band)
-    if on.size and on[-1] - on[0] + 1 == on.size:      # contiguous: index by a slice (views, not gathers)
-        band = slice(int(on[0]), int(on[-1]) + 1)
+    band = bin_index(grid.weight >= band_weight)
 
     def rel(got, ref):
         num = np.linalg.norm(got - ref, axis=1)
