@@ -6,8 +6,8 @@ import stat
 import pytest
 
 from roadcollab.errors import FileFormatError, MessageError, ParameterError
-from roadcollab.wire.identity import (Certificate, FleetAuthority, FleetTrust, VehicleIdentity, check_id,
-                                      open_envelope, seal_envelope)
+from roadcollab.wire.envelope import open_envelope, seal_envelope
+from roadcollab.wire.identity import Certificate, FleetAuthority, FleetTrust, VehicleIdentity, check_id
 
 
 @pytest.fixture(scope="module")

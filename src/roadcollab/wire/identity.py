@@ -1,4 +1,4 @@
-"""Fleet identities: an Ed25519 fleet authority, vehicle certificates and signed envelopes.
+"""Fleet identities: an Ed25519 fleet authority and vehicle certificates (signed envelopes: :mod:`.envelope`).
 
 The paper's vehicles exchange messages with no trusted authority for the *data*; a fleet still needs to
 know *who* may take part, or a server can invent participants (a Sybil roster) or substitute keys. This
@@ -11,11 +11,8 @@ to the same bytes)::
 
     certificate := "RCCERT1" 0x00 | u16 len fleet_id | fleet_id | u16 len vehicle_id | vehicle_id
                    | 32-byte Ed25519 public key | u64 issued_s | 64-byte authority signature
-    envelope    := "RCENV1" 0x00 | u32 len certificate | certificate | u32 len payload | payload
-                   | 64-byte signature of the vehicle
 
-Signatures are over a domain-separated byte string (:data:`CERT_CONTEXT` or :data:`ENVELOPE_CONTEXT`
-followed by the caller's ``context``, e.g. a topic and a session id), so a signature made for one purpose
+Signatures are over a domain-separated byte string (:data:`CERT_CONTEXT`; envelopes have their own), so a signature made for one purpose
 does not verify for another. Keys come from the operating system's CSPRNG (``cryptography``), never from
 the simulation's seed plan: a seeded key is a known key.
 
@@ -33,18 +30,14 @@ from pathlib import Path
 
 from ..errors import FileFormatError, MessageError, ParameterError
 
-__all__ = ["CERT_CONTEXT", "ENVELOPE_CONTEXT", "Certificate", "FleetAuthority", "VehicleIdentity",
-           "FleetTrust", "seal_envelope", "open_envelope", "verify_signature", "check_id"]
+__all__ = ["CERT_CONTEXT", "Certificate", "FleetAuthority", "VehicleIdentity", "FleetTrust", "verify_signature",
+           "check_id"]
 
 CERT_MAGIC = b"RCCERT1\x00"
-ENVELOPE_MAGIC = b"RCENV1\x00"
 CERT_CONTEXT = b"roadcollab/certificate/v1\x00"
-ENVELOPE_CONTEXT = b"roadcollab/envelope/v1\x00"
 _KEY = 32
 _SIG = 64
 _MAX_ID = 64
-#: The largest payload an envelope carries (the largest roadcollab message plus headroom).
-MAX_ENVELOPE_PAYLOAD = 64 * 1024 * 1024
 
 
 def check_id(name: str, value: str) -> str:
@@ -396,72 +389,3 @@ class VehicleIdentity:
             return cls(cert, _load_private(folder / "identity.key"))
         except ParameterError as err:
             raise FileFormatError(f"{folder}: {err}") from None
-
-
-def _envelope_signed(context: bytes, cert: bytes, payload: bytes) -> bytes:
-    return (ENVELOPE_CONTEXT + struct.pack(">I", len(context)) + bytes(context)
-            + struct.pack(">I", len(cert)) + cert + struct.pack(">I", len(payload)) + bytes(payload))
-
-
-def seal_envelope(identity: VehicleIdentity, payload: bytes, context: bytes = b"") -> bytes:
-    """``payload`` with the sender's certificate and its signature over ``context`` and both.
-
-    Parameters
-    ----------
-    identity : VehicleIdentity
-    payload : bytes
-    context : bytes
-        Bound into the signature but not sent (e.g. the topic and session): the receiver must supply the
-        same context, so an envelope replayed into another topic or session does not verify.
-
-    Returns
-    -------
-    bytes
-    """
-    if len(payload) > MAX_ENVELOPE_PAYLOAD:
-        raise ParameterError(f"payload of {len(payload)} bytes exceeds {MAX_ENVELOPE_PAYLOAD}")
-    cert = identity.certificate.to_bytes()
-    sig = identity.sign(_envelope_signed(context, cert, payload))
-    return ENVELOPE_MAGIC + struct.pack(">I", len(cert)) + cert + struct.pack(">I", len(payload)) + bytes(payload) + sig
-
-
-def open_envelope(data: bytes, trust: FleetTrust, context: bytes = b"") -> tuple[Certificate, bytes]:
-    """Check an envelope from :func:`seal_envelope`: the certificate against ``trust``, the signature against it.
-
-    Parameters
-    ----------
-    data : bytes
-        Untrusted.
-    trust : FleetTrust
-    context : bytes
-        What the sender must have bound (see :func:`seal_envelope`).
-
-    Returns
-    -------
-    certificate : Certificate
-        The sender's (checked).
-    payload : bytes
-
-    Raises
-    ------
-    MessageError
-        Malformed, oversized, another fleet, revoked, or a bad signature.
-    """
-    if not isinstance(data, (bytes, bytearray, memoryview)):
-        raise MessageError(f"envelope must be bytes, got {type(data).__name__}")
-    r = _Reader(data, "envelope")
-    if r.take(len(ENVELOPE_MAGIC)) != ENVELOPE_MAGIC:
-        raise MessageError("envelope: wrong magic")
-    n_cert = r.u(">I")
-    if n_cert > 1024:
-        raise MessageError(f"envelope: certificate of {n_cert} bytes")
-    cert_bytes = r.take(n_cert)
-    n_payload = r.u(">I")
-    if n_payload > MAX_ENVELOPE_PAYLOAD:
-        raise MessageError(f"envelope: payload of {n_payload} bytes exceeds {MAX_ENVELOPE_PAYLOAD}")
-    payload, sig = r.take(n_payload), r.take(_SIG)
-    r.end()
-    cert = trust.check(Certificate.from_bytes(cert_bytes))
-    verify_signature(cert.public_key, _envelope_signed(context, cert_bytes, payload), sig,
-                     f"envelope from {cert.vehicle_id!r}")
-    return cert, payload
