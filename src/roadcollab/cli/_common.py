@@ -15,7 +15,7 @@ import re
 from ..errors import ParameterError
 from ..io.limits import DEFAULT_MAX_FILE_MB, DEFAULT_MAX_ROWS, FileLimits
 
-__all__ = ["positive_int", "nonneg_int", "positive_float", "paillier_bits", "add_out_option", "add_dask_options",
+__all__ = ["input_paths", "positive_int", "nonneg_int", "positive_float", "paillier_bits", "add_out_option", "add_dask_options",
            "add_road_options", "add_limit_options", "file_limits", "dask_options", "check_dask_options",
            "command_line", "progress", "run_with_progress", "print_table", "config_from_args"]
 
@@ -129,9 +129,19 @@ class _HelpFormatter(argparse.RawDescriptionHelpFormatter):
 
 # --- common options ------------------------------------------------------------------------------
 
+def out_path(text: str) -> Path:
+    """argparse type of ``--out``: a non-empty path (``Path("")`` would silently mean the current folder)."""
+    if not text.strip():
+        raise argparse.ArgumentTypeError("expected a folder name, got an empty one")
+    return Path(text)
+
+
 def add_out_option(p: argparse.ArgumentParser) -> None:
-    """``--out DIR`` (required): the folder every study writes its outputs to."""
-    p.add_argument("--out", type=Path, required=True, help="output folder")
+    """``--out DIR`` (required): the folder every study writes its outputs to (absent, empty or a previous
+    result of the same command: README "Output folders")."""
+    p.add_argument("--out", type=out_path, required=True,
+                   help="output folder: absent, empty, or a previous result of this command (never a folder "
+                        "holding other files)")
 
 
 def add_study_options(p: argparse.ArgumentParser, *, runs: int, runs_help: str, vehicles_help: str) -> None:
@@ -231,6 +241,30 @@ def check_dask_options(args: argparse.Namespace, timeout: float = 5.0) -> None:
     except (OSError, TimeoutError) as err:
         raise ParameterError(f"--scheduler {address}: no Dask scheduler answered within {timeout:g} s "
                              f"({type(err).__name__}: {err})") from None
+
+
+#: Options whose values are files or folders a run reads: a result folder must neither be nor hold one.
+INPUT_OPTIONS = ("drive", "road_profile", "profile", "network", "store", "fleet")
+
+
+def input_paths(args: argparse.Namespace) -> list[str]:
+    """The input files and folders named by ``args`` (:data:`INPUT_OPTIONS`; lists flattened).
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+
+    Returns
+    -------
+    list of str
+    """
+    out = []
+    for name in INPUT_OPTIONS:
+        value = getattr(args, name, None)
+        for v in value if isinstance(value, (list, tuple)) else [value]:
+            if v is not None:
+                out.append(str(v))
+    return out
 
 
 # --- running -------------------------------------------------------------------------------------

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from ._common import (command_parser, add_dask_options, add_study_options, check_dask_options, dask_options, paillier_bits, positive_int, print_table,
+from ._common import (input_paths, command_parser, add_dask_options, add_study_options, check_dask_options, dask_options, paillier_bits, positive_int, print_table,
                       run_with_progress)
 
 __all__ = ["NAME", "add_parser", "run"]
@@ -73,7 +73,7 @@ def run(args: argparse.Namespace, command_line: str) -> int:
                             paillier_bits=args.paillier_bits, replica_runs=args.replica_runs,
                             poisoning_runs=args.poisoning_runs)
     check_dask_options(args)
-    with staged_output(args.out) as out:
+    with staged_output(args.out, NAME, input_paths(args)) as out:
         steps = cfg.n_runs + replica_fit_count(cfg)
         result, elapsed = run_with_progress(steps, NAME, lambda cb: run_attack_study(
             cfg, args.seed, progress=cb, **dask_options(args)))

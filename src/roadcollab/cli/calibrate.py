@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from ._common import (command_parser, add_dask_options, add_out_option, check_dask_options, dask_options, positive_float, positive_int,
+from ._common import (input_paths, command_parser, add_dask_options, add_out_option, check_dask_options, dask_options, positive_float, positive_int,
                       progress)
 
 __all__ = ["NAME", "add_parser", "run"]
@@ -74,7 +74,7 @@ def run(args: argparse.Namespace, command_line: str) -> int:
                                    experiment=ExperimentConfig(n_vehicles=args.vehicles, n_runs=1), **kw)
     n = len(cfg.seeds) * cfg.runs_per_seed
     check_dask_options(args)
-    with staged_output(args.out) as out:
+    with staged_output(args.out, NAME, input_paths(args)) as out:
         prog, cb = progress(n, NAME)
         with prog:
             result = calibrate_anomalies(cfg, progress=cb, **dask_options(args))

@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 import time
 
-from ._common import add_out_option, positive_float
+from ._common import add_out_option, input_paths, positive_float
 
 __all__ = ["NAME", "add_parser", "run"]
 
@@ -62,6 +62,7 @@ def run(args: argparse.Namespace, command_line: str) -> int:
     from ..io.profiles import load_profile, packaged_profile_path
     from ..models.iri import GOLDEN_CAR, iri_segments
     from ..reporting.iri_report import write_iri
+    from ..reporting.output_folder import staged_output
 
     path = packaged_profile_path() if args.road_profile in (None, "packaged") else args.road_profile
     profile = load_profile(path)
@@ -69,7 +70,8 @@ def run(args: argparse.Namespace, command_line: str) -> int:
     result = iri_segments(profile.distance, profile.elevation, args.segment_length, car=GOLDEN_CAR)
     elapsed = time.perf_counter() - t0
     source = profile.source if args.road_profile not in (None, "packaged") else "packaged data/profile_1.txt"
-    write_iri(result, args.out, command=command_line, source=source, car=GOLDEN_CAR, elapsed=elapsed)
+    with staged_output(args.out, NAME, input_paths(args)) as out:
+        write_iri(result, out, command=command_line, source=source, car=GOLDEN_CAR, elapsed=elapsed)
     mean = result.mean
     print(f"IRI over {len(mean)} segments of {args.segment_length:g} m: mean {mean.mean():.3f} m/km "
           f"(min {mean.min():.3f}, max {mean.max():.3f}); wrote {args.out}/iri.csv and report.md")

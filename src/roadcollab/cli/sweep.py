@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 
 from ..errors import ParameterError
-from ._common import (command_parser, add_dask_options, add_out_option, check_dask_options, dask_options, nonneg_int, positive_int,
+from ._common import (input_paths, command_parser, add_dask_options, add_out_option, check_dask_options, dask_options, nonneg_int, positive_int,
                       print_table, run_with_progress)
 
 __all__ = ["NAME", "add_parser", "run"]
@@ -86,7 +86,7 @@ def run(args: argparse.Namespace, command_line: str) -> int:
 
     cfg = _config(args)
     check_dask_options(args)
-    with staged_output(args.out) as out:
+    with staged_output(args.out, NAME, input_paths(args)) as out:
         result, elapsed = run_with_progress(len(cfg.points()) * cfg.n_runs, NAME,
                                             lambda cb: run_sweep(cfg, args.seed, progress=cb, **dask_options(args)))
         findings = write_sweep(result, out, command=command_line, elapsed=elapsed)
