@@ -14,12 +14,11 @@ end in one line naming the options.
 from __future__ import annotations
 
 import argparse
-import math
 from dataclasses import dataclass
 from typing import Callable, NoReturn
 
-__all__ = ["CommandParser", "Range", "add_check", "ranged", "ranged_list", "count", "help_range", "plural", "SEED_MAX",
-           "SPEED", "NOISE", "UNCERTAINTY", "GAMMA", "SEED", "WORKERS", "MAX_ROWS", "MAX_FILE_MB"]
+__all__ = ["CommandParser", "Range", "add_check", "ranged", "ranged_list", "count", "help_range", "iso_class", "plural",
+           "SEED_MAX", "SPEED", "NOISE", "UNCERTAINTY", "GAMMA", "SEED", "WORKERS", "MAX_ROWS", "MAX_FILE_MB"]
 
 #: Largest root seed: ``config.json`` records it, and JSON readers keep integers exactly up to 2^53.
 SEED_MAX = 2 ** 53
@@ -100,10 +99,9 @@ class Range:
             value = int(text) if self.integer else float(text)
         except ValueError:
             raise argparse.ArgumentTypeError(f"{want}, got {shown!r} (not {kind})") from None
-        # NaN fails both comparisons; infinity fails the upper bound.
+        # NaN fails both comparisons; infinity fails the upper bound. The value is shown as typed.
         if not (self.low <= value <= self.high):
-            got = shown if not math.isfinite(value) else _num(value)
-            raise argparse.ArgumentTypeError(f"{want}, got {got}")
+            raise argparse.ArgumentTypeError(f"{want}, got {shown.strip()}")
         return value
 
 
@@ -241,3 +239,27 @@ def count(what: str, low: int, high: int) -> Callable[[str], int]:
 def help_range(parse) -> str:
     """``"1 to 60 m/s"``: the range of a :func:`ranged` type, for the option's help."""
     return parse.range.text()
+
+
+def iso_class(text: str) -> str:
+    """argparse ``type``: an ISO 8608 roughness class letter A (smoothest) to H, any case.
+
+    Parameters
+    ----------
+    text : str
+        The option's value as typed.
+
+    Returns
+    -------
+    str
+        The upper-case letter.
+
+    Raises
+    ------
+    argparse.ArgumentTypeError
+        Anything but one letter A-H.
+    """
+    key = text.strip().upper()
+    if len(key) != 1 or key not in "ABCDEFGH":
+        raise argparse.ArgumentTypeError(f"expected an ISO 8608 roughness class A to H, got {text[:40]!r}")
+    return key

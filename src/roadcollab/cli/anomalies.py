@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from ._arguments import NOISE, help_range
+from ._arguments import NOISE, help_range, iso_class
 from ._common import (command_parser, add_dask_options, add_road_options, add_study_options, check_dask_options,
                       config_from_args, dask_options, plural, print_table, run_with_progress)
 
@@ -37,7 +37,8 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
                       min_vehicles=2)
     p.add_argument("--noise", type=NOISE, default=None,
                    help=f"accelerometer noise std, m/s^2 (default 0.05; {help_range(NOISE)})")
-    p.add_argument("--iso-class", default=None, help="ISO 8608 roughness class (default C)")
+    p.add_argument("--iso-class", type=iso_class, default=None,
+                   help="ISO 8608 roughness class, A (smoothest) to H (default C)")
     p.add_argument("--no-sweeps", action="store_true", help="skip the depth and noise sweeps")
     add_road_options(p)
     add_dask_options(p)

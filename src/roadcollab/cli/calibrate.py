@@ -24,6 +24,12 @@ def _seeds(text: str) -> str:
     The text is returned as typed (the run expands it); the check comes first so that a range such as
     ``0-99999999999`` is refused instead of being expanded into memory.
     """
+    _count_seeds(text)
+    return text
+
+
+def _count_seeds(text: str) -> int:
+    """How many seeds ``text`` names (see :func:`_seeds`); ``argparse.ArgumentTypeError`` if it is malformed."""
     n = 0
     for part in (t.strip() for t in text.split(",")):
         lo, sep, hi = part.partition("-")
@@ -37,14 +43,12 @@ def _seeds(text: str) -> str:
         n += b - a + 1
         if n > _MOST_SEEDS:
             raise argparse.ArgumentTypeError(f"expected at most {_MOST_SEEDS} seeds, got {part!r} and more")
-    return text
+    return n
 
 
 def _check(args: argparse.Namespace) -> str | None:
     """The seeds and the grids together: at most 1000 seeds, at most 50 values per grid."""
-    from ..experiments.calibration_config import parse_seeds
-
-    n = len(parse_seeds(args.seeds))
+    n = sum(_count_seeds(text) for text in args.seeds)
     if n > _MOST_SEEDS:
         return f"argument --seeds: expected at most {_MOST_SEEDS} seeds in all, got {n}"
     for option, grid in (("--snr-thresholds", args.snr_thresholds), ("--min-depths-mm", args.min_depths_mm)):

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from ._arguments import GAMMA, NOISE, UNCERTAINTY, count, help_range
+from ._arguments import GAMMA, NOISE, UNCERTAINTY, count, help_range, iso_class
 from ._common import (command_parser, add_dask_options, add_road_options, add_study_options, check_dask_options,
                       config_from_args, dask_options, plural, print_table, run_with_progress)
 
@@ -44,7 +44,8 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
     p.add_argument("--uncertainty", type=UNCERTAINTY, default=None,
                    help=f"relative parameter uncertainty of each vehicle's model (default 0.10; "
                         f"{help_range(UNCERTAINTY)})")
-    p.add_argument("--iso-class", default=None, help="ISO 8608 roughness class of the synthetic road (default C)")
+    p.add_argument("--iso-class", type=iso_class, default=None,
+                   help="ISO 8608 roughness class of the synthetic road, A (smoothest) to H (default C)")
     p.add_argument("--gamma", type=GAMMA, default=None,
                    help=f"observer parameter gamma of eq. 4 (default 512, the strongest single-vehicle observer; "
                         f"{help_range(GAMMA)})")

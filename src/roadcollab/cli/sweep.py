@@ -15,15 +15,15 @@ _NOISES = ranged_list("noise standard deviation", NOISE.range.low, NOISE.range.h
 _UNCERTAINTIES = ranged_list("relative uncertainty", UNCERTAINTY.range.low, UNCERTAINTY.range.high)
 #: Grid points x runs: 2000 is a few hours serially (about 5 s per run-point under load).
 _MOST_RUN_POINTS = 2000
+#: Lengths of SweepConfig's default grids (gammas, noise stds, uncertainties), known without importing the
+#: study (a second); tests/test_cli_arguments.py checks them against SweepConfig.
+DEFAULT_GRID_SIZES = (5, 2, 2)
 
 
 def _check(args: argparse.Namespace) -> str | None:
     """The grid's size: points (product of the three lists' lengths) x --runs at most 2000."""
-    from ..experiments.sweep_config import SweepConfig
-
-    default = SweepConfig()
-    sizes = [len(v) if v is not None else len(d) for v, d in ((args.gammas, default.gammas),
-             (args.noise, default.sensor_noise_stds), (args.uncertainty, default.parameter_uncertainties))]
+    sizes = [len(v) if v is not None else d for v, d in zip((args.gammas, args.noise, args.uncertainty),
+                                                            DEFAULT_GRID_SIZES)]
     total = sizes[0] * sizes[1] * sizes[2] * args.runs
     if total > _MOST_RUN_POINTS:
         return (f"arguments --gammas, --noise, --uncertainty, --runs: {sizes[0]} x {sizes[1]} x {sizes[2]} grid "
