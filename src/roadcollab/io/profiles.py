@@ -31,7 +31,7 @@ MAX_DISTANCE = 1e7          # m: 10,000 km
 MAX_ELEVATION = 1e4         # m: above Everest; a larger value is a glitch
 MIN_SPACING, MAX_SPACING = 1e-4, 1.0   # m: profilometers sample every 1 mm to 0.3 m
 #: A header field: a column name such as ``distance_m``, ``left (m)`` or ``z_right``.
-_NAME = re.compile(r"[A-Za-z][A-Za-z0-9_ ()/.\-]*")
+_NAME = re.compile(r"[A-Za-z][A-Za-z0-9_]*(?: ?[(\[][A-Za-z0-9/^_ ]*[)\]])?")
 
 
 @dataclass(frozen=True, eq=False)
