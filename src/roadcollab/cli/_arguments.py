@@ -107,7 +107,7 @@ class Range:
 
 def _num(v: float) -> str:
     """A bound or value as a person writes it: ``60``, ``0.05``, ``2,000,000``, ``9.007e+15``."""
-    if float(v).is_integer() and abs(v) < 1e12:
+    if float(v).is_integer() and abs(v) < 1e16:
         return f"{int(v):,}"
     return f"{v:g}"
 
