@@ -17,6 +17,7 @@ import pytest
 
 from roadcollab.cli._arguments import Range, plural, ranged
 from roadcollab.cli._table import fit_widths, print_table, split_columns, table_width
+import roadcollab.cli.main as cli_main
 from roadcollab.cli.main import build_parser, main
 
 #: Options that take a value that is not a number (checked elsewhere: files, folders, addresses, names).
@@ -79,6 +80,14 @@ CASES = [(prefix, option, label, value)
          for label, value in _bad_values(typ.range)]
 
 
+@pytest.fixture
+def no_run(monkeypatch):
+    """A refused command line must never reach a command's ``run`` (nothing imported or computed)."""
+    def run(args, command_line):
+        raise AssertionError(f"{args.command} ran")
+    monkeypatch.setattr(cli_main, "_RUN", {name: run for name in cli_main._RUN})
+
+
 def _refused(capsys, argv):
     """Run ``main(argv)``: (exit status, stderr, seconds)."""
     t0 = time.perf_counter()
@@ -105,16 +114,16 @@ def test_every_range_is_in_the_help(capsys):
 
 @pytest.mark.parametrize("prefix, option, label, value", CASES,
                          ids=[f"{' '.join(c[0])} {c[1]} {c[2]}" for c in CASES])
-def test_out_of_range_values_are_one_line_naming_the_option(tmp_path, capsys, prefix, option, label, value):
+def test_out_of_range_values_are_one_line_naming_the_option(tmp_path, capsys, no_run, prefix, option, label, value):
     code, err, seconds = _refused(capsys, [*prefix, f"{option}={value}", *_required(prefix, tmp_path)])
     assert code == 2
     assert err.count("\n") == 1 and err.endswith("\n"), err
     assert f"argument {option}: expected " in err and "Traceback" not in err
-    assert seconds < 0.5
+    assert seconds < 5  # a guard against computing, not a speed target: run() is never called (fixture)
     assert not (tmp_path / "out").exists()  # nothing was started
 
 
-def test_the_ranges_the_issue_found(tmp_path, capsys):
+def test_the_ranges_the_issue_found(tmp_path, capsys, no_run):
     out = str(tmp_path / "o")
     for argv, expected in [
         (["reproduce", "--speed", "0.01"], "argument --speed: expected a speed from 1 to 60 m/s, got 0.01"),
@@ -137,7 +146,7 @@ def test_the_edges_of_a_range_are_accepted():
     assert (parsed.speed, parsed.runs, parsed.noise, parsed.uncertainty) == (60.0, 10000, 0.0, 0.3)
 
 
-def test_paillier_bits_and_iso_class(tmp_path, capsys):
+def test_paillier_bits_and_iso_class(tmp_path, capsys, no_run):
     for value in ("100", "1000", "16384", "nan", "x"):
         code, err, _ = _refused(capsys, ["attack", "--paillier-bits", value, "--out", str(tmp_path)])
         assert code == 2 and "argument --paillier-bits: expected" in err and err.count("\n") == 1
@@ -159,10 +168,10 @@ def test_paillier_bits_and_iso_class(tmp_path, capsys):
     (["calibrate-anomalies", "--seeds", "1000-99999999999999"], "argument --seeds: expected at most 1000 seeds"),
     (["calibrate-anomalies", "--seeds", "5-3"], "argument --seeds: expected an ascending range a-b, got '5-3'"),
 ])
-def test_options_that_depend_on_each_other_are_checked_after_parsing(tmp_path, capsys, argv, expected):
+def test_options_that_depend_on_each_other_are_checked_after_parsing(tmp_path, capsys, no_run, argv, expected):
     code, err, seconds = _refused(capsys, argv + _required(argv[:1], tmp_path))
     assert code == 2 and expected in err and err.count("\n") == 1, err
-    assert seconds < 0.5
+    assert seconds < 5
 
 
 def test_dependent_options_that_fit_pass():
