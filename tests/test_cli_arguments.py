@@ -201,7 +201,7 @@ def test_an_argument_error_is_one_line_from_the_installed_command(tmp_path):
 # --- plurals and tables --------------------------------------------------------------------------
 
 def test_plural():
-    assert [plural(n, "run") for n in (0, 1, 2, 1000)] == ["0 runs", "1 run", "2 runs", "1,000 runs"]
+    assert [plural(n, "run") for n in (0, 1, 2, 1000)] == ["0 runs", "1 run", "2 runs", "1000 runs"]
     assert plural(1, "Dask worker") == "1 Dask worker" and plural(3, "vehicle") == "3 vehicles"
 
 

@@ -17,34 +17,13 @@ import argparse
 from dataclasses import dataclass
 from typing import Callable, NoReturn
 
+from ..reporting.wording import plural
+
 __all__ = ["CommandParser", "Range", "add_check", "ranged", "ranged_list", "count", "help_range", "iso_class", "plural",
            "SEED_MAX", "SPEED", "NOISE", "UNCERTAINTY", "GAMMA", "SEED", "WORKERS", "MAX_ROWS", "MAX_FILE_MB"]
 
 #: Largest root seed: ``config.json`` records it, and JSON readers keep integers exactly up to 2^53.
 SEED_MAX = 2 ** 53
-
-
-def plural(n: int, noun: str, nouns: str | None = None) -> str:
-    """``"1 run"``, ``"2 runs"``: a count with its noun in the right number.
-
-    Parameters
-    ----------
-    n : int
-    noun : str
-        Singular.
-    nouns : str, optional
-        Plural (default ``noun + "s"``).
-
-    Returns
-    -------
-    str
-
-    Examples
-    --------
-    >>> plural(1, "run"), plural(2, "run"), plural(0, "vehicle-segment")
-    ('1 run', '2 runs', '0 vehicle-segments')
-    """
-    return f"{n:,} {noun if n == 1 else (nouns or noun + 's')}"
 
 
 @dataclass(frozen=True)
