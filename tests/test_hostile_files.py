@@ -6,6 +6,8 @@ The corpus is generated in tmp_path (no committed binaries); the 2.5 GB file is 
 import json
 import os
 import re
+import subprocess
+import sys
 import time
 from pathlib import Path
 
@@ -13,7 +15,8 @@ import numpy as np
 import pytest
 
 from roadcollab import FileFormatError, ParameterError
-from roadcollab.cli.main import main
+from roadcollab.cli.main import build_parser, main
+from roadcollab.reporting.output_folder import MANIFEST
 from roadcollab.io.drive_params import write_drive_params
 from roadcollab.io.drives import load_drive, read_drive_csv
 from roadcollab.io.limits import FileLimits
@@ -216,6 +219,7 @@ def test_failed_or_interrupted_run_leaves_previous_results(tmp_path, capsys, mon
     out = tmp_path / "out"
     out.mkdir()
     (out / "report.md").write_text("previous")
+    (out / MANIFEST).write_text(json.dumps({"command": "estimate", "files": ["report.md"]}))  # an earlier result
     bad = _drive(tmp_path, rows=_with_row(3, "0.015,nan,0"))
     assert _cli(capsys, ["estimate", "--drive", str(bad), "--out", str(out)])[0] == 2
     import roadcollab.reporting.drives_report as report   # the command imports it when it runs
@@ -224,9 +228,9 @@ def test_failed_or_interrupted_run_leaves_previous_results(tmp_path, capsys, mon
         raise KeyboardInterrupt
 
     monkeypatch.setattr(report, "write_estimates", killed)
-    with pytest.raises(KeyboardInterrupt):
-        main(["estimate", "--drive", str(path), "--out", str(out)])
-    assert [p.name for p in out.iterdir()] == ["report.md"] and (out / "report.md").read_text() == "previous"
+    assert main(["estimate", "--drive", str(path), "--out", str(out)]) == 130  # Ctrl-C: one line, status 130
+    assert sorted(p.name for p in out.iterdir()) == [MANIFEST, "report.md"]
+    assert (out / "report.md").read_text() == "previous"
     assert not list(tmp_path.glob(".out.*"))
 
 
@@ -245,3 +249,169 @@ def test_help_says_what_it_does_writes_and_an_example(command, capsys):
         main([command, "--help"])
     text = capsys.readouterr().out
     assert "Writes:" in text and f"example:\n  roadcollab {command}" in text
+
+
+# --- files that are not regular files (issue 18, section 4) ---------------------------------------
+
+def _not_regular(tmp_path: Path, kind: str) -> tuple[Path, str]:
+    """A path of ``kind`` and the message the readers must give for it."""
+    path = tmp_path / f"{kind.replace(' ', '_')}.csv"
+    if kind == "folder":
+        path.mkdir()
+        return path, "to be a regular file, got a folder"
+    if kind == "FIFO":
+        os.mkfifo(path)
+        return path, "to be a regular file, got a named pipe (FIFO)"
+    if kind == "device":
+        return Path("/dev/zero"), "to be a regular file, got a device"
+    if kind == "symlink loop":
+        path.symlink_to(tmp_path / "loop_b")
+        (tmp_path / "loop_b").symlink_to(path)
+        return path, "is a symlink loop"
+    if kind == "dangling symlink":
+        path.symlink_to(tmp_path / "gone.csv")
+        return path, f"is a dangling symlink (its target {tmp_path / 'gone.csv'} does not exist)"
+    if kind == "missing":
+        return path, "not found (expected an existing file)"
+    raise AssertionError(kind)
+
+
+NOT_REGULAR = ["folder", "FIFO", "device", "symlink loop", "dangling symlink", "missing"]
+#: Every file option of the command line, with what it calls the file.
+FILE_OPTIONS = [
+    (["estimate", "--out", "{out}", "--drive"], "--drive", "drive CSV"),
+    (["reproduce", "--runs", "1", "--out", "{out}", "--road-profile"], "--road-profile", "profile file"),
+    (["anomalies", "--runs", "1", "--out", "{out}", "--road-profile"], "--road-profile", "profile file"),
+    (["iri", "--out", "{out}", "--road-profile"], "--road-profile", "profile file"),
+]
+
+
+@pytest.mark.parametrize("kind", NOT_REGULAR)
+@pytest.mark.parametrize("argv, option, what", FILE_OPTIONS, ids=[" ".join(f[0][:1]) + " " + f[1] for f in FILE_OPTIONS])
+def test_file_options_name_the_kind_of_non_regular_file(tmp_path, kind, argv, option, what):
+    # A subprocess with a timeout: a reader that opened the FIFO would block forever (no writer comes).
+    path, message = _not_regular(tmp_path, kind)
+    args = [a.format(out=tmp_path / "out") for a in argv] + [str(path)]
+    t0 = time.perf_counter()
+    res = subprocess.run([sys.executable, "-m", "roadcollab.cli.main", *args], capture_output=True, text=True,
+                         timeout=60)
+    assert res.returncode == 2 and "Traceback" not in res.stderr and res.stderr.count("\n") == 1, res.stderr
+    assert f"error: argument {option}: {path}: " in res.stderr and message in res.stderr
+    assert (what in res.stderr) and time.perf_counter() - t0 < 30
+    assert not (tmp_path / "out").exists()
+
+
+@pytest.mark.parametrize("kind", NOT_REGULAR)
+def test_readers_name_the_kind_of_non_regular_file(tmp_path, kind):
+    path, message = _not_regular(tmp_path, kind)
+    for read, what in ((read_drive_csv, "drive CSV"), (load_profile, "profile file")):
+        with pytest.raises(FileFormatError, match="^" + re.escape(f"{path}: ") + ".*" + re.escape(message)) as info:
+            read(path)
+        assert what in str(info.value) and "\n" not in str(info.value)
+
+
+def test_unreadable_file_says_permission_denied(tmp_path, monkeypatch):
+    path = tmp_path / "p.txt"
+    path.write_text("".join(f"{k}.0 0.0\n" for k in range(12)))
+    if os.geteuid() != 0:  # root reads anything: then the check is exercised through os.access below
+        path.chmod(0)
+        with pytest.raises(FileFormatError, match=re.escape(f"{path}: cannot read profile file: permission denied")):
+            load_profile(path)
+        path.chmod(0o644)
+    monkeypatch.setattr(os, "access", lambda p, mode, **kw: False)
+    with pytest.raises(FileFormatError, match=re.escape(f"{path}: cannot read profile file: permission denied")):
+        load_profile(path)
+
+
+def test_a_file_below_a_file_is_not_found_with_the_reason(tmp_path):
+    (tmp_path / "f").write_text("x")
+    with pytest.raises(FileFormatError, match=re.escape("not found (a folder in its path is a file)")):
+        load_profile(tmp_path / "f" / "p.txt")
+
+
+# --- what iri reads: what the other commands read (issue 18, section 4) -----------------------------
+
+def _packaged_rows():
+    from roadcollab.io.profiles import packaged_profile_path
+
+    prof = load_profile(packaged_profile_path())
+    return prof.distance.tolist(), prof.elevation.tolist()
+
+
+def _iri_csv(path: Path) -> np.ndarray:
+    return np.loadtxt(path / "iri.csv", delimiter=",", skiprows=1, ndmin=2)
+
+
+def test_iri_reads_a_profile_with_a_bom_and_a_header(tmp_path, capsys):
+    d, z = _packaged_rows()
+    plain = tmp_path / "plain.txt"
+    plain.write_text("".join(f"{a!r} {b!r}\n" for a, b in zip(d, z)))
+    bom = tmp_path / "bom.csv"
+    bom.write_bytes(b"\xef\xbb\xbf" + ("distance_m,elevation_m\n" + "".join(f"{a!r},{b!r}\n" for a, b in zip(d, z))
+                                       ).encode())
+    assert main(["iri", "--road-profile", str(plain), "--out", str(tmp_path / "a")]) == 0
+    assert main(["iri", "--road-profile", str(bom), "--out", str(tmp_path / "b")]) == 0
+    capsys.readouterr()
+    np.testing.assert_array_equal(_iri_csv(tmp_path / "a"), _iri_csv(tmp_path / "b"))
+
+
+def test_iri_of_a_two_track_profile_is_per_track(tmp_path, capsys):
+    # Oracles: each track's IRI is the one-track IRI of that track alone, and the IRI is homogeneous
+    # (the Golden Car is linear and the rectified slope is |.|): a right track of 2 x left has twice its IRI.
+    d, z = _packaged_rows()
+    two = tmp_path / "two.txt"
+    two.write_text("# distance_m left_m right_m\n" + "".join(f"{a!r} {b!r} {2 * b!r}\n" for a, b in zip(d, z)))
+    one = tmp_path / "one.txt"
+    one.write_text("".join(f"{a!r} {b!r}\n" for a, b in zip(d, z)))
+    assert main(["iri", "--road-profile", str(two), "--out", str(tmp_path / "two")]) == 0
+    assert main(["iri", "--road-profile", str(one), "--out", str(tmp_path / "one")]) == 0
+    assert "IRI over 5 segments of 100 m" in capsys.readouterr().out
+    two_iri, one_iri = _iri_csv(tmp_path / "two"), _iri_csv(tmp_path / "one")
+    np.testing.assert_array_equal(two_iri[:, 2], one_iri[:, 2])
+    np.testing.assert_allclose(two_iri[:, 3], 2 * one_iri[:, 2], rtol=1e-12)
+    assert "two tracks (left, right)" in (tmp_path / "two" / "report.md").read_text()
+
+
+def test_two_track_profile_drives_its_own_right_track(tmp_path):
+    from roadcollab.io.profiles import measured_road
+
+    d, z = _packaged_rows()
+    right = z[::-1]
+    path = tmp_path / "two.csv"
+    path.write_text("distance_m, left_m, right_m\n" + "".join(f"{a!r}, {b!r}, {c!r}\n" for a, b, c in zip(d, z, right)))
+    prof = load_profile(path)
+    assert prof.tracks == 2 and prof.elevation.shape == (len(d), 2)
+    road = measured_road(path, detrend=False, enveloping_length=0.0, rng=0)
+    np.testing.assert_array_equal(road.elevation[:, 0], z)
+    np.testing.assert_array_equal(road.elevation[:, 1], right)
+    with pytest.raises(ParameterError, match="second_track 'measured' needs a two-track profile"):
+        measured_road(None, second_track="measured", rng=0)
+
+
+@pytest.mark.parametrize("text, pattern", [
+    ("0 0 0\n1 0\n", r"line 2: expected 3 numbers 'distance_m left_m right_m', got '1 0' \(every row has the 3 "),
+    ("distance_m,left_m,right_m\n0,0\n", r"line 2: expected 3 numbers 'distance_m left_m right_m'"),
+    ("0 0\n1 0 0\n", r"line 2: expected 2 numbers 'distance_m elevation_m', got '1 0 0'"),
+    ("0 0\ndistance_m elevation_m\n", r"line 2: expected 2 numbers"),   # a header only before the data
+    ("0 0 0 0\n", r"line 1: expected 2 numbers 'distance_m elevation_m' or 3 'distance_m left_m right_m'"),
+])
+def test_profile_columns_are_consistent(tmp_path, text, pattern):
+    path = tmp_path / "p.txt"
+    path.write_text(text)
+    with pytest.raises(FileFormatError, match="^" + re.escape(str(path)) + ": " + pattern):
+        load_profile(path)
+
+
+def test_iri_advice_names_its_own_flags(tmp_path, capsys):
+    d, z = _packaged_rows()
+    path = tmp_path / "p.txt"
+    path.write_text("".join(f"{a!r} {b!r}\n" for a, b in zip(d, z)))
+    code, err = _cli(capsys, ["iri", "--road-profile", str(path), "--max-rows", "100", "--out", str(tmp_path / "o")])
+    assert code == 2 and "raise the limit with --max-rows" in err
+    code, err = _cli(capsys, ["iri", "--road-profile", str(path), "--max-file-mb", "0.01", "--out", str(tmp_path / "o")])
+    assert code == 2 and "raise the limit with --max-file-mb" in err
+    parser_help = " ".join(build_parser()._subparsers._group_actions[0].choices["iri"].format_help().split())
+    for flag in re.findall(r"raise the limit with (--[a-z-]+)", err + " --max-rows"):
+        assert flag in parser_help
+    # And the raised limit works.
+    assert main(["iri", "--road-profile", str(path), "--max-rows", str(len(d)), "--out", str(tmp_path / "o")]) == 0

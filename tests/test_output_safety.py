@@ -14,7 +14,7 @@ from roadcollab.reporting.output_folder import MANIFEST, STAGING_MARK
 #: Every command that writes, with the smallest arguments that would run it (bench writes nothing).
 COMMANDS = {
     "reproduce": ["reproduce", "--runs", "1", "--vehicles", "2"],
-    "attack": ["attack", "--runs", "1"],
+    "attack": ["attack", "--runs", "2"],
     "anomalies": ["anomalies", "--runs", "1", "--vehicles", "3", "--no-sweeps"],
     "calibrate-anomalies": ["calibrate-anomalies", "--seeds", "1000", "--runs-per-seed", "1"],
     "sweep": ["sweep", "--runs", "1"],

@@ -12,17 +12,32 @@ from typing import Callable, Sequence
 
 import re
 
-from ..errors import ParameterError
-from ..io.limits import DEFAULT_MAX_FILE_MB, DEFAULT_MAX_ROWS, FileLimits
+from ..errors import FileFormatError, ParameterError
+from ..io.limits import DEFAULT_MAX_FILE_MB, DEFAULT_MAX_ROWS, FileLimits, check_regular_file
+from ._arguments import MAX_FILE_MB, MAX_ROWS, SEED, SPEED, WORKERS, add_check, count, help_range, plural, ranged
+from ._outputs import input_paths, out_path
+from ._table import print_table
 
-__all__ = ["input_paths", "positive_int", "nonneg_int", "positive_float", "paillier_bits", "add_out_option", "add_dask_options",
-           "add_road_options", "add_limit_options", "file_limits", "dask_options", "check_dask_options",
-           "command_line", "progress", "run_with_progress", "print_table", "config_from_args"]
+__all__ = ["input_paths", "out_path", "positive_int", "nonneg_int", "positive_float", "paillier_bits", "add_out_option", "add_dask_options",
+           "add_road_options", "add_limit_options", "add_seed_option", "file_limits", "dask_options",
+           "check_dask_options", "command_line", "progress", "run_with_progress", "print_table", "plural",
+           "config_from_args"]
 
 #: The shortest measured profile a simulated command accepts: lead-in + lead-out (15 m each), one metre
 #: of slack and a scored segment of at least 20 m.
 MIN_SCORED_M = 20.0
 _MARGIN_M = 15.0
+#: The most vehicles an experiment accepts (ExperimentConfig).
+MAX_VEHICLES = 1000
+#: IRI segments: 1 m (shorter is the Golden Car's own response, not the road's) to 100 km.
+SEGMENT_LENGTH = ranged("segment length", 1, 100_000, "m")
+#: Distance grid of drives at different speeds: 5 mm (finer than any tyre resolves) to 1 m (the
+#: coarsest profile spacing read).
+GRID_STEP = ranged("grid step", 0.005, 1, "m")
+#: Start offsets between drives (GPS error): 0.1 m to 1 km.
+MAX_OFFSET = ranged("largest offset", 0.1, 1000, "m")
+#: A segment spans at least this many samples of the profile or grid it averages.
+MIN_SAMPLES_PER_SEGMENT = 10
 _ADDRESS = re.compile(r"(tcp|tls|inproc|ucx|ws|wss)://[^\s]+|[A-Za-z0-9_.\-]+:\d{1,5}")
 
 
@@ -129,13 +144,6 @@ class _HelpFormatter(argparse.RawDescriptionHelpFormatter):
 
 # --- common options ------------------------------------------------------------------------------
 
-def out_path(text: str) -> Path:
-    """argparse type of ``--out``: a non-empty path (``Path("")`` would silently mean the current folder)."""
-    if not text.strip():
-        raise argparse.ArgumentTypeError("expected a folder name, got an empty one")
-    return Path(text)
-
-
 def add_out_option(p: argparse.ArgumentParser) -> None:
     """``--out DIR`` (required): the folder every study writes its outputs to (absent, empty or a previous
     result of the same command: README "Output folders")."""
@@ -144,7 +152,8 @@ def add_out_option(p: argparse.ArgumentParser) -> None:
                         "holding other files)")
 
 
-def add_study_options(p: argparse.ArgumentParser, *, runs: int, runs_help: str, vehicles_help: str) -> None:
+def add_study_options(p: argparse.ArgumentParser, *, runs: int, runs_help: str, vehicles_help: str,
+                      min_runs: int = 1, max_runs: int = 10_000, min_vehicles: int = 1) -> None:
     """``--runs``, ``--vehicles``, ``--seed`` and ``--out``, in that order (reproduce, attack, anomalies).
 
     Parameters
@@ -153,19 +162,32 @@ def add_study_options(p: argparse.ArgumentParser, *, runs: int, runs_help: str, 
     runs : int
         Default of ``--runs``.
     runs_help, vehicles_help : str
-        Help texts of ``--runs`` and ``--vehicles``.
+        Help texts of ``--runs`` and ``--vehicles`` (the range is appended).
+    min_runs, max_runs : int
+        Range of ``--runs``.
+    min_vehicles : int
+        Smallest ``--vehicles`` (the largest is the 1000 an experiment accepts).
     """
-    p.add_argument("--runs", type=positive_int, default=runs, help=runs_help)
-    p.add_argument("--vehicles", type=positive_int, default=10, help=vehicles_help)
-    p.add_argument("--seed", type=nonneg_int, default=0, help="root seed (default 0)")
+    runs_type = count("number of runs", min_runs, max_runs)
+    vehicles_type = count("fleet size", min_vehicles, MAX_VEHICLES)
+    p.add_argument("--runs", type=runs_type, default=runs, help=f"{runs_help}; {help_range(runs_type)}")
+    p.add_argument("--vehicles", type=vehicles_type, default=10,
+                   help=f"{vehicles_help}; {help_range(vehicles_type)}")
+    add_seed_option(p)
     add_out_option(p)
+
+
+def add_seed_option(p: argparse.ArgumentParser, what: str = "root seed") -> None:
+    """``--seed`` (default 0), from 0 to 2^53 (``config.json`` records it; JSON keeps such integers exact)."""
+    p.add_argument("--seed", type=SEED, default=0, help=f"{what} (default 0; {help_range(SEED)})")
 
 
 def add_dask_options(p: argparse.ArgumentParser) -> None:
     """``--workers N`` or ``--scheduler ADDRESS`` (mutually exclusive): where the runs are computed."""
     g = p.add_mutually_exclusive_group()
-    g.add_argument("--workers", type=positive_int, default=None,
-                   help="run on a local process pool with N worker processes (results are identical)")
+    g.add_argument("--workers", type=WORKERS, default=None, metavar="N",
+                   help="run on a local process pool with N worker processes (results are identical; "
+                        f"{help_range(WORKERS)})")
     g.add_argument("--scheduler", default=None, metavar="ADDRESS",
                    help="run on an existing Dask cluster, e.g. tcp://host:8786")
 
@@ -173,10 +195,66 @@ def add_dask_options(p: argparse.ArgumentParser) -> None:
 def add_road_options(p: argparse.ArgumentParser) -> None:
     """``--road-profile FILE``, ``--speed`` (m/s) and the file limits: the road the simulated fleet drives."""
     p.add_argument("--road-profile", metavar="FILE", default=None,
-                   help="measured profile (rows 'distance_m elevation_m', uniform spacing, at least "
-                        f"{2 * _MARGIN_M + 1 + MIN_SCORED_M:g} m long); 'packaged' for the shipped one")
-    p.add_argument("--speed", type=positive_float, default=15.0, help="vehicle speed, m/s (default 15)")
+                   help="measured profile (rows 'distance_m elevation_m' or 'distance_m left_m right_m', uniform "
+                        f"spacing, at least {2 * _MARGIN_M + 1 + MIN_SCORED_M:g} m long); 'packaged' for the "
+                        "shipped one")
+    p.add_argument("--speed", type=SPEED, default=15.0,
+                   help=f"vehicle speed, m/s (default 15; {help_range(SPEED)}, road vehicles)")
     add_limit_options(p, "the --road-profile file")
+    add_check(p, lambda args: check_file_options("--road-profile", [args.road_profile], "profile file",
+                                                 keep=("packaged",)))
+
+
+def check_file_options(option: str, paths, what: str, keep: Sequence[str] = ()) -> str | None:
+    """The first of ``paths`` that is not an existing, readable regular file, as an argument error; None if all are.
+
+    Parameters
+    ----------
+    option : str
+        The option naming the files (``"--drive"``).
+    paths : sequence of str or None
+        The values given (None entries are skipped).
+    what : str
+        What the files are (``"drive CSV"``).
+    keep : sequence of str
+        Values that name no file (``"packaged"``).
+
+    Returns
+    -------
+    str or None
+        ``"argument --drive: <path>: ..."`` (see :func:`~roadcollab.io.limits.check_regular_file`).
+    """
+    for path in paths or ():
+        if path is None or path in keep:
+            continue
+        try:
+            check_regular_file(Path(path), what)
+        except FileFormatError as err:
+            return f"argument {option}: {err}"
+    return None
+
+
+def check_segment_length(segment_length: float, spacing: float, spacing_name: str) -> str | None:
+    """A segment shorter than ten sample spacings as an argument error; None if it is long enough.
+
+    Parameters
+    ----------
+    segment_length : float
+        ``--segment-length``, m.
+    spacing : float
+        Sample spacing of the profile or grid, m.
+    spacing_name : str
+        Where the spacing comes from (``"--grid-step"``, ``"the profile's spacing"``).
+
+    Returns
+    -------
+    str or None
+    """
+    need = MIN_SAMPLES_PER_SEGMENT * spacing
+    if segment_length < need * (1 - 1e-9):
+        return (f"argument --segment-length: expected at least {MIN_SAMPLES_PER_SEGMENT} times {spacing_name} "
+                f"({need:g} m), got {segment_length:g} m")
+    return None
 
 
 def add_limit_options(p: argparse.ArgumentParser, what: str) -> None:
@@ -188,10 +266,11 @@ def add_limit_options(p: argparse.ArgumentParser, what: str) -> None:
     what : str
         The files the limits apply to, for the help text.
     """
-    p.add_argument("--max-rows", type=positive_int, default=DEFAULT_MAX_ROWS, metavar="N",
-                   help=f"most data rows accepted in {what} (default {DEFAULT_MAX_ROWS:,})")
-    p.add_argument("--max-file-mb", type=positive_float, default=DEFAULT_MAX_FILE_MB, metavar="MB",
-                   help=f"size limit of {what} in MB, checked before reading (default {DEFAULT_MAX_FILE_MB:g})")
+    p.add_argument("--max-rows", type=MAX_ROWS, default=DEFAULT_MAX_ROWS, metavar="N",
+                   help=f"most data rows accepted in {what} (default {DEFAULT_MAX_ROWS:,}; {help_range(MAX_ROWS)})")
+    p.add_argument("--max-file-mb", type=MAX_FILE_MB, default=DEFAULT_MAX_FILE_MB, metavar="MB",
+                   help=f"size limit of {what} in MB, checked before reading (default {DEFAULT_MAX_FILE_MB:g}; "
+                        f"{help_range(MAX_FILE_MB)})")
 
 
 def file_limits(args: argparse.Namespace) -> FileLimits:
@@ -241,30 +320,6 @@ def check_dask_options(args: argparse.Namespace, timeout: float = 5.0) -> None:
     except (OSError, TimeoutError) as err:
         raise ParameterError(f"--scheduler {address}: no Dask scheduler answered within {timeout:g} s "
                              f"({type(err).__name__}: {err})") from None
-
-
-#: Options whose values are files or folders a run reads: a result folder must neither be nor hold one.
-INPUT_OPTIONS = ("drive", "road_profile", "profile", "network", "store", "fleet")
-
-
-def input_paths(args: argparse.Namespace) -> list[str]:
-    """The input files and folders named by ``args`` (:data:`INPUT_OPTIONS`; lists flattened).
-
-    Parameters
-    ----------
-    args : argparse.Namespace
-
-    Returns
-    -------
-    list of str
-    """
-    out = []
-    for name in INPUT_OPTIONS:
-        value = getattr(args, name, None)
-        for v in value if isinstance(value, (list, tuple)) else [value]:
-            if v is not None:
-                out.append(str(v))
-    return out
 
 
 # --- running -------------------------------------------------------------------------------------
@@ -327,35 +382,6 @@ def run_with_progress(total: int, description: str, work: Callable[[Callable[[in
     return result, time.perf_counter() - t0
 
 
-def print_table(title: str, columns: Sequence[str], rows: Sequence[Sequence[str]]) -> None:
-    """Print a rich table with right-justified columns to stdout.
-
-    Parameters
-    ----------
-    title : str
-        Table title.
-    columns : sequence of str
-        Column headers.
-    rows : sequence of sequence of str
-        Cell texts, one sequence per row.
-    """
-    from rich.console import Console
-    from rich.table import Table
-
-    table = Table(title=title)
-    for col in columns:
-        table.add_column(col, justify="right", overflow="fold")
-    for row in rows:
-        table.add_row(*row)
-    console = Console()
-    # Piped or in a narrow terminal rich assumes 80 columns and cuts numbers to "0.0…": give the table
-    # the width it needs (headers may wrap, numbers never).
-    need = sum(max([len(c)] + [len(r[i]) for r in rows]) + 3 for i, c in enumerate(columns)) + 1
-    if console.width < need:
-        console = Console(width=min(need, 250))
-    console.print(table)
-
-
 # --- simulation options --------------------------------------------------------------------------
 
 def config_from_args(args: argparse.Namespace) -> ExperimentConfig:
@@ -391,8 +417,8 @@ def config_from_args(args: argparse.Namespace) -> ExperimentConfig:
         kw["gamma"] = args.gamma
     if args.uncertainty is not None:
         kw["fleet"] = dataclasses.replace(FleetSpec(), estimate_uncertainty=args.uncertainty)
-    if args.road_profile is not None and args.road_profile != "packaged" and not Path(args.road_profile).is_file():
-        raise ParameterError(f"--road-profile must be an existing file, got {args.road_profile!r}")
+    if args.road_profile is not None and args.road_profile != "packaged":
+        check_regular_file(Path(args.road_profile), "--road-profile file")
     if args.road_profile is not None:
         # A measured profile covers a fixed stretch: score as much of it as fits.
         length = measured_road(None if args.road_profile == "packaged" else args.road_profile, rng=0,

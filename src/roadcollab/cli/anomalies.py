@@ -4,8 +4,9 @@ from __future__ import annotations
 
 import argparse
 
-from ._common import (input_paths, command_parser, add_dask_options, add_road_options, add_study_options, check_dask_options, config_from_args,
-                      dask_options, print_table, run_with_progress)
+from ._arguments import NOISE, help_range, iso_class
+from ._common import (input_paths, command_parser, add_dask_options, add_road_options, add_study_options, check_dask_options,
+                      config_from_args, dask_options, plural, print_table, run_with_progress)
 
 __all__ = ["NAME", "add_parser", "run"]
 
@@ -32,9 +33,12 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
         writes="into --out (replaced as a whole at the end): detection.csv, the road map, F1 vs depth, F1 vs "
                "noise (each figure with its CSV), config.json, report.md.",
         example="roadcollab anomalies --runs 5 --no-sweeps --out results/anomalies")
-    add_study_options(p, runs=20, runs_help="roads (default 20)", vehicles_help="fleet size (default 10, at least 2)")
-    p.add_argument("--noise", type=float, default=None, help="accelerometer noise std, m/s^2 (default 0.05)")
-    p.add_argument("--iso-class", default=None, help="ISO 8608 roughness class (default C)")
+    add_study_options(p, runs=20, runs_help="roads (default 20)", vehicles_help="fleet size (default 10)",
+                      min_vehicles=2)
+    p.add_argument("--noise", type=NOISE, default=None,
+                   help=f"accelerometer noise std, m/s^2 (default 0.05; {help_range(NOISE)})")
+    p.add_argument("--iso-class", type=iso_class, default=None,
+                   help="ISO 8608 roughness class, A (smoothest) to H (default C)")
     p.add_argument("--no-sweeps", action="store_true", help="skip the depth and noise sweeps")
     add_road_options(p)
     add_dask_options(p)
@@ -73,7 +77,7 @@ def run(args: argparse.Namespace, command_line: str) -> int:
         result, elapsed = run_with_progress(cfg.n_runs, NAME, lambda cb: run_anomaly_study(
             cfg, args.seed, progress=cb, **dask_options(args)))
         write_anomalies(result, out, command=command_line, elapsed=elapsed)
-    print_table(f"Anomaly detection, {cfg.n_runs} runs, {elapsed:.1f} s",
+    print_table(f"Anomaly detection, {plural(cfg.n_runs, 'run')}, {elapsed:.1f} s",
                 ("estimator", "precision", "recall", "F1", "median position error (m)"),
                 [(r.estimator, f"{r.precision:.3f}", f"{r.recall:.3f}", f"{r.f1:.3f}",
                   f"{r.median_position_error_m:.3f}") for r in result.detection_rows])

@@ -4,8 +4,14 @@ from __future__ import annotations
 
 import argparse
 
-from ._common import (input_paths, command_parser, add_dask_options, add_study_options, check_dask_options, dask_options, paillier_bits, positive_int, print_table,
-                      run_with_progress)
+from ._arguments import count, help_range
+from ._common import (input_paths, command_parser, add_dask_options, add_study_options, check_dask_options, dask_options,
+                      paillier_bits, plural, print_table, run_with_progress)
+
+#: Vehicles the replica attacks target (AttackStudyConfig.replica_targets): the fleet needs at least as many.
+_REPLICA_TARGETS = 3
+_REPLICA_RUNS = count("number of segments", 1, 100)
+_POISONING_RUNS = count("number of runs", 1, 100)
 
 __all__ = ["NAME", "add_parser", "run"]
 
@@ -36,14 +42,16 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
                "linkability.csv, poisoning.csv, baselines.csv (DP, Paillier, AEAD, secure aggregation), "
                "dp_composition.csv, frontier.csv, Figs. 8-12, config.json, report.md.",
         example="roadcollab attack --runs 5 --paillier-bits 1024 --out results/attack")
-    add_study_options(p, runs=20, runs_help="segments (default 20, at least 2)",
-                      vehicles_help="fleet size (default 10, at least 3)")
+    add_study_options(p, runs=20, runs_help="segments (default 20)", min_runs=2, max_runs=1000,
+                      vehicles_help=f"fleet size (default 10; the replica attacks target {_REPLICA_TARGETS} vehicles)",
+                      min_vehicles=_REPLICA_TARGETS)
     p.add_argument("--paillier-bits", type=paillier_bits, default=2048,
                    help="Paillier key size, bits (512-8192 in steps of 64; default 2048)")
-    p.add_argument("--replica-runs", type=positive_int, default=3,
-                   help="segments of the replica attacks (default 3; linked attacks need 3)")
-    p.add_argument("--poisoning-runs", type=positive_int, default=2,
-                   help="runs of the poisoning measurements (default 2)")
+    p.add_argument("--replica-runs", type=_REPLICA_RUNS, default=3,
+                   help=f"segments of the replica attacks (default 3; linked attacks need 3; "
+                        f"{help_range(_REPLICA_RUNS)})")
+    p.add_argument("--poisoning-runs", type=_POISONING_RUNS, default=2,
+                   help=f"runs of the poisoning measurements (default 2; {help_range(_POISONING_RUNS)})")
     add_dask_options(p)
     return p
 
@@ -78,7 +86,7 @@ def run(args: argparse.Namespace, command_line: str) -> int:
         result, elapsed = run_with_progress(steps, NAME, lambda cb: run_attack_study(
             cfg, args.seed, progress=cb, **dask_options(args)))
         write_attack(result, out, command=command_line, elapsed=elapsed)
-    print_table(f"Attacks on S_j's poles, {cfg.n_runs} segments, {elapsed:.1f} s",
+    print_table(f"Attacks on S_j's poles, {plural(cfg.n_runs, 'segment')}, {elapsed:.1f} s",
                 ("mechanism", "attack", "road", "segments", "median rel. pole error", "success rate"),
                 [(r.mechanism, r.attack, r.road, str(r.segments), f"{r.median_rel_pole_error:.3g}",
                   f"{r.success_rate:.2f}") for r in result.attack_rows])

@@ -12,7 +12,9 @@ import time
 from dataclasses import asdict
 
 from ..errors import ParameterError
-from ._common import add_limit_options, command_parser, file_limits, out_path, positive_float
+from ._arguments import add_check, help_range
+from ._common import (out_path, GRID_STEP, MAX_OFFSET, SEGMENT_LENGTH, add_limit_options, check_file_options,
+                      check_segment_length, command_parser, file_limits, plural)
 
 __all__ = ["NAME", "add_estimate_arguments", "estimate_command", "add_parser", "run"]
 
@@ -141,16 +143,29 @@ def add_estimate_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--out", type=out_path, required=True, metavar="DIR",
                         help="output folder: absent, empty or a previous estimate result (never a folder holding "
                              "other files or the drives); written at the end, a failed run leaves it untouched")
-    parser.add_argument("--segment-length", type=positive_float, default=100.0, metavar="M",
-                        help="IRI segment length of the fused elevation, m (default 100)")
+    parser.add_argument("--segment-length", type=SEGMENT_LENGTH, default=100.0, metavar="M",
+                        help="IRI segment length of the fused elevation, m (default 100; "
+                             f"{help_range(SEGMENT_LENGTH)}, and at least 10 --grid-step)")
     parser.add_argument("--align", action="store_true",
                         help="estimate each drive's start offset (GPS error) by cross-correlating the drives' "
                              "inversions on distance, apply it and write offsets.csv")
-    parser.add_argument("--max-offset", type=positive_float, default=10.0, metavar="M",
-                        help="largest start offset between two drives searched with --align, m (default 10)")
-    parser.add_argument("--grid-step", type=positive_float, default=0.05, metavar="M",
-                        help="step of the distance grid for drives at different speeds, m (default 0.05)")
+    parser.add_argument("--max-offset", type=MAX_OFFSET, default=10.0, metavar="M",
+                        help="largest start offset between two drives searched with --align, m (default 10; "
+                             f"{help_range(MAX_OFFSET)}, and at least 2 --grid-step)")
+    parser.add_argument("--grid-step", type=GRID_STEP, default=0.05, metavar="M",
+                        help="step of the distance grid for drives at different speeds, m (default 0.05; "
+                             f"{help_range(GRID_STEP)})")
     add_limit_options(parser, "each drive CSV")
+    add_check(parser, _check)
+
+
+def _check(args: argparse.Namespace) -> str | None:
+    """The options together: segments and offsets against the grid step, and every --drive a regular file."""
+    problem = check_segment_length(args.segment_length, args.grid_step, "--grid-step")
+    if problem is None and args.max_offset < 2 * args.grid_step:
+        problem = (f"argument --max-offset: expected at least 2 --grid-step ({2 * args.grid_step:g} m) to search, "
+                   f"got {args.max_offset:g} m")
+    return problem or check_file_options("--drive", args.drive, "drive CSV")
 
 
 def add_parser(subparsers) -> argparse.ArgumentParser:
@@ -199,6 +214,6 @@ def run(args: argparse.Namespace, command_line: str) -> int:
                                spacing=args.grid_step)
     for note in summary.get("notes", []):
         print(f"note: {note}")
-    print(f"estimated {summary['n_drives']} drives over {summary['length_m']:.1f} m ({summary['grid']} grid); "
-          f"wrote {args.out}/report.md")
+    print(f"estimated {plural(summary['n_drives'], 'drive')} over {summary['length_m']:.1f} m "
+          f"({summary['grid']} grid); wrote {args.out}/report.md")
     return 0

@@ -17,6 +17,7 @@ from pathlib import Path
 
 from .. import __version__
 from . import anomalies, attack, bench, calibrate, estimate, iri, message, reproduce, sweep
+from ._arguments import CommandParser
 from ._common import command_line
 
 __all__ = ["main", "build_parser"]
@@ -46,10 +47,10 @@ def build_parser() -> argparse.ArgumentParser:
     -------
     argparse.ArgumentParser
     """
-    parser = argparse.ArgumentParser(prog="roadcollab", description=_DESCRIPTION, epilog=_EPILOG,
-                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser = CommandParser(prog="roadcollab", description=_DESCRIPTION, epilog=_EPILOG,
+                           formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--version", action="version", version=f"roadcollab {__version__}")
-    sub = parser.add_subparsers(dest="command", required=True)
+    sub = parser.add_subparsers(dest="command", required=True, parser_class=CommandParser)
     for module in COMMANDS:
         module.add_parser(sub)
     return parser

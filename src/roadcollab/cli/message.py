@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from ._common import command_parser, nonneg_int, out_path
+from ._common import out_path, add_seed_option, command_parser
 
 __all__ = ["NAME", "add_parser", "run"]
 
@@ -40,7 +40,7 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
                         "secure_aggregation: a masked input, the round-2 message a vehicle sends the aggregator "
                         "(vehicle 1, session 0/0, 600 x 2 uint64 ring elements, uniform as a masked z is); "
                         "default paper")
-    q.add_argument("--seed", type=nonneg_int, default=0, help="seed of the example's random draws (default 0)")
+    add_seed_option(q, "seed of the example's random draws")
     return p
 
 

@@ -4,8 +4,11 @@ from __future__ import annotations
 
 import argparse
 
+from ._arguments import GAMMA, NOISE, UNCERTAINTY, count, help_range, iso_class
 from ._common import (input_paths, command_parser, add_dask_options, add_road_options, add_study_options, check_dask_options,
-                      config_from_args, dask_options, nonneg_int, positive_float, print_table, run_with_progress)
+                      config_from_args, dask_options, plural, print_table, run_with_progress)
+
+_MEASURED_RUNS = count("number of runs", 0, 10_000)
 
 __all__ = ["NAME", "add_parser", "run"]
 
@@ -36,18 +39,22 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
                "--measured-runs also mse_measured.csv and iri_measured.csv.",
         example="roadcollab reproduce --runs 20 --vehicles 5 --out results/repro")
     add_study_options(p, runs=100, runs_help="Monte Carlo runs (default 100)", vehicles_help="fleet size (default 10)")
-    p.add_argument("--noise", type=float, default=None, help="accelerometer noise std, m/s^2 (default 0.05)")
-    p.add_argument("--uncertainty", type=float, default=None,
-                   help="relative parameter uncertainty of each vehicle's model (default 0.10)")
-    p.add_argument("--iso-class", default=None, help="ISO 8608 roughness class of the synthetic road (default C)")
-    p.add_argument("--gamma", type=positive_float, default=None,
-                   help="observer parameter gamma of eq. 4 (default 512, the strongest single-vehicle observer)")
+    p.add_argument("--noise", type=NOISE, default=None,
+                   help=f"accelerometer noise std, m/s^2 (default 0.05; {help_range(NOISE)})")
+    p.add_argument("--uncertainty", type=UNCERTAINTY, default=None,
+                   help=f"relative parameter uncertainty of each vehicle's model (default 0.10; "
+                        f"{help_range(UNCERTAINTY)})")
+    p.add_argument("--iso-class", type=iso_class, default=None,
+                   help="ISO 8608 roughness class of the synthetic road, A (smoothest) to H (default C)")
+    p.add_argument("--gamma", type=GAMMA, default=None,
+                   help=f"observer parameter gamma of eq. 4 (default 512, the strongest single-vehicle observer; "
+                        f"{help_range(GAMMA)})")
     p.add_argument("--oracle", action="store_true", help="use the true plants in T_j (analysis only)")
     p.add_argument("--redraw-fleet", action="store_true",
                    help="draw a new fleet for every run (statistics over fleets)")
-    p.add_argument("--measured-runs", type=nonneg_int, default=20,
+    p.add_argument("--measured-runs", type=_MEASURED_RUNS, default=20,
                    help="also run this many runs on the shipped measured profile for the report (default 20, "
-                        "independent of --runs; 0: skip; ignored with --road-profile)")
+                        f"independent of --runs; 0: skip; ignored with --road-profile; {help_range(_MEASURED_RUNS)})")
     add_road_options(p)
     add_dask_options(p)
     return p
@@ -115,7 +122,7 @@ def run(args: argparse.Namespace, command_line: str) -> int:
         summary = write_reproduction(result, out, command=command_line, elapsed=elapsed, measured=measured,
                                      timings=timings)
     headers, values = headline_table(result.table())
-    print_table(f"MSE per vehicle ((m/s)^2), {cfg.n_runs} runs, {elapsed:.1f} s", headers,
+    print_table(f"MSE per vehicle ((m/s)^2), {plural(cfg.n_runs, 'run')}, {elapsed:.1f} s", headers,
                 [(str(v[0]), *(f"{x:.3g}" for x in v[1:])) for v in values])
     ratio = summary["vehicle1_observer_over_algorithm1"]
     alg1 = ("Algorithm 1 needs at least 2 vehicles" if ratio is None else

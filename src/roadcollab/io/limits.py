@@ -11,8 +11,11 @@ The command line raises the limits with ``--max-rows`` and ``--max-file-mb``.
 
 from __future__ import annotations
 
+import errno
 import math
+import os
 import re
+import stat
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -20,7 +23,7 @@ from .._validation import check_int, check_real
 from ..errors import FileFormatError
 
 __all__ = ["DEFAULT_MAX_ROWS", "DEFAULT_MAX_FILE_MB", "PARAMS_MAX_BYTES", "MAX_ACCEL", "FileLimits",
-           "check_file_size", "parse_ascii_number", "short_repr"]
+           "check_regular_file", "check_file_size", "parse_ascii_number", "short_repr"]
 
 DEFAULT_MAX_ROWS = 2_000_000       # 2.8 h at 200 Hz, 20 km of profile at 1 cm
 DEFAULT_MAX_FILE_MB = 200.0        # 2 M rows of full-precision CSV take about 120 MB
@@ -54,8 +57,70 @@ class FileLimits:
         return int(self.max_file_mb * 1e6)
 
 
+def check_regular_file(path: Path, what: str) -> os.stat_result:
+    """Refuse anything but an existing, readable regular file, with a message for each kind; nothing is opened.
+
+    A FIFO or a device is recognised from ``stat`` before any ``open`` (opening a FIFO blocks until a
+    writer appears; ``/dev/zero`` never ends), so the check never blocks.
+
+    Parameters
+    ----------
+    path : Path
+        The file as given.
+    what : str
+        What the file is, for the message (e.g. ``"drive CSV"``).
+
+    Returns
+    -------
+    os.stat_result
+        Of the file (symlinks followed).
+
+    Raises
+    ------
+    FileFormatError
+        ``"<path>: <what> ..."``: not found, a dangling symlink, a symlink loop, a folder, a FIFO, a
+        device, a socket, or not readable.
+    """
+    path = Path(path)
+    try:
+        st = path.stat()
+    except OSError as err:
+        raise FileFormatError(f"{path}: {what} {_stat_problem(path, err)}") from None
+    mode = st.st_mode
+    kind = ("a folder" if stat.S_ISDIR(mode) else "a named pipe (FIFO)" if stat.S_ISFIFO(mode) else
+            "a device" if stat.S_ISCHR(mode) or stat.S_ISBLK(mode) else "a socket" if stat.S_ISSOCK(mode) else
+            None if stat.S_ISREG(mode) else "not a regular file")
+    if kind is not None:
+        raise FileFormatError(f"{path}: expected {what} to be a regular file, got {kind}")
+    if not os.access(path, os.R_OK):
+        raise FileFormatError(f"{path}: cannot read {what}: permission denied")
+    return st
+
+
+def _stat_problem(path: Path, err: OSError) -> str:
+    """Why ``stat`` of ``path`` failed, in words: not found, dangling or looping symlink, a parent that is a file."""
+    if err.errno == errno.ELOOP:
+        return "is a symlink loop (the links never reach a file)"
+    if err.errno == errno.ENOENT and path.is_symlink():
+        try:
+            target = os.readlink(path)
+        except OSError:
+            target = "?"
+        return f"is a dangling symlink (its target {target} does not exist)"
+    if err.errno == errno.ENOENT:
+        return "not found (expected an existing file)"
+    if err.errno == errno.ENOTDIR:
+        return "not found (a folder in its path is a file)"
+    if err.errno == errno.EACCES:
+        return "cannot be reached: permission denied on a folder in its path"
+    if err.errno == errno.ENAMETOOLONG:
+        return "not found: the path is too long"
+    return f"cannot be read: {err.strerror or err}"
+
+
 def check_file_size(path: Path, what: str, max_bytes: int, flag: str | None = "--max-file-mb") -> None:
-    """Refuse a missing file or one larger than ``max_bytes`` (from ``stat``; nothing is read).
+    """Refuse anything but a regular file (:func:`check_regular_file`) or one larger than ``max_bytes``
+    (from ``stat``; nothing is read).
 
     Parameters
     ----------
@@ -71,14 +136,9 @@ def check_file_size(path: Path, what: str, max_bytes: int, flag: str | None = "-
     Raises
     ------
     FileFormatError
-        ``"<path>: ..."``: not an existing file, unreadable, or too large.
+        ``"<path>: ..."``: not an existing regular file (each kind its own message), unreadable, or too large.
     """
-    if not path.is_file():
-        raise FileFormatError(f"{path}: {what} not found (expected an existing file)")
-    try:
-        size = path.stat().st_size
-    except OSError as err:
-        raise FileFormatError(f"{path}: cannot read {what}: {err.strerror or err}") from None
+    size = check_regular_file(path, what).st_size
     if size > max_bytes:
         raise_hint = f"; raise the limit with {flag}" if flag else ""
         raise FileFormatError(f"{path}: {what} is {size / 1e6:.4g} MB, larger than the limit of "

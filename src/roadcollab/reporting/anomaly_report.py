@@ -8,6 +8,7 @@ from . import plotting
 from ..experiments.anomaly_rows import (DepthDetectionRow, DetectionRow, MapRow, NoiseDetectionRow,
                                         VehicleDetectionRow)
 from .records import markdown_table, output_dir, row_columns, run_header, write_config, write_rows
+from .wording import plural
 
 __all__ = ["anomaly_markdown", "write_anomalies"]
 
@@ -24,7 +25,7 @@ def _detection_lines(result) -> list[str]:
     return [
         "## Road anomaly detection",
         "",
-        f"{cfg.n_runs} runs, seed {result.seed}; road: {road}; {exp.speed:g} m/s; sensor noise "
+        f"{plural(cfg.n_runs, 'run')}, seed {result.seed}; road: {road}; {exp.speed:g} m/s; sensor noise "
         f"{exp.sensor_noise_std:g} m/s^2; vehicles 2..{exp.n_vehicles} pooled; a detection matches a true anomaly "
         f"within {cfg.tolerance:g} m (center to center) on a shared track.",
         "",

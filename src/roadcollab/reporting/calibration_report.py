@@ -8,6 +8,7 @@ from ..experiments.anomaly_config import ESTIMATORS
 from ..experiments.calibration_config import EVALUATION_SEEDS, OBJECTIVE_ESTIMATORS
 from ..experiments.calibration_result import AnomalyCalibrationResult, score_column
 from .records import fmt, markdown_table, write_config, write_csv
+from .wording import plural
 
 __all__ = ["calibration_markdown", "write_calibration"]
 
@@ -24,7 +25,7 @@ def _flatness_lines(result: AnomalyCalibrationResult) -> list[str]:
                         if len(near) <= 8 else ""))
     if len(cfg.seeds) > 1:
         tied = [p for p, (gap, se) in zip(result.points, gaps) if gap <= 2 * se or p is best]
-        lines.append(f"- within two paired standard errors (over the {len(cfg.seeds)} seeds) of the best: "
+        lines.append(f"- within two paired standard errors (over the {plural(len(cfg.seeds), 'seed')}) of the best: "
                      f"{len(tied)} of {n} points: "
                      + ", ".join(f"({p.snr_threshold:g}, {1000 * p.min_depth:g} mm)" for p in tied))
     obj = [p.objective for p in result.points]
@@ -60,8 +61,9 @@ def calibration_markdown(result: AnomalyCalibrationResult) -> str:
     conds = ", ".join([f"default road (anomalies {100 * lo:g}-{100 * hi:g} cm)"]
                       + [f"every anomaly {100 * d:g} cm" for d in cfg.condition_depths])
     lines = [
-        f"Training seeds {seeds} (never the evaluation seeds {list(EVALUATION_SEEDS)}), {cfg.runs_per_seed} runs "
-        f"each; {exp.n_vehicles} vehicles, ISO class {exp.iso_class}, {exp.speed:g} m/s, sensor noise "
+        f"Training seeds {seeds} (never the evaluation seeds {list(EVALUATION_SEEDS)}), "
+        f"{plural(cfg.runs_per_seed, 'run')} each; {exp.n_vehicles} vehicles, ISO class {exp.iso_class}, "
+        f"{exp.speed:g} m/s, sensor noise "
         f"{exp.sensor_noise_std:g} m/s^2; conditions: {conds}; vehicles 2..{exp.n_vehicles} pooled; a detection "
         f"matches within {cfg.tolerance:g} m. Objective: mean F1 of {' and '.join(OBJECTIVE_ESTIMATORS)} over "
         f"the conditions.",

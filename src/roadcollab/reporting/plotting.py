@@ -13,6 +13,7 @@ import numpy as np
 
 from .plotting_base import legend_outside, plt, save_figure
 from .plotting_security import plot_attack_success
+from .wording import plural
 
 __all__ = ["save_figure", "plot_mse", "plot_fusion", "plot_estimates", "plot_poles", "plot_attack_success",
            "plot_anomaly_map", "plot_f1_vs_depth", "plot_f1_vs_noise"]
@@ -105,7 +106,7 @@ def plot_fusion(rows: list, path, *, title: str | None = None) -> Path:
                     label=label)
     _mse_axes(ax, sorted({r.vehicle for r in rows}))
     legend_outside(ax)
-    ax.set_title(title or f"MSE per vehicle of the fleet estimates (mean over {runs} runs; bars: 95 % CI)",
+    ax.set_title(title or f"MSE per vehicle of the fleet estimates (mean over {plural(runs, 'run')}; bars: 95 % CI)",
                  fontsize=10)
     return save_figure(fig, path)
 

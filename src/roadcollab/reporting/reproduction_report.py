@@ -15,6 +15,7 @@ from ..experiments.reproduction import ESTIMATORS
 from ..experiments.reproduction_iri import iri_ratios
 from ..experiments.reproduction_rows import BoundRow, FleetRow, FusionRow, IriRow, MseRow, RunTraces, TraceRow
 from .records import markdown_table, output_dir, write_config, write_rows
+from .wording import plural
 
 __all__ = ["headline_table", "reproduction_summary", "write_reproduction"]
 
@@ -194,7 +195,7 @@ def _intro_lines(result, command: str, elapsed: float) -> list[str]:
         "# roadcollab reproduction: collaborative estimation with privacy (Figs. 4-7)",
         "",
         f"Command: `{command}`  ",
-        f"Seed {result.seed}; {cfg.n_runs} runs x {cfg.n_vehicles} vehicles; {elapsed:.1f} s.  ",
+        f"Seed {result.seed}; {plural(cfg.n_runs, 'run')} x {plural(cfg.n_vehicles, 'vehicle')}; {elapsed:.1f} s.  ",
         f"Road: {road}; speed {cfg.speed:g} m/s; {cfg.sample_rate:g} Hz; scored segment "
         f"{cfg.segment_length:g} m (+{cfg.margin:g} m lead-in/out); sensor noise {cfg.sensor_noise_std:g} m/s^2; "
         f"parameter uncertainty {100 * cfg.fleet.estimate_uncertainty:g} % (1 sigma); fleet spread "
@@ -271,7 +272,8 @@ def _iri_lines(rows: list[IriRow], estimators, config) -> list[str]:
         "### Road roughness: estimated against true IRI (`iri_measured.csv`)",
         "",
         f"Golden Car IRI (ASTM E1926, 80 km/h) per {seg:g} m segment of the scored {config.segment_length:g} m "
-        f"({len({r.start_m for r in rows})} segments per run and track, {len({r.run for r in rows})} runs), of "
+        f"({plural(len({r.start_m for r in rows}), 'segment')} per run and track, "
+        f"{plural(len({r.run for r in rows}), 'run')}), of "
         f"vehicle {rows[0].vehicle}'s estimates (the fleet estimates use vehicles 1..{rows[0].vehicle}). Each "
         "estimate's elevation is its band-limited road-velocity estimate integrated over distance (increment "
         "w / fs per sample). It lacks wavelengths above "
@@ -299,7 +301,7 @@ def _measured_section(measured, out: Path, clock: _FigureClock) -> list[str]:
     if irows:
         write_rows(out / "iri_measured.csv", irows, IriRow)
     clock(plotting.plot_fusion, frows, out / "fig_measured_mse.png", title=(
-        f"Measured profile: MSE per vehicle of the fleet estimates (mean over {mres.config.n_runs} runs; "
+        f"Measured profile: MSE per vehicle of the fleet estimates (mean over {plural(mres.config.n_runs, 'run')}; "
         "bars: 95 % CI)"))
     ms = reproduction_summary(mrows, mres.bound_check())
     mc = mres.config
@@ -307,9 +309,10 @@ def _measured_section(measured, out: Path, clock: _FigureClock) -> list[str]:
         "## Measured road profile (shipped with the package)",
         "",
         f"`profile_1.txt` (MIT licence beside it): one measured track; the second track is the measured one plus "
-        f"an independent ISO class A residual high-passed at 20 m. {mc.n_runs} runs, same fleet and seed, speed "
-        f"{mc.speed:g} m/s, scored {mc.segment_length:g} m; {mel:.1f} s. The online estimators are still designed "
-        f"for an ISO class {mc.iso_class} road; the linear MMSE estimates use the measured road's own spectrum.",
+        f"an independent ISO class A residual high-passed at 20 m. {plural(mc.n_runs, 'run')}, same fleet and seed, "
+        f"speed {mc.speed:g} m/s, scored {mc.segment_length:g} m; {mel:.1f} s. The online estimators are still "
+        f"designed for an ISO class {mc.iso_class} road; the linear MMSE estimates use the measured road's own "
+        "spectrum.",
         "",
         *_summary_lines(ms, mc.n_vehicles),
         "",

@@ -12,6 +12,7 @@ from ..experiments.sweep_findings import SweepFinding
 from ..experiments.sweep_result import SweepResult, SweepRow
 from .plotting_sweep import plot_sweep
 from .records import markdown_table, output_dir, write_config, write_rows
+from .wording import plural
 
 __all__ = ["write_sweep", "findings_markdown"]
 
@@ -135,8 +136,9 @@ def _intro_lines(result: SweepResult, n_rows: int, command: str, elapsed: float)
         f"Command: `{command}`  ",
         f"Seed {result.seed}; {n_rows} grid points (gamma {_gammas(cfg.gammas)} x sensor noise "
         f"{_gammas(cfg.sensor_noise_stds)} m/s^2 x parameter uncertainty "
-        f"{', '.join(f'{100 * u:g} %' for u in cfg.parameter_uncertainties)}); {cfg.n_runs} runs per grid point, "
-        f"each with a new fleet of {cfg.n_vehicles} vehicles and its own road; {elapsed:.1f} s.  ",
+        f"{', '.join(f'{100 * u:g} %' for u in cfg.parameter_uncertainties)}); "
+        f"{plural(cfg.n_runs, 'run')} per grid point, each with a new fleet of {cfg.n_vehicles} vehicles and its own "
+        f"road; {elapsed:.1f} s.  ",
         f"Road: {road}; speed {exp.speed:g} m/s; {exp.sample_rate:g} Hz; scored segment {exp.segment_length:g} m "
         f"(+{exp.margin:g} m lead-in/out); fleet spread +-{100 * exp.fleet.spread:g} %; band from "
         f"{exp.band_low_hz:g} Hz.",
@@ -192,7 +194,7 @@ def _definition_lines(n_vehicles: int, n_runs: int) -> list[str]:
         "- `algorithm1_gain` = `vehicle1_observer_mse / algorithm1_mse` (> 1: Algorithm 1 better).",
         "- Standard errors are over runs, which are independent (new fleet and road each): `algorithm1_mse_se` of the "
         f"per-run means over vehicles 2..{V}; `algorithm1_gain_se` by the delta method on the paired per-run values "
-        f"(first order; with {R} runs an approximation).",
+        f"(first order; with {plural(R, 'run')} an approximation).",
         "",
     ]
 
