@@ -96,7 +96,17 @@ class Cleaning:
         return len(self.spikes)
 
     def describe(self, sample_rate: float) -> dict:
-        """JSON-ready summary (sample times in s since the drive's first sample)."""
+        """JSON-ready summary (sample times in s since the drive's first sample).
+
+        Parameters
+        ----------
+        sample_rate : float
+            The drive's sample rate, Hz.
+
+        Returns
+        -------
+        dict
+        """
         return {"spikes_repaired": self.n_spikes,
                 "spikes": [{"sample": k, "time_s": k / sample_rate, "side": ("left", "right")[c], "value": v}
                            for (k, c), v in zip(self.spikes, self.spike_values)],
