@@ -49,7 +49,7 @@ from ..io.drives import Drive, common_time_grid
 from ..models.vehicle import Vehicle
 
 __all__ = ["ESTIMATORS", "DEFAULT_WINDOW", "DEFAULT_MARGIN_PERIODS", "AnomalyRow", "DriveEstimates",
-           "integrate_elevation", "window_slices", "estimate_drives", "find_anomalies"]
+           "integrate_elevation", "window_plan", "window_slices", "estimate_drives", "find_anomalies"]
 
 ESTIMATORS = ("single", "collaborative", "fused")
 DEFAULT_WINDOW = 2 ** 16          # samples (328 s at 200 Hz): longer records are estimated in windows
@@ -203,9 +203,28 @@ def _drive_estimators(drives: list[Drive], grid: SegmentGrid, *, speed: float, s
     return cars
 
 
-def _window_plan(n: int, fs: float, band_low_hz: float, window: int | None, margin_s: float | None
+def window_plan(n: int, fs: float, band_low_hz: float, window: int | None, margin_s: float | None
                  ) -> tuple[int, int]:
-    """Window length and margin (samples) for ``n`` samples: one window of ``n`` if it fits."""
+    """Window length and margin (samples) for a record of ``n`` samples: one window of ``n`` if it fits.
+
+    Parameters
+    ----------
+    n : int
+        Record length, samples.
+    fs : float
+        Sample rate, Hz.
+    band_low_hz : float
+        Band edge, Hz (the default margin is ``DEFAULT_MARGIN_PERIODS`` of its period).
+    window : int or None
+        Longest record in one piece, samples (default :data:`DEFAULT_WINDOW`).
+    margin_s : float or None
+        Margin, s.
+
+    Returns
+    -------
+    length, margin : int
+        Samples.
+    """
     window = DEFAULT_WINDOW if window is None else check_int("window", window, low=64)
     margin_s = DEFAULT_MARGIN_PERIODS / band_low_hz if margin_s is None else check_positive("margin_s", margin_s)
     margin = int(np.ceil(margin_s * fs))
@@ -314,7 +333,7 @@ def estimate_drives(drives: list[Drive], *, gamma: float | None = None, band_low
         raise ParameterError(f"{d0.csv_path}: expected a sample rate above {2 * band_low_hz:g} Hz (twice the "
                              f"{band_low_hz:g} Hz band edge), got {fs:.9g} Hz")
     n = min(d.n_samples for d in drives)
-    length, margin = _window_plan(n, fs, band_low_hz, window, margin_s)
+    length, margin = window_plan(n, fs, band_low_hz, window, margin_s)
     grid = SegmentGrid(length, fs, band_low_hz=band_low_hz)
     cars = _drive_estimators(drives, grid, speed=speed, sample_rate=fs, gamma=gamma, band_low_hz=band_low_hz)
     velocity = {k: np.zeros((len(drives), n, 2)) for k in ESTIMATORS}

@@ -17,7 +17,7 @@ from ..experiments.drive_estimation import AnomalyRow
 from ..experiments.fleet_estimation import FLEET_ESTIMATORS, FleetEstimates
 from ..models.iri import IRISegments
 from . import plotting_drives
-from .drive_tables import write_final_estimate
+from .drive_tables import write_array_csv, write_final_estimate
 from .records import markdown_table, write_config, write_csv, write_rows
 
 __all__ = ["FLEET_FILES", "iri_lines", "write_iri_csv", "write_fleet_estimates"]
@@ -31,12 +31,6 @@ _IRI_COLUMNS = ["start_m", "end_m", "iri_left_m_per_km", "iri_right_m_per_km", "
 def _blank(v: float):
     """A CSV cell: the float, or an empty string for NaN (a drive that did not pass)."""
     return "" if not np.isfinite(v) else float(v)
-
-
-def _wide(position: np.ndarray, named: list[tuple[str, np.ndarray]]) -> tuple[list[dict], list[str]]:
-    cols = ["position_m"] + [n for n, _ in named]
-    rows = [{"position_m": float(p), **{n: _blank(s[i]) for n, s in named}} for i, p in enumerate(position)]
-    return rows, cols
 
 
 def write_iri_csv(path, iri: IRISegments | None) -> None:
@@ -78,7 +72,8 @@ def _tables(est: FleetEstimates, out: Path, anomalies: list[AnomalyRow]) -> None
     V = len(est.drives)
     named = [(f"elevation_{name}_v{j + 1}_{side}", est.elevation[name][j][:, c])
              for j in range(V) for name in FLEET_ESTIMATORS for c, side in enumerate(_SIDES)]
-    write_csv(out / "road_estimates.csv", *_wide(est.position, named))
+    write_array_csv(out / "road_estimates.csv", ["position_m"] + [n for n, _ in named],    # blank: did not pass
+                    np.column_stack([est.position] + [series for _, series in named]))
     write_final_estimate(out / "final_estimate.csv", est.position, est.fused, est.elevation["collaborative"][-1],
                          est.coverage)
     rows = [{"drive": j + 1, "csv": d.csv_path.name, "start_m_given": d.start_m,
