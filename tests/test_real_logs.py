@@ -181,7 +181,7 @@ def test_spike_rule_on_hand_made_signals():
 def test_too_many_spikes_refuse_the_drive(fleet):
     d = fleet.drives[0].drive
     a = d.accel.copy()
-    n = int(MAX_SPIKE_FRACTION * d.n_samples) + 2
+    n = 3 * int(MAX_SPIKE_FRACTION * d.n_samples)         # a spike every 30 samples, 3x the limit
     a[np.arange(n) * 30 + 100, 1] += 150.0
     with pytest.raises(FileFormatError, match=r"d1\.csv: \d+ isolated spikes in accel_right .* unreliable"):
         clean_drive(replace(d, accel=a))
