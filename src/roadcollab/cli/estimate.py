@@ -89,8 +89,9 @@ def estimate_command(drive_paths: list[str], out_dir, *, command: str, limits: F
                      spacing: float = 0.05) -> dict:
     """Everything ``roadcollab estimate`` does: read, estimate, detect, IRI, write.
 
-    Drives that share one time grid (constant speed, sample rate and start) are relayed in time
-    exactly as the simulations are (:func:`~roadcollab.experiments.drive_estimation.estimate_drives`);
+    Every drive is cleaned first (:func:`roadcollab.io.drive_clean.clean_drive`: isolated spikes
+    repaired and counted, the slow offset such as gravity removed). Drives that share one time grid
+    (constant speed, sample rate and start) are relayed in time exactly as the simulations are (:func:`~roadcollab.experiments.drive_estimation.estimate_drives`);
     any others, or with ``align``, are estimated on one distance grid
     (:func:`~roadcollab.experiments.fleet_estimation.estimate_fleet`).
 
@@ -117,7 +118,8 @@ def estimate_command(drive_paths: list[str], out_dir, *, command: str, limits: F
     -------
     dict
         Summary of :func:`~roadcollab.reporting.drives_report.write_estimates` (``grid`` = ``"time"``)
-        or :func:`~roadcollab.reporting.fleet_report.write_fleet_estimates` (``"distance"``).
+        or :func:`~roadcollab.reporting.fleet_report.write_fleet_estimates` (``"distance"``, with
+        ``stretches``: the drives of every separate stretch of road), plus ``spikes_repaired`` per drive.
 
     Raises
     ------
@@ -189,8 +191,10 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
     p = command_parser(
         subparsers, NAME, summary="estimate the road from recorded drives (CSV + parameters)",
         does="Reads recorded drives (an acceleration CSV per drive with a .toml or .json parameters file beside "
-             "it), relays Algorithm 1 down them in the order given, fuses the estimates and looks for anomalies. "
-             "A bad file is refused with one line naming the file, the line and the field.",
+             "it), repairs isolated logger spikes and removes slow offsets such as gravity (both counted in the "
+             "report), relays Algorithm 1 down the drives in the order given, fuses the estimates and looks for "
+             "anomalies. Long drives are estimated in overlapping windows (memory stays bounded). A bad file is "
+             "refused with one line naming the file, the line and the field.",
         writes="into --out (replaced as a whole at the end): road_estimates.csv, final_estimate.csv, "
                "anomalies.csv, iri.csv, offsets.csv (drives at different speeds/starts), figures, config.json, "
                "report.md.",
