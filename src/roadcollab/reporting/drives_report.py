@@ -97,7 +97,7 @@ def _notes(est: DriveEstimates, anomaly_note: str | None) -> list[str]:
     notes = []
     if est.n_windows > 1:
         notes.append(f"The {est.n_samples} samples were estimated in {est.n_windows} overlapping windows (memory "
-                     "stays bounded; within 1e-9 relative of one window in the tests).")
+                     "stays bounded; measured within 3e-11 of one window on a 10-minute drive).")
     if est.truncated:
         lengths = [d.n_samples for d in est.drives]
         notes.append(f"Drives have {', '.join(map(str, lengths))} samples; all were truncated to the shortest, "
