@@ -52,10 +52,10 @@ from ..models.vehicle import FleetSpec, Vehicle
 from .config import ExperimentConfig
 from .distance_maps import band_limit_stretch, covered, distance_grid, elevation_at, elevation_to_distance, \
     estimate_offset
-from .drive_estimation import AnomalyRow, integrate_elevation
+from .drive_estimation import AnomalyRow, integrate_elevation, window_plan, window_slices
 
 __all__ = ["FLEET_ESTIMATORS", "FleetEstimates", "VehicleRecord", "invert_drive", "estimate_fleet",
-           "find_fleet_anomalies", "fused_iri"]
+           "find_fleet_anomalies", "fused_iri", "drive_stretches"]
 
 FLEET_ESTIMATORS = ("single", "inversion", "collaborative", "fused")
 
@@ -67,9 +67,10 @@ class VehicleRecord:
     Attributes
     ----------
     car : CollaborativeEstimator
-        Designed at the drive's mean speed on ``SegmentGrid(N, rate)``.
-    Y : (K, 2) complex ndarray
-        Record spectrum.
+        Designed at the drive's mean speed on ``SegmentGrid(L, rate)``, ``L`` the window length
+        (``N`` for a record of at most one window).
+    windows : list of (lo, hi, c0, c1)
+        The windows and cores of :func:`~roadcollab.experiments.drive_estimation.window_slices`.
     w_single, w_inversion : (N, 2) ndarray
         Observer and offline-inversion road velocities, m/s.
     w_posterior : (N, 2) ndarray or None
@@ -77,7 +78,7 @@ class VehicleRecord:
     """
 
     car: CollaborativeEstimator
-    Y: np.ndarray
+    windows: list
     w_single: np.ndarray
     w_inversion: np.ndarray
     w_posterior: np.ndarray | None
@@ -132,7 +133,7 @@ class FleetEstimates:
 
 
 def invert_drive(drive: Drive, *, gamma: float, band_low_hz: float, fleet: FleetSpec | None = None,
-                 index: int = 0) -> VehicleRecord:
+                 index: int = 0, window: int | None = None, margin_s: float | None = None) -> VehicleRecord:
     """Design vehicle ``index``'s estimator for one drive and invert its record in its own time.
 
     Parameters
@@ -144,6 +145,9 @@ def invert_drive(drive: Drive, *, gamma: float, band_low_hz: float, fleet: Fleet
         A fleet prior; if given, the posterior-mean inversion is also computed.
     index : int
         0-based vehicle number.
+    window, margin_s : int and float, optional
+        Longest record inverted in one piece (samples) and the windows' margin (s), as
+        :func:`~roadcollab.experiments.drive_estimation.estimate_drives`.
 
     Returns
     -------
@@ -155,7 +159,8 @@ def invert_drive(drive: Drive, *, gamma: float, band_low_hz: float, fleet: Fleet
         The design rejects the vehicle's parameters (message starts with the parameters file).
     """
     n, fs = drive.n_samples, drive.sample_rate
-    grid = SegmentGrid(n, fs, band_low_hz=band_low_hz)
+    length, margin = window_plan(n, fs, band_low_hz, window, margin_s)
+    grid = SegmentGrid(length, fs, band_low_hz=band_low_hz)
     try:
         cfg = ExperimentConfig(speed=drive.speed, sample_rate=fs, sensor_noise_std=drive.sensor_noise_std,
                                gamma=gamma, band_low_hz=band_low_hz)
@@ -167,11 +172,22 @@ def invert_drive(drive: Drive, *, gamma: float, band_low_hz: float, fleet: Fleet
         raise FileFormatError(f"{drive.params_path}: no estimator can be designed for this vehicle at "
                               f"{drive.speed:g} m/s and {fs:g} Hz ({type(err).__name__}: {err}); check the "
                               "[vehicle] parameters") from None
-    Y = grid.rfft(drive.accel)
-    W_obs = car.estimate(None, Y=Y).W_obs
-    post = grid.irfft(car.invert(Y, posterior=True), n) if fleet is not None else None
-    return VehicleRecord(car=car, Y=Y, w_single=grid.irfft(W_obs, n), w_inversion=grid.irfft(car.invert(Y), n),
-                         w_posterior=post)
+    single, inversion = np.zeros((n, 2)), np.zeros((n, 2))
+    post = np.zeros((n, 2)) if fleet is not None else None
+    windows = window_slices(n, length, margin)
+    # Every road velocity passes W_reg (DC regularisation, corner band_low_hz / 2) in its own window
+    # before the windows are joined: what is below it (a window's own drift) is not observed and
+    # must not leak across window joints. The band limit on distance (from band_low_hz at the
+    # slowest speed) comes after; W W_reg is within 0.5 % of W in band.
+    reg = grid.reg_weight[:, None]
+    for lo, hi, c0, c1 in windows:
+        Y = grid.rfft(drive.accel[lo:hi])
+        core = slice(c0 - lo, c1 - lo)
+        single[c0:c1] = grid.irfft(reg * car.estimate(None, Y=Y).W_obs, length)[core]
+        inversion[c0:c1] = grid.irfft(reg * car.invert(Y), length)[core]
+        if post is not None:
+            post[c0:c1] = grid.irfft(reg * car.invert(Y, posterior=True), length)[core]
+    return VehicleRecord(car=car, windows=windows, w_single=single, w_inversion=inversion, w_posterior=post)
 
 
 def _to_grid(drive: Drive, w: np.ndarray, x: np.ndarray, shift: float) -> np.ndarray:
@@ -186,9 +202,12 @@ def _collaborative(rec: VehicleRecord, drive: Drive, x: np.ndarray, previous: np
     h = elevation_at(x, previous, drive.positions + shift)
     w = np.zeros_like(h)
     w[:-1] = np.diff(h, axis=0) * drive.sample_rate       # w[k] = (h[k + 1] - h[k]) rate, this vehicle's time
-    Z = grid.reg_weight[:, None] * grid.rfft(w)
-    W_hat = rec.car.estimate(None, Y=rec.Y, Wf=rec.car.wf_from_z(Z)).W_hat
-    return grid.irfft(W_hat, drive.n_samples)
+    out = np.zeros_like(h)
+    for lo, hi, c0, c1 in rec.windows:
+        Z = grid.reg_weight[:, None] * grid.rfft(w[lo:hi])
+        W_hat = rec.car.estimate(None, Y=grid.rfft(drive.accel[lo:hi]), Wf=rec.car.wf_from_z(Z)).W_hat
+        out[c0:c1] = grid.irfft(grid.reg_weight[:, None] * W_hat, hi - lo)[c0 - lo:c1 - lo]   # as invert_drive
+    return out
 
 
 def _align(band_inv: list[np.ndarray], dx: float, max_offset: float) -> tuple[np.ndarray, np.ndarray]:
@@ -226,8 +245,8 @@ def _running_mean(stack: list[np.ndarray]) -> np.ndarray:
 
 
 def estimate_fleet(drives: list[Drive], *, spacing: float = 0.05, align: bool = False, max_offset: float = 10.0,
-                   gamma: float | None = None, band_low_hz: float | None = None, fleet: FleetSpec | None = None
-                   ) -> FleetEstimates:
+                   gamma: float | None = None, band_low_hz: float | None = None, fleet: FleetSpec | None = None,
+                   window: int | None = None, margin_s: float | None = None) -> FleetEstimates:
     """Every drive's estimates and the fused elevation on one uniform distance grid (module docstring).
 
     Parameters
@@ -245,6 +264,9 @@ def estimate_fleet(drives: list[Drive], *, spacing: float = 0.05, align: bool = 
     fleet : FleetSpec, optional
         A known fleet prior: ``fused`` then averages posterior-mean inversions (simulation studies;
         the command line uses the nominal ones).
+    window, margin_s : int and float, optional
+        Longest record inverted in one piece (samples) and the windows' margin (s), as
+        :func:`~roadcollab.experiments.drive_estimation.estimate_drives`.
 
     Returns
     -------
@@ -260,7 +282,8 @@ def estimate_fleet(drives: list[Drive], *, spacing: float = 0.05, align: bool = 
     base = ExperimentConfig()
     gamma = base.gamma if gamma is None else gamma
     band_low_hz = base.band_low_hz if band_low_hz is None else band_low_hz
-    recs = [invert_drive(d, gamma=gamma, band_low_hz=band_low_hz, fleet=fleet, index=j) for j, d in enumerate(drives)]
+    recs = [invert_drive(d, gamma=gamma, band_low_hz=band_low_hz, fleet=fleet, index=j, window=window,
+                         margin_s=margin_s) for j, d in enumerate(drives)]
     n_low = band_low_hz / min(float(d.speeds().min()) for d in drives)
     pad = max_offset if align else 0.0
     x = distance_grid([d.positions[0] - pad for d in drives], [d.positions[-1] + pad for d in drives], spacing)
@@ -334,3 +357,33 @@ def fused_iri(est: FleetEstimates, segment_length: float) -> tuple[IRISegments |
         return iri_segments(est.position[ok], est.fused[ok], segment_length), None
     except ParameterError as err:
         return None, f"IRI was not computed: {err}."
+
+
+def drive_stretches(drives: list[Drive], min_overlap: float, offsets=None) -> list[tuple[list[int], float, float]]:
+    """Group drives into stretches of road they share: two drives are together if they overlap by at
+    least ``min_overlap`` metres (directly or through other drives).
+
+    Parameters
+    ----------
+    drives : list of Drive
+    min_overlap : float
+        m (``roadcollab estimate`` uses the IRI segment length).
+    offsets : (V,) array_like, optional
+        Corrections added to every drive's positions, m (default zeros).
+
+    Returns
+    -------
+    list of (drives, start_m, end_m)
+        1-based drive numbers of each stretch and the stretch it covers, m, in road order.
+    """
+    shift = np.zeros(len(drives)) if offsets is None else np.asarray(offsets, dtype=float)
+    spans = sorted((float(d.positions[0] + s), float(d.positions[-1] + s), j + 1)
+                   for j, (d, s) in enumerate(zip(drives, shift)))
+    groups: list[list] = []
+    for lo, hi, j in spans:
+        if groups and min(hi, groups[-1][2]) - lo >= min_overlap:
+            groups[-1][0].append(j)
+            groups[-1][2] = max(groups[-1][2], hi)
+        else:
+            groups.append([[j], lo, hi])
+    return [(sorted(g), lo, hi) for g, lo, hi in groups]

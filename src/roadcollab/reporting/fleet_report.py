@@ -2,8 +2,8 @@
 
 Files: ``road_estimates.csv`` (``position_m`` and ``elevation_<estimator>_v<k>_<side>`` for every
 drive ``k`` and estimator single/inversion/collaborative/fused, blank where drive ``k`` did not pass),
-``final_estimate.csv`` (``position_m, elevation_fused_left, elevation_fused_right, coverage``, then
-every drive's inversion), ``offsets.csv``, ``iri.csv``, ``anomalies.csv``, ``elevation.png``,
+``final_estimate.csv`` (one schema with the time grid, :mod:`roadcollab.reporting.drive_tables`),
+``offsets.csv``, ``iri.csv``, ``anomalies.csv``, ``elevation.png``,
 ``config.json`` and ``report.md``.
 """
 
@@ -17,6 +17,7 @@ from ..experiments.drive_estimation import AnomalyRow
 from ..experiments.fleet_estimation import FLEET_ESTIMATORS, FleetEstimates
 from ..models.iri import IRISegments
 from . import plotting_drives
+from .drive_tables import write_array_csv, write_final_estimate
 from .records import markdown_table, write_config, write_csv, write_rows
 
 __all__ = ["FLEET_FILES", "iri_lines", "write_iri_csv", "write_fleet_estimates"]
@@ -30,12 +31,6 @@ _IRI_COLUMNS = ["start_m", "end_m", "iri_left_m_per_km", "iri_right_m_per_km", "
 def _blank(v: float):
     """A CSV cell: the float, or an empty string for NaN (a drive that did not pass)."""
     return "" if not np.isfinite(v) else float(v)
-
-
-def _wide(position: np.ndarray, named: list[tuple[str, np.ndarray]]) -> tuple[list[dict], list[str]]:
-    cols = ["position_m"] + [n for n, _ in named]
-    rows = [{"position_m": float(p), **{n: _blank(s[i]) for n, s in named}} for i, p in enumerate(position)]
-    return rows, cols
 
 
 def write_iri_csv(path, iri: IRISegments | None) -> None:
@@ -77,12 +72,10 @@ def _tables(est: FleetEstimates, out: Path, anomalies: list[AnomalyRow]) -> None
     V = len(est.drives)
     named = [(f"elevation_{name}_v{j + 1}_{side}", est.elevation[name][j][:, c])
              for j in range(V) for name in FLEET_ESTIMATORS for c, side in enumerate(_SIDES)]
-    write_csv(out / "road_estimates.csv", *_wide(est.position, named))
-    final = [(f"elevation_fused_{side}", est.fused[:, c]) for c, side in enumerate(_SIDES)]
-    final.append(("coverage", np.where(est.coverage > 0, est.coverage, np.nan).astype(float)))
-    final += [(f"elevation_inversion_v{j + 1}_{side}", est.elevation["inversion"][j][:, c])
-              for j in range(V) for c, side in enumerate(_SIDES)]
-    write_csv(out / "final_estimate.csv", *_wide(est.position, final))
+    write_array_csv(out / "road_estimates.csv", ["position_m"] + [n for n, _ in named],    # blank: did not pass
+                    np.column_stack([est.position] + [series for _, series in named]))
+    write_final_estimate(out / "final_estimate.csv", est.position, est.fused, est.elevation["collaborative"][-1],
+                         est.coverage)
     rows = [{"drive": j + 1, "csv": d.csv_path.name, "start_m_given": d.start_m,
              "offset_m": float(est.offsets[j]), "start_m_used": d.start_m + float(est.offsets[j]),
              "correlation_peak": _blank(est.offset_peaks[j])} for j, d in enumerate(est.drives)]

@@ -314,6 +314,14 @@ def staged_file(path, inputs: Iterable = (), *, is_ours=None) -> Iterator[Path]:
 
     :func:`check_output_file` is applied on entry; a failed run leaves ``path`` untouched.
 
+    Parameters
+    ----------
+    path : str or Path
+    inputs : iterable
+        Input files (refused as the output).
+    is_ours : callable, optional
+        As :func:`check_output_file`.
+
     Yields
     ------
     Path

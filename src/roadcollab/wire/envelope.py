@@ -15,7 +15,8 @@ from __future__ import annotations
 import struct
 
 from ..errors import MessageError, ParameterError
-from .identity import _SIG, Certificate, FleetTrust, VehicleIdentity, _Reader, verify_signature
+from .certificate import _SIG, Certificate, _Reader, verify_signature
+from .identity import FleetTrust, VehicleIdentity
 
 __all__ = ["ENVELOPE_CONTEXT", "MAX_ENVELOPE_PAYLOAD", "seal_envelope", "open_envelope"]
 

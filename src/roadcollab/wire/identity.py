@@ -1,4 +1,5 @@
-"""Fleet identities: an Ed25519 fleet authority and vehicle certificates (signed envelopes: :mod:`.envelope`).
+"""Fleet identities: an Ed25519 fleet authority, the trust anchor and key files (certificates: :mod:`.certificate`;
+signed envelopes: :mod:`.envelope`).
 
 The paper's vehicles exchange messages with no trusted authority for the *data*; a fleet still needs to
 know *who* may take part, or a server can invent participants (a Sybil roster) or substitute keys. This
@@ -23,154 +24,15 @@ from the network) or :class:`~roadcollab.errors.FileFormatError` (a key file).
 from __future__ import annotations
 
 import os
-import struct
 import time
 from dataclasses import dataclass
 from pathlib import Path
 
 from ..errors import FileFormatError, MessageError, ParameterError
+from .certificate import _KEY, CERT_CONTEXT, Certificate, _ed25519, check_id, verify_signature
 
 __all__ = ["CERT_CONTEXT", "Certificate", "FleetAuthority", "VehicleIdentity", "FleetTrust", "verify_signature",
            "check_id"]
-
-CERT_MAGIC = b"RCCERT1\x00"
-CERT_CONTEXT = b"roadcollab/certificate/v1\x00"
-_KEY = 32
-_SIG = 64
-_MAX_ID = 64
-
-
-def check_id(name: str, value: str) -> str:
-    """A fleet or vehicle id: 1-64 characters of ``[A-Za-z0-9_.-]`` (safe in MQTT topics and file names).
-
-    Parameters
-    ----------
-    name : str
-        What the id is, for the message.
-    value : str
-
-    Returns
-    -------
-    str
-        ``value``.
-
-    Raises
-    ------
-    ParameterError
-    """
-    ok = isinstance(value, str) and 0 < len(value) <= _MAX_ID and all(c.isascii() and (c.isalnum() or c in "_.-")
-                                                                          for c in value)
-    if not ok or value in (".", ".."):
-        raise ParameterError(f"{name} must be 1-{_MAX_ID} characters of letters, digits, '_', '.', '-', got {value!r}")
-    return value
-
-
-def _ed25519():
-    from cryptography.hazmat.primitives.asymmetric import ed25519
-    return ed25519
-
-
-def verify_signature(public_key: bytes, data: bytes, signature: bytes, what: str) -> None:
-    """Check an Ed25519 signature; :class:`~roadcollab.errors.MessageError` naming ``what`` if it fails.
-
-    Parameters
-    ----------
-    public_key : bytes
-        32-byte raw Ed25519 public key.
-    data, signature : bytes
-        The signed bytes (context included) and the 64-byte signature.
-    what : str
-        What was signed, for the message.
-    """
-    from cryptography.exceptions import InvalidSignature
-
-    try:
-        _ed25519().Ed25519PublicKey.from_public_bytes(bytes(public_key)).verify(bytes(signature), bytes(data))
-    except (InvalidSignature, ValueError):
-        raise MessageError(f"{what}: bad signature") from None
-
-
-def _pack_str(s: str) -> bytes:
-    b = s.encode("ascii")
-    return struct.pack(">H", len(b)) + b
-
-
-class _Reader:
-    """Bounds-checked reading of untrusted bytes."""
-
-    def __init__(self, data: bytes, what: str):
-        self.data, self.pos, self.what = bytes(data), 0, what
-
-    def take(self, n: int) -> bytes:
-        if n < 0 or self.pos + n > len(self.data):
-            raise MessageError(f"{self.what}: truncated (needs {self.pos + n} bytes, got {len(self.data)})")
-        out = self.data[self.pos:self.pos + n]
-        self.pos += n
-        return out
-
-    def u(self, fmt: str) -> int:
-        return struct.unpack(fmt, self.take(struct.calcsize(fmt)))[0]
-
-    def string(self, name: str) -> str:
-        raw = self.take(self.u(">H"))
-        try:
-            return check_id(f"{self.what} {name}", raw.decode("ascii"))
-        except (UnicodeDecodeError, ParameterError) as err:
-            raise MessageError(f"{self.what}: bad {name} ({err})") from None
-
-    def end(self) -> None:
-        if self.pos != len(self.data):
-            raise MessageError(f"{self.what}: {len(self.data) - self.pos} trailing bytes")
-
-
-@dataclass(frozen=True)
-class Certificate:
-    """A vehicle's certificate: the fleet authority's signature binding ``vehicle_id`` to ``public_key``.
-
-    Attributes
-    ----------
-    fleet_id, vehicle_id : str
-        Ids (:func:`check_id`).
-    public_key : bytes
-        The vehicle's 32-byte raw Ed25519 public key.
-    issued_s : int
-        Issue time, s since the Unix epoch (informative; revocation is by :class:`FleetTrust`).
-    signature : bytes
-        The authority's 64-byte Ed25519 signature of :meth:`signed_bytes`.
-    """
-
-    fleet_id: str
-    vehicle_id: str
-    public_key: bytes
-    issued_s: int
-    signature: bytes
-
-    def signed_bytes(self) -> bytes:
-        """The bytes the authority signs: :data:`CERT_CONTEXT` and every field but the signature."""
-        return (CERT_CONTEXT + _pack_str(self.fleet_id) + _pack_str(self.vehicle_id) + bytes(self.public_key)
-                + struct.pack(">Q", self.issued_s))
-
-    def to_bytes(self) -> bytes:
-        """The certificate's wire form (module docstring)."""
-        return CERT_MAGIC + self.signed_bytes()[len(CERT_CONTEXT):] + bytes(self.signature)
-
-    @classmethod
-    def from_bytes(cls, data: bytes) -> "Certificate":
-        """Parse a certificate (its signature is *not* checked here: :meth:`FleetTrust.check` does).
-
-        Raises
-        ------
-        MessageError
-            Wrong magic, truncated, bad id, trailing bytes.
-        """
-        r = _Reader(data, "certificate")
-        if r.take(len(CERT_MAGIC)) != CERT_MAGIC:
-            raise MessageError("certificate: wrong magic")
-        fleet, vehicle = r.string("fleet_id"), r.string("vehicle_id")
-        pk, issued, sig = r.take(_KEY), r.u(">Q"), r.take(_SIG)
-        r.end()
-        return cls(fleet, vehicle, pk, issued, sig)
-
 
 @dataclass(frozen=True)
 class FleetTrust:
@@ -192,6 +54,10 @@ class FleetTrust:
     def check(self, cert: Certificate) -> Certificate:
         """Accept ``cert`` if it is this fleet's, signed by its authority and not revoked.
 
+        Parameters
+        ----------
+        cert : Certificate
+
         Returns
         -------
         Certificate
@@ -211,7 +77,16 @@ class FleetTrust:
         return cert
 
     def save(self, path) -> Path:
-        """Write the trust anchor (fleet id and authority public key, hex) as a small TOML file."""
+        """Write the trust anchor (fleet id, authority public key in hex, revoked ids) as a small TOML file.
+
+        Parameters
+        ----------
+        path : str or Path
+
+        Returns
+        -------
+        Path
+        """
         path = Path(path)
         revoked = ", ".join(f'"{v}"' for v in sorted(self.revoked))
         path.write_text(f'fleet_id = "{self.fleet_id}"\nauthority_key = "{self.authority_key.hex()}"\n'
@@ -220,7 +95,16 @@ class FleetTrust:
 
     @classmethod
     def load(cls, path) -> "FleetTrust":
-        """Read a file written by :meth:`save`; :class:`~roadcollab.errors.FileFormatError` if malformed."""
+        """Read a file written by :meth:`save`; :class:`~roadcollab.errors.FileFormatError` if malformed.
+
+        Parameters
+        ----------
+        path : str or Path
+
+        Returns
+        -------
+        FleetTrust
+        """
         data = _read_toml(path)
         try:
             fleet = check_id("fleet_id", data["fleet_id"])
@@ -300,15 +184,47 @@ class FleetAuthority:
 
     @classmethod
     def generate(cls, fleet_id: str) -> "FleetAuthority":
-        """A new authority with a fresh key from the OS CSPRNG."""
+        """A new authority with a fresh key from the OS CSPRNG.
+
+        Parameters
+        ----------
+        fleet_id : str
+
+        Returns
+        -------
+        FleetAuthority
+        """
         return cls(fleet_id, _ed25519().Ed25519PrivateKey.generate())
 
     def trust(self, revoked=()) -> FleetTrust:
-        """The public trust anchor of this authority."""
+        """The public trust anchor of this authority.
+
+        Parameters
+        ----------
+        revoked : iterable of str
+            Vehicle ids no longer accepted.
+
+        Returns
+        -------
+        FleetTrust
+        """
         return FleetTrust(self.fleet_id, self.public_key, frozenset(revoked))
 
     def issue(self, vehicle_id: str, public_key: bytes, *, issued_s: int | None = None) -> Certificate:
-        """Sign a certificate binding ``vehicle_id`` to ``public_key`` (32 raw bytes)."""
+        """Sign a certificate binding ``vehicle_id`` to ``public_key``.
+
+        Parameters
+        ----------
+        vehicle_id : str
+        public_key : bytes
+            32 raw Ed25519 bytes.
+        issued_s : int, optional
+            Issue time, s since the epoch (default now).
+
+        Returns
+        -------
+        Certificate
+        """
         check_id("vehicle_id", vehicle_id)
         if len(bytes(public_key)) != _KEY:
             raise ParameterError(f"public_key must be {_KEY} raw Ed25519 bytes, got {len(bytes(public_key))}")
@@ -318,7 +234,17 @@ class FleetAuthority:
                            self._key.sign(unsigned.signed_bytes()))
 
     def save(self, folder) -> Path:
-        """Write ``authority.key`` (PEM, mode 0600; an existing key is never replaced) and ``trust.toml``."""
+        """Write ``authority.key`` (PEM, mode 0600; an existing key is never replaced) and ``trust.toml``.
+
+        Parameters
+        ----------
+        folder : str or Path
+            Created if absent.
+
+        Returns
+        -------
+        Path
+        """
         folder = Path(folder)
         folder.mkdir(parents=True, exist_ok=True)
         _write_private(folder / "authority.key", _pem(self._key))
@@ -327,7 +253,16 @@ class FleetAuthority:
 
     @classmethod
     def load(cls, folder) -> "FleetAuthority":
-        """Read a folder written by :meth:`save`."""
+        """Read a folder written by :meth:`save`.
+
+        Parameters
+        ----------
+        folder : str or Path
+
+        Returns
+        -------
+        FleetAuthority
+        """
         folder = Path(folder)
         trust = FleetTrust.load(folder / "trust.toml")
         auth = cls(trust.fleet_id, _load_private(folder / "authority.key"))
@@ -358,16 +293,45 @@ class VehicleIdentity:
 
     @classmethod
     def enroll(cls, authority: FleetAuthority, vehicle_id: str) -> "VehicleIdentity":
-        """A fresh key pair for ``vehicle_id`` with a certificate from ``authority``."""
+        """A fresh key pair for ``vehicle_id`` with a certificate from ``authority``.
+
+        Parameters
+        ----------
+        authority : FleetAuthority
+        vehicle_id : str
+
+        Returns
+        -------
+        VehicleIdentity
+        """
         key = _ed25519().Ed25519PrivateKey.generate()
         return cls(authority.issue(vehicle_id, _raw_public(key)), key)
 
     def sign(self, data: bytes) -> bytes:
-        """The 64-byte Ed25519 signature of ``data`` (callers add their own domain separation)."""
+        """The 64-byte Ed25519 signature of ``data`` (callers add their own domain separation).
+
+        Parameters
+        ----------
+        data : bytes
+
+        Returns
+        -------
+        bytes
+        """
         return self._key.sign(bytes(data))
 
     def save(self, folder) -> Path:
-        """Write ``identity.key`` (PEM, 0600; never replaced) and ``certificate.bin``."""
+        """Write ``identity.key`` (PEM, 0600; never replaced) and ``certificate.bin``.
+
+        Parameters
+        ----------
+        folder : str or Path
+            Created if absent.
+
+        Returns
+        -------
+        Path
+        """
         folder = Path(folder)
         folder.mkdir(parents=True, exist_ok=True)
         _write_private(folder / "identity.key", _pem(self._key))
@@ -376,7 +340,16 @@ class VehicleIdentity:
 
     @classmethod
     def load(cls, folder) -> "VehicleIdentity":
-        """Read a folder written by :meth:`save`."""
+        """Read a folder written by :meth:`save`.
+
+        Parameters
+        ----------
+        folder : str or Path
+
+        Returns
+        -------
+        VehicleIdentity
+        """
         folder = Path(folder)
         path = folder / "certificate.bin"
         if not path.is_file():
