@@ -21,6 +21,7 @@ from .._validation import check_int
 from ..errors import ParameterError
 from ..privacy import baselines
 from .anomaly_config import AnomalyStudyConfig
+from .collusion import collusion_rows
 from .fusion_poisoning import PoisoningSummary, fusion_poisoning_rows
 from .pipeline import PipelineCache
 from .poisoning import poisoning_rows, summarize
@@ -100,7 +101,10 @@ def _poisoning(config: AttackStudyConfig, seed: int, pipe) -> list[PoisoningSumm
     malicious = min(4, config.experiment.n_vehicles - 1)
     fused = fusion_poisoning_rows(AnomalyStudyConfig(experiment=config.experiment), seed,
                                   n_runs=config.poisoning_runs, malicious=malicious, pipe=pipe)
-    return receiver + fused
+    # Pooling colluders c = 1 ... 4 against the robust node (issue 20, section 3).
+    colluding = collusion_rows(AnomalyStudyConfig(experiment=config.experiment), seed, n_runs=config.poisoning_runs,
+                               fleet_sizes=(config.experiment.n_vehicles,), pipe=pipe)
+    return receiver + fused + colluding
 
 
 def run_attack_study(config: AttackStudyConfig, seed: int, *, progress: Callable[[int], None] | None = None,
