@@ -316,7 +316,7 @@ def _run_constructions(pipe, guard, mech, run, ys, Ys, score, dz, anomalies) -> 
         else:
             step = guarded.step(0, ys[j], msg, Y=Ys[j])
             with np.errstate(all="ignore"):     # unguarded: Algorithm 1 as it is (may be NaN)
-                ratio_u = score(guard.estimator.estimate(None, msg, Y=Ys[j]).W_hat)[0] / obs
+                ratio_u = score(guard.estimator.estimate(None, msg, Y=Ys[j], unguarded=True).W_hat)[0] / obs
             rep = step.guard
             outcome = ("guard_refused" if rep.whole_message_refused else
                        "guard_partial" if rep.refused_bands else "accepted")
