@@ -21,7 +21,7 @@ from .._validation import check_int, check_positive
 from ..errors import ParameterError
 from .detector import Detection
 
-__all__ = ["DEFAULT_MIN_VOTES", "corroborate", "min_votes_for", "votes"]
+__all__ = ["DEFAULT_MIN_VOTES", "confirmed_by_own", "corroborate", "min_votes_for", "votes"]
 
 #: Independent vehicles that must see an anomaly before the fleet map reports it.
 DEFAULT_MIN_VOTES = 3
@@ -114,3 +114,32 @@ def corroborate(detections: Sequence[Detection], per_vehicle: Sequence[Sequence[
         raise ParameterError(f"min_votes must be at most the number of vehicles ({len(per_vehicle)}), "
                              f"got {min_votes}")
     return [d for d in detections if votes(d, per_vehicle, tolerance=tolerance) >= min_votes]
+
+
+def confirmed_by_own(detections: Sequence[Detection], own: Sequence[Detection], *,
+                     tolerance: float = 1.0) -> list[Detection]:
+    """The detections of a message-aided estimate that the receiver's own data supports.
+
+    A received message may move a receiver's estimate (within its guard's bound); an anomaly it reports
+    must also show in an estimate made from its own record alone (its observer, its own inversion): a
+    lie cannot plant an anomaly the receiver reports. The price is recall where only the message sees one
+    (measured in ``docs/security-receivers.md``).
+
+    Parameters
+    ----------
+    detections : sequence of Detection
+        Detections in the estimate that used the message.
+    own : sequence of Detection
+        Detections in the receiver's own estimates (without the message).
+    tolerance : float
+        Largest distance between agreeing centers, m.
+
+    Returns
+    -------
+    list of Detection
+        The confirmed subset, in the input order.
+    """
+    tolerance = check_positive("tolerance", tolerance)
+    if not all(isinstance(d, Detection) for d in list(detections) + list(own)):
+        raise ParameterError("detections and own must hold Detection objects")
+    return [d for d in detections if any(_agrees(d, e, tolerance) for e in own)]

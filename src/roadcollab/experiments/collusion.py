@@ -85,8 +85,8 @@ def collusion_rows(config: AnomalyStudyConfig, seed: int, *, n_runs: int = 4, fl
     Returns
     -------
     list of PoisoningSummary
-        Strategy ``collusion_c{c}_{attack}``, target ``fused_robust`` for ``n = 10`` and
-        ``fused_robust_n{n}`` otherwise.
+        Strategy ``collusion_c{c}_{attack}``, target ``fused_robust`` for the whole fleet and
+        ``fused_robust_n{n}`` for a smaller ``n``.
     """
     n_runs = check_int("n_runs", n_runs, low=1)
     exp = config.experiment
@@ -107,7 +107,7 @@ def collusion_rows(config: AnomalyStudyConfig, seed: int, *, n_runs: int = 4, fl
             mu = fuse_inversions(honest, run.grid, fusion).z
             rep_h = corroborate(run.detect(mu), own, min_votes=votes, tolerance=_TOLERANCE)
             mse_h = _score(run, mu)
-            target = "robust" if n == 10 else f"robust_n{n}"        # _row prefixes "fused_"
+            target = "robust" if n == exp.n_vehicles else f"robust_n{n}"        # _row prefixes "fused_"
             for c in (range(1, (n - 1) // 2 + 1) if colluders is None else colluders):
                 c = check_int("colluders", c, low=1, high=n - 1)
                 for attack in attacks:

@@ -20,7 +20,9 @@ road (its own ``z_s``, a good estimate of it), and lies *coherently* with the ro
 Rows are :class:`~roadcollab.experiments.fusion_poisoning.PoisoningSummary` with target
 ``receiver_hardened`` (the lie in an ``InversionMessage``) or ``receiver_none`` (the same ``z`` through
 ``e`` of an ``ExchangeMessage``); ``max_ratio_to_observer`` is the target (<= 2), fake and lost anomalies
-are counted against the receiver's detections with the honest message.
+are counted against the receiver's detections with the honest message, each confirmed by its own data
+(:func:`~roadcollab.detection.corroboration.confirmed_by_own`: a detection in the message-aided estimate
+is reported only if the receiver's observer or own inversion shows it too).
 """
 
 from __future__ import annotations
@@ -30,13 +32,12 @@ import numpy as np
 from .._validation import check_int
 from ..collaboration.guard import ReceiverGuard
 from ..collaboration.relay import Exchange, Relay
-from ..detection.detector import MAX_ROAD_VELOCITY, detect_anomalies
 from ..detection.scoring import lost_anomalies, new_false_detections
 from ..errors import ParameterError
 from .config import ExperimentConfig
 from .fusion_poisoning import PoisoningSummary
 from .pipeline import PipelineCache, record_run
-from .poisoning import _add_to_z, _nominal_estimator, _pothole_dz
+from .poisoning import _add_to_z, _nominal_estimator, _pothole_dz, _scorer
 from .seeds import SeedPlan, run_stream
 
 __all__ = ["RECEIVER_ATTACKS", "coherent_dz", "receiver_attack_rows"]
@@ -78,26 +79,11 @@ def coherent_dz(guard: ReceiverGuard, shape: np.ndarray, statistic: float, *, ca
     return g.irfft(dZ)
 
 
-def _scorer(pipe, config, road):
-    grid, n, sl = pipe.grid, pipe.grid.n_samples, config.scored
-    truth = grid.band_limited(grid.rfft(road.velocity), n)[sl]
-
-    def score(X):
-        """MSE on the scored stretch and anomaly detections of a spectrum (none if not a road)."""
-        w = grid.band_limited(X, n)
-        with np.errstate(all="ignore"):
-            m = float(np.mean((w[sl] - truth) ** 2))
-        if not np.all(np.abs(w) < MAX_ROAD_VELOCITY):
-            return m, []
-        return m, detect_anomalies(w, positions=road.positions[:n], speed=config.speed, sample_rate=config.sample_rate)
-    return score
-
-
-def _segment(pipe, config, guard, j, ss, mech, pothole, attack, statistic, sender):
+def _segment(pipe, config, guard, j, ss, mech, pothole, attack, statistic, sender, confirm):
     """One segment: (observer MSE, honest MSE, attacked MSE, fake, lost, refused) at receiver ``j``."""
     road, ys, Ys = record_run(pipe, run_stream(ss, "road"), run_stream(ss, "noise"), config.sensor_noise_std)
-    score = _scorer(pipe, config, road)
     est, sender_est = pipe.estimators[j], pipe.estimators[j - 1]
+    score = _scorer(pipe, config, road, est, Ys[j]) if confirm else _scorer(pipe, config, road)
     honest = Relay([sender_est], Exchange(mech)).step(0, ys[j - 1], Y=Ys[j - 1]).message
     z_s = sender_est.invert(Ys[j - 1])[pipe.grid.active]
     if attack == "fake_pothole_09":
@@ -118,7 +104,7 @@ def _segment(pipe, config, guard, j, ss, mech, pothole, attack, statistic, sende
 
 def receiver_attack_rows(config: ExperimentConfig | None = None, *, seed: int = 0, n_runs: int = 2, receiver: int = 1,
                          mechanisms=("none", "hardened"), attacks=RECEIVER_ATTACKS, drift_segments: int = 8,
-                         guard_options: dict | None = None, pipe=None) -> list[PoisoningSummary]:
+                         guard_options: dict | None = None, confirm: bool = True, pipe=None) -> list[PoisoningSummary]:
     """Measure the guard-aware coherent lies against one receiver.
 
     Parameters
@@ -140,6 +126,8 @@ def receiver_attack_rows(config: ExperimentConfig | None = None, *, seed: int = 
     guard_options : dict, optional
         Keyword options of :class:`~roadcollab.collaboration.guard.ReceiverGuard` (e.g.
         ``{"bounded": False}`` for the guard before issue 20).
+    confirm : bool
+        Report only anomalies the receiver's own data confirms (False: every detection of its estimate).
     pipe : FleetPipeline, optional
         The pipeline of ``config`` and ``seed`` if already built.
 
@@ -173,7 +161,7 @@ def receiver_attack_rows(config: ExperimentConfig | None = None, *, seed: int = 
                 else:
                     statistic = (0.9 if attack == "fake_pothole_09" else 0.8) * thr
                 vals.append(_segment(pipe, config, guard, j, ss, mech, pothole,
-                                     "coherent_down" if drift else attack, statistic, sender=j - 1))
+                                     "coherent_down" if drift else attack, statistic, j - 1, confirm))
             a = np.array([v[:3] for v in vals])
             out.append(PoisoningSummary(
                 strategy=attack, target=f"receiver_{mech}", honest_mse=float(a[:, 1].mean()),
