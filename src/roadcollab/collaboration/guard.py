@@ -39,6 +39,27 @@ Thresholds (stated a priori, not fitted to the tests):
 - ``max_condition = 1e8``: honest ``T`` measured up to 1e2, obfuscated ``Psi1 T`` up to
   ``1e4 * 1e2`` (``ObfuscationSpec.max_condition`` is 1e4); 1e8 leaves two decades.
 - ``max_refused_fraction = 0.5``.
+
+Bounded combination (the default, issue 20). Refusing only what is implausible lets a coherent lie just
+below the threshold through at full weight (the sender's ``z`` scaled per band to ``0.8 x threshold``
+cost vehicle 2 2.84 x its observer-only MSE). :meth:`ReceiverGuard.feedforward` therefore combines the
+message with the receiver's own information by their stated errors, per band:
+
+.. math::
+
+    z_{used} = g_b \big(z_{own} + \min(1, \sqrt{\kappa / r_b})\,(z_{msg} - z_{own})\big),
+    \qquad w^f = (I - D \hat P) z_{used},
+
+with the innovation clipped to ``kappa v_b`` (``kappa = 2``) and the gain ``g_b`` the honest optimum
+``P_obs / (P_obs + P_msg)``: ``P_obs`` the observer's expected error ``E|(D P - I) w + D n|^2`` and
+``P_msg`` that of the message's contribution, ``E|D (P - P_hat) w|^2 + tr(M C M^H)`` (``M = I - D P_hat``,
+``C`` the inversion error covariance, the sender's taken as the receiver's), both over the receiver's
+posterior plants. Where the worst case within the clip (a lie aligned with the observer's error,
+``beta_b = (sqrt(P_msg) + sigma_max(M) sqrt(kappa v_b)) / sqrt(P_obs)``) could cost more than ``rho`` times
+``P_obs``, ``g_b`` is lowered to ``(sqrt(rho) - 1) / (beta_b - 1)`` (``rho = 1.5``, below the target 2 to
+leave room for the model's approximations). With ``sender=`` the mean band statistic of each sender is
+kept across segments, and a sender above ``drift_limit`` (2; honest about 1) after ``drift_segments`` (3)
+is refused: a slow drift is judged as a sequence. Measured in ``docs/security-receivers.md``.
 """
 
 from __future__ import annotations
@@ -51,9 +72,10 @@ import numpy as np
 
 from .._validation import check_int, check_nonnegative, check_positive, check_real
 from ..errors import MessageError, ParameterError
-from ..lti.batch2x2 import condition_2x2, inv2x2, matmul, sigma_max_2x2
+from ..lti.batch2x2 import condition_2x2, inv2x2, matmul
 from ..wire.message import ExchangeMessage, InversionMessage
 from .algorithm1 import CollaborativeEstimator
+from .guard_gains import bounded_gains
 
 __all__ = ["GuardReport", "ReceiverGuard", "fleet_guards", "third_octave_bands"]
 
@@ -195,7 +217,8 @@ class ReceiverGuard:
         C = self._inversion_error(S)
         self.expected = 2.0 * np.real(np.trace(C, axis1=1, axis2=2))
         self.band_expected = np.array([self.expected[b].sum() for b in self.bands])
-        self.gains = self._gains(S, C)
+        self.gains = bounded_gains(estimator, S, C, self.bands, self.band_expected, noise_std=self.noise_std,
+                                   kappa=self.innovation_bound, rho=self.design_ratio)
         # Per-sender running sums of the band statistics: owned state, one entry per sender key.
         self._history: dict = {}
 
@@ -220,33 +243,6 @@ class ReceiverGuard:
         noise = est.grid.n_samples * self.noise_std ** 2 * matmul(Pinv, Pinv.conj().transpose(0, 2, 1))
         w2 = est.grid.reg_weight[act] ** 2
         return w2[:, None, None] * (param + noise)
-
-    def _gains(self, S: np.ndarray, C: np.ndarray) -> np.ndarray:
-        """``g_b`` per band (module docstring, "Bounded combination")."""
-        est = self.estimator
-        act = est.grid.active
-        D = est.D_f[act]
-        M = np.eye(2) - matmul(D, est.P_f[act])                 # I - D P_hat: z -> w^f
-        E = matmul(D[None], est.posterior_responses) - np.eye(2)        # D P - I per posterior draw
-        p_obs = np.real(np.trace(np.mean(matmul(E, S[None], E.conj().transpose(0, 1, 3, 2)), axis=0)
-                                 + est.grid.n_samples * self.noise_std ** 2 * matmul(D, D.conj().transpose(0, 2, 1)),
-                                 axis1=1, axis2=2))
-        # With g = 1 the error is D (P - P_hat) w + D n + M e (the receiver's own model error stays): the part
-        # a gain trades against the observer's (D P - I) w is D (P - P_hat) w + M e, independent terms.
-        F = matmul(D[None], est.posterior_responses - est.P_f[act][None])
-        p_model = np.real(np.trace(np.mean(matmul(F, S[None], F.conj().transpose(0, 1, 3, 2)), axis=0),
-                                   axis1=1, axis2=2))
-        p_msg = p_model + np.real(np.trace(matmul(M, C, M.conj().transpose(0, 2, 1)), axis1=1, axis2=2))
-        m2 = sigma_max_2x2(M)[0] ** 2
-        gains = np.zeros(len(self.bands))
-        for i, b in enumerate(self.bands):
-            P_obs, P_msg = p_obs[b].sum(), p_msg[b].sum()
-            g = P_obs / (P_obs + P_msg)                          # honest optimum (independent errors)
-            beta = (np.sqrt(P_msg) + np.sqrt(m2[b].max() * self.innovation_bound * self.band_expected[i])) / np.sqrt(P_obs)
-            if beta > 1.0:                                       # worst case within the clip <= rho P_obs
-                g = min(g, (np.sqrt(self.design_ratio) - 1.0) / (beta - 1.0))
-            gains[i] = g
-        return gains
 
     def _refuse_all(self, reason: str) -> tuple[np.ndarray, GuardReport]:
         K = int(self.estimator.grid.active.sum())
