@@ -47,8 +47,8 @@ message with the receiver's own information by their stated errors, per band:
 
 .. math::
 
-    z_{used} = g_b \big(z_{own} + \min(1, \sqrt{\kappa / r_b})\,(z_{msg} - z_{own})\big),
-    \qquad w^f = (I - D \hat P) z_{used},
+    z_{used} = g_b \\big(z_{own} + \\min(1, \\sqrt{\\kappa / r_b})\\,(z_{msg} - z_{own})\\big),
+    \\qquad w^f = (I - D \\hat P) z_{used},
 
 with the innovation clipped to ``kappa v_b`` (``kappa = 2``) and the gain ``g_b`` the honest optimum
 ``P_obs / (P_obs + P_msg)``: ``P_obs`` the observer's expected error ``E|(D P - I) w + D n|^2`` and
