@@ -357,7 +357,7 @@ class ReceiverGuard:
             The receiver's own record spectrum on the grid.
         sender : hashable, optional
             Who sent it (an authenticated identity): its band statistics are kept across segments and a
-            sender whose average exceeds ``drift_limit`` is refused (slow drift).
+            sender whose average exceeds ``drift_limit`` is refused (slow drift; ``bounded`` guards only).
 
         Returns
         -------

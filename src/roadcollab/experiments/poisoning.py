@@ -100,8 +100,9 @@ class PoisoningRow:
     reason : str
         The decode error or the guard's first reason ("" if accepted).
     fake_anomalies : int
-        Detections in the receiver's estimate that match neither a true anomaly nor a detection
-        with the honest message.
+        Reported detections of the receiver's estimate (those its own data confirms,
+        :func:`~roadcollab.detection.corroboration.confirmed_by_own`) that match neither a true anomaly
+        nor a reported detection with the honest message.
     lost_anomalies : int
         True anomalies detected with the honest message and not with this one.
     """
