@@ -65,9 +65,10 @@ def default_fleet_run():
 @pytest.mark.parametrize("mechanism", ["none", "paper", "paper_vehicle", "hardened"])
 def test_every_honest_message_of_the_default_fleet_decodes_and_passes_the_guard(default_fleet_run, mechanism):
     cfg, pipe, ys, Ys = default_fleet_run
-    guards = fleet_guards(pipe.estimators, pipe.road_moment, cfg.sensor_noise_std)
+    # The accept/refuse guard without the bounded combination (bounded=False): accepted means exactly Algorithm 1.
+    guards = fleet_guards(pipe.estimators, pipe.road_moment, cfg.sensor_noise_std, bounded=False)
     steps = Relay(pipe.estimators, Exchange(mechanism, cfg.obfuscation), rng=3, guard=guards).run(ys, spectra=Ys)
-    plain = Relay(pipe.estimators, Exchange(mechanism, cfg.obfuscation), rng=3).run(ys, spectra=Ys)
+    plain = Relay(pipe.estimators, Exchange(mechanism, cfg.obfuscation), rng=3, unguarded=True).run(ys, spectra=Ys)
     assert steps[0].guard is None and all(s.guard is None for s in plain)
     for s, p in zip(steps, plain):
         assert decode(encode(s.message)).mechanism == s.message.mechanism

@@ -100,9 +100,12 @@ class CollaborativeEstimator:
     >>> first, second = rc.FleetPipeline(cfg, rc.sample_fleet(2, cfg.fleet, rng=1)).estimators
     >>> ys = rc.simulate_measurements([first, second], np.zeros((cfg.n_samples, 2)), 0.05, rng=2)
     >>> r1 = first.estimate(ys[0])                      # vehicle 1: its own observer
-    >>> r2 = second.estimate(ys[1], first.message(r1))  # vehicle 2: Algorithm 1
+    >>> r2 = second.estimate(ys[1], first.message(r1), unguarded=True)  # the paper's Algorithm 1
     >>> r2.estimate.shape == (cfg.n_samples, 2)
     True
+
+    Without ``unguarded=True`` the message goes through the vehicle's receiver guard
+    (``ReceiverGuard(...).attach()``); with none attached it is refused (``ParameterError``).
     """
 
     def __init__(self, vehicle: Vehicle, noise: JDPNoise, grid: SegmentGrid, *, gamma: float,
@@ -143,6 +146,8 @@ class CollaborativeEstimator:
         # ``protocol.decode(data, systems=self.system_cache)``) once per receiver, not per segment.
         self.response_cache = FrequencyResponseCache()
         self.system_cache = SystemCache()
+        # The guard every received message goes through (ReceiverGuard.attach); None: refused unless unguarded=True.
+        self.guard = None
 
     # -- realisations sent to the next vehicle ------------------------------------------------
     def _realisations(self) -> tuple[StateSpaceData, StateSpaceData]:
@@ -330,33 +335,52 @@ class CollaborativeEstimator:
         """
         return self.wf_from_active_z(self.received_z(message))
 
-    def estimate(self, y, message: ExchangeMessage | None = None, *, Wf: np.ndarray | None = None,
-                 Y: np.ndarray | None = None) -> VehicleEstimate:
-        """Run Algorithm 1 for this vehicle on one segment.
+    def estimate(self, y, message: ExchangeMessage | InversionMessage | None = None, *, Wf: np.ndarray | None = None,
+                 Y: np.ndarray | None = None, unguarded: bool = False, sender=None) -> VehicleEstimate:
+        """Run Algorithm 1 for this vehicle on one segment, the received message through the guard.
+
+        A received message is applied only through the vehicle's receiver guard (``self.guard``, set by
+        :meth:`~roadcollab.collaboration.guard.ReceiverGuard.attach`): a well-formed message can say
+        anything (``z x 1e6`` cost 2.6e10 x, issue 20). ``unguarded=True`` is the named opt-out: the
+        paper's exact Algorithm 1 (eqs. 11-12), for the reproduction and the Theorem 1 measurement.
 
         Parameters
         ----------
         y : (N, 2) array_like
             Measured body-tip accelerations, m/s^2.
-        message : ExchangeMessage | None
+        message : ExchangeMessage | InversionMessage | None
             From vehicle ``j-1``; None for vehicle 1 (``w^f = 0``).
         Wf : (K, 2) ndarray, optional
             A feed-forward spectrum computed elsewhere (e.g. the fused estimate); overrides
             ``message``.
         Y : (K, 2) complex ndarray, optional
             The spectrum of ``y`` on the grid, if already computed (``y`` is then not used).
+        unguarded : bool
+            Apply ``message`` without the guard: the paper's exact Algorithm 1.
+        sender : hashable, optional
+            Who sent ``message`` (an authenticated identity): the guard keeps its record across segments.
 
         Returns
         -------
         VehicleEstimate
+
+        Raises
+        ------
+        ParameterError
+            If a message is given, no guard is attached and ``unguarded`` is not set.
         """
         if Y is None:
             Y = self.spectrum(y)
         elif Y.shape != (self.grid.n_bins, 2):
             raise ParameterError(f"Y must have shape ({self.grid.n_bins}, 2), got {Y.shape}")
         DY = matvec(self.D_f, Y)
+        if Wf is None and message is not None and not unguarded and self.guard is None:
+            raise ParameterError(f"vehicle {self.vehicle.index} received a message but has no receiver guard: "
+                                 f"attach one (ReceiverGuard(...).attach(), fleet_guards(..., attach=True)) "
+                                 f"or pass unguarded=True to apply it as the paper's Algorithm 1 does")
         if Wf is None:
-            Wf = self.learn(message) if message is not None else np.zeros_like(Y)
+            Wf = (np.zeros_like(Y) if message is None else self.learn(message) if unguarded
+                  else self.guard.feedforward(message, Y, sender=sender)[0])
         return VehicleEstimate(W_obs=DY, W_hat=DY + Wf, Wf=Wf, Y=Y, P_f=self.P_f, grid=self.grid,
                                offset=self._offset)
 

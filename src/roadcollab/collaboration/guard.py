@@ -39,20 +39,43 @@ Thresholds (stated a priori, not fitted to the tests):
 - ``max_condition = 1e8``: honest ``T`` measured up to 1e2, obfuscated ``Psi1 T`` up to
   ``1e4 * 1e2`` (``ObfuscationSpec.max_condition`` is 1e4); 1e8 leaves two decades.
 - ``max_refused_fraction = 0.5``.
+
+Bounded combination (the default, issue 20). Refusing only what is implausible lets a coherent lie just
+below the threshold through at full weight (the sender's ``z`` scaled per band to ``0.8 x threshold``
+cost vehicle 2 2.84 x its observer-only MSE). :meth:`ReceiverGuard.feedforward` therefore combines the
+message with the receiver's own information by their stated errors, per band:
+
+.. math::
+
+    z_{used} = g_b \\big(z_{own} + \\min(1, \\sqrt{\\kappa / r_b})\\,(z_{msg} - z_{own})\\big),
+    \\qquad w^f = (I - D \\hat P) z_{used},
+
+with the innovation clipped to ``kappa v_b`` (``kappa = 2``) and the gain ``g_b`` the honest optimum
+``P_obs / (P_obs + P_msg)``: ``P_obs`` the observer's expected error ``E|(D P - I) w + D n|^2`` and
+``P_msg`` that of the message's contribution, ``E|D (P - P_hat) w|^2 + tr(M C M^H)`` (``M = I - D P_hat``,
+``C`` the inversion error covariance, the sender's taken as the receiver's), both over the receiver's
+posterior plants. Where the worst case within the clip (a lie aligned with the observer's error,
+``beta_b = (sqrt(P_msg) + sigma_max(M) sqrt(kappa v_b)) / sqrt(P_obs)``) could cost more than ``rho`` times
+``P_obs``, ``g_b`` is lowered to ``(sqrt(rho) - 1) / (beta_b - 1)`` (``rho = 1.5``, below the target 2 to
+leave room for the model's approximations). With ``sender=`` the mean band statistic of each sender is
+kept across segments, and a sender above ``drift_limit`` (2; honest about 1) after ``drift_segments`` (3)
+is refused: a slow drift is judged as a sequence. Measured in ``docs/security-receivers.md``.
 """
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 from typing import Sequence
 
 import numpy as np
 
-from .._validation import check_int, check_nonnegative, check_positive
+from .._validation import check_int, check_nonnegative, check_positive, check_real
 from ..errors import MessageError, ParameterError
 from ..lti.batch2x2 import condition_2x2, inv2x2, matmul
 from ..wire.message import ExchangeMessage, InversionMessage
 from .algorithm1 import CollaborativeEstimator
+from .guard_gains import bounded_gains
 
 __all__ = ["GuardReport", "ReceiverGuard", "fleet_guards", "third_octave_bands"]
 
@@ -74,6 +97,9 @@ class GuardReport:
         ``r_b`` per band (inf where not finite; NaN if the message was refused before).
     whole_message_refused : bool
         No part of the message was used.
+    gains : tuple of float
+        ``g_b`` per band actually applied by :meth:`ReceiverGuard.feedforward` (0 where refused; empty
+        from :meth:`ReceiverGuard.check`).
     """
 
     accepted_bands: tuple[int, ...]
@@ -81,6 +107,7 @@ class GuardReport:
     reasons: tuple[str, ...]
     statistics: tuple[float, ...]
     whole_message_refused: bool
+    gains: tuple[float, ...] = ()
 
     @property
     def refused(self) -> bool:
@@ -143,11 +170,27 @@ class ReceiverGuard:
         Refuse the whole message when more than this fraction of the bands is refused.
     min_bins : int
         Fewest bins per band.
+    bounded : bool
+        :meth:`feedforward` combines the message with the receiver's own information (module docstring,
+        "Bounded combination"); False uses every accepted band of the message as it is (the guard before
+        issue 20, which a coherent lie below the threshold steers).
+    innovation_bound : float
+        ``kappa``: the part of ``z_msg - z_own`` used per band is scaled down to power at most
+        ``kappa * v_b``.
+    design_ratio : float
+        ``rho``: the gains are chosen so that the worst case within the clip costs at most ``rho`` x the
+        observer-only error per band under the model (the target is 2; the margin covers the model).
+    drift_limit : float
+        A sender whose band statistics ``r_b`` average more than this over at least ``drift_segments``
+        segments (honest: about 1) is not trusted any more (:meth:`feedforward` with ``sender=``).
+    drift_segments : int
+        Segments before the per-sender average is judged.
     """
 
     def __init__(self, estimator: CollaborativeEstimator, road_moment: np.ndarray, noise_std: float, *,
                  threshold: float = 10.0, max_condition: float = 1e8, max_refused_fraction: float = 0.5,
-                 min_bins: int = 16) -> None:
+                 min_bins: int = 16, bounded: bool = True, innovation_bound: float = 2.0,
+                 design_ratio: float = 1.5, drift_limit: float = 2.0, drift_segments: int = 3) -> None:
         if not isinstance(estimator, CollaborativeEstimator):
             raise ParameterError(f"estimator must be a CollaborativeEstimator, got {type(estimator).__name__}")
         if estimator.fleet is None:
@@ -166,11 +209,32 @@ class ReceiverGuard:
         freqs = np.arange(grid.n_bins)[act] * grid.sample_rate / grid.nfft
         self.bands = third_octave_bands(freqs, min_bins=min_bins)
         self.band_edges_hz = [(float(freqs[b[0]]), float(freqs[b[-1]])) for b in self.bands]
-        self.expected = self._expected_discrepancy(S)
+        self.bounded = bool(bounded)
+        self.innovation_bound = check_positive("innovation_bound", innovation_bound)
+        self.design_ratio = check_real("design_ratio", design_ratio, low=1.0, low_open=True)
+        self.drift_limit = check_positive("drift_limit", drift_limit)
+        self.drift_segments = check_int("drift_segments", drift_segments, low=1)
+        C = self._inversion_error(S)
+        self.expected = 2.0 * np.real(np.trace(C, axis1=1, axis2=2))
         self.band_expected = np.array([self.expected[b].sum() for b in self.bands])
+        self.gains = bounded_gains(estimator, S, C, self.bands, self.band_expected, noise_std=self.noise_std,
+                                   kappa=self.innovation_bound, rho=self.design_ratio)
+        # Per-sender running sums of the band statistics: owned state, one entry per sender key.
+        self._history: dict = {}
 
-    def _expected_discrepancy(self, S: np.ndarray) -> np.ndarray:
-        """``v`` per active bin (module docstring): twice the receiver's own inversion error."""
+    def attach(self) -> "ReceiverGuard":
+        """Make this the estimator's guard: its ``estimate(y, message)`` then goes through it.
+
+        Returns
+        -------
+        ReceiverGuard
+            ``self``.
+        """
+        self.estimator.guard = self
+        return self
+
+    def _inversion_error(self, S: np.ndarray) -> np.ndarray:
+        """``C = E[(z_own - W w)(z_own - W w)^H]`` per active bin, (K_active, 2, 2); ``v = 2 tr C``."""
         est = self.estimator
         act = est.grid.active
         Pinv = inv2x2(est.P_f[act])                              # P_hat_j^-1
@@ -178,7 +242,7 @@ class ReceiverGuard:
         param = np.mean(matmul(A, S[None], A.conj().transpose(0, 1, 3, 2)), axis=0)
         noise = est.grid.n_samples * self.noise_std ** 2 * matmul(Pinv, Pinv.conj().transpose(0, 2, 1))
         w2 = est.grid.reg_weight[act] ** 2
-        return 2.0 * w2 * np.real(np.trace(param + noise, axis1=1, axis2=2))
+        return w2[:, None, None] * (param + noise)
 
     def _refuse_all(self, reason: str) -> tuple[np.ndarray, GuardReport]:
         K = int(self.estimator.grid.active.sum())
@@ -280,9 +344,10 @@ class ReceiverGuard:
             Z[act_idx[self.bands[b]]] = fallback[act_idx[self.bands[b]]]
         return Z, report
 
-    def feedforward(self, message: ExchangeMessage | InversionMessage, Y: np.ndarray
+    def feedforward(self, message: ExchangeMessage | InversionMessage, Y: np.ndarray, *, sender=None
                     ) -> tuple[np.ndarray, GuardReport]:
-        """``w^f_j`` from the guarded ``z`` (:meth:`check`): 0 where refused.
+        """``w^f_j`` from the guarded ``z`` (:meth:`check`): 0 where refused; with ``bounded`` (the
+        default) ``g_b (z_own + min(1, sqrt(kappa / r_b)) (z - z_own))`` in accepted bands.
 
         Parameters
         ----------
@@ -290,6 +355,9 @@ class ReceiverGuard:
             From vehicle ``j - 1``.
         Y : (K, 2) complex ndarray
             The receiver's own record spectrum on the grid.
+        sender : hashable, optional
+            Who sent it (an authenticated identity): its band statistics are kept across segments and a
+            sender whose average exceeds ``drift_limit`` is refused (slow drift; ``bounded`` guards only).
 
         Returns
         -------
@@ -298,11 +366,57 @@ class ReceiverGuard:
         report : GuardReport
         """
         z, report = self.check(message, Y)
-        return self.estimator.wf_from_active_z(z), report
+        if not self.bounded:
+            return self.estimator.wf_from_active_z(z), report
+        if sender is not None and not report.whole_message_refused:
+            report = self._judge_sender(sender, report)
+        gains = np.zeros(len(self.bands))
+        out = np.zeros_like(z)
+        if not report.whole_message_refused:
+            act = self.estimator.grid.active
+            z_own = self.estimator.invert(Y)[act]
+            for i in report.accepted_bands:
+                b = self.bands[i]
+                # z_own + d, d scaled to power <= kappa v_b, times g_b: the message moves w^f at most as far
+                # as the receiver's own uncertainty allows.
+                shrink = min(1.0, float(np.sqrt(self.innovation_bound / max(report.statistics[i], 1e-300))))
+                gains[i] = self.gains[i]
+                out[b] = self.gains[i] * (z_own[b] + shrink * (z[b] - z_own[b]))
+        report = dataclasses.replace(report, gains=tuple(float(g) for g in gains))
+        return self.estimator.wf_from_active_z(out), report
+
+    def _judge_sender(self, sender, report: GuardReport) -> GuardReport:
+        """Add this segment's band statistics to the sender's record; refuse a sender whose average is high."""
+        r = np.minimum(np.array(report.statistics, float), 10.0 * self.threshold)
+        total, count = self._history.get(sender, (0.0, 0))
+        total, count = total + float(np.mean(r)), count + 1
+        self._history[sender] = (total, count)
+        mean = total / count
+        if count >= self.drift_segments and mean > self.drift_limit:
+            reason = (f"sender {sender!r}: band statistic averages {mean:.3g} over {count} segments > "
+                      f"{self.drift_limit:g} (honest: about 1)")
+            return GuardReport((), tuple(range(len(self.bands))), (reason,), report.statistics, True)
+        return report
+
+    def sender_record(self, sender) -> tuple[float, int]:
+        """The mean band statistic and the number of segments seen from ``sender`` (0, 0 if none).
+
+        Parameters
+        ----------
+        sender : hashable
+            The key passed to :meth:`feedforward`.
+
+        Returns
+        -------
+        mean : float
+        segments : int
+        """
+        total, count = self._history.get(sender, (0.0, 0))
+        return (total / count if count else 0.0), count
 
 
-def fleet_guards(estimators: Sequence[CollaborativeEstimator], road_moment: np.ndarray, noise_std: float,
-                 **options) -> tuple[ReceiverGuard, ...]:
+def fleet_guards(estimators: Sequence[CollaborativeEstimator], road_moment: np.ndarray, noise_std: float, *,
+                 attach: bool = False, **options) -> tuple[ReceiverGuard, ...]:
     """One :class:`ReceiverGuard` per vehicle, for ``Relay(..., guard=...)``.
 
     Parameters
@@ -313,6 +427,8 @@ def fleet_guards(estimators: Sequence[CollaborativeEstimator], road_moment: np.n
         Road second moment per active bin, (m/s)^2.
     noise_std : float
         Accelerometer noise standard deviation, m/s^2.
+    attach : bool
+        Also make each the estimator's own guard (:meth:`ReceiverGuard.attach`).
     **options
         Keyword options of :class:`ReceiverGuard` (``threshold``, ``max_condition``, ...).
 
@@ -320,4 +436,8 @@ def fleet_guards(estimators: Sequence[CollaborativeEstimator], road_moment: np.n
     -------
     tuple of ReceiverGuard
     """
-    return tuple(ReceiverGuard(e, road_moment, noise_std, **options) for e in estimators)
+    guards = tuple(ReceiverGuard(e, road_moment, noise_std, **options) for e in estimators)
+    if attach:
+        for g in guards:
+            g.attach()
+    return guards

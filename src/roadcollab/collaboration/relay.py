@@ -117,8 +117,12 @@ class Relay:
     guard : sequence of ReceiverGuard | None, optional
         One receiver guard per vehicle (:func:`~roadcollab.collaboration.guard.fleet_guards`; None
         entries allowed): each incoming message is checked before use, implausible bands fall back
-        to the receiver's observer, and the step carries the :class:`GuardReport`. Without a guard
-        (the default) every estimate is exactly Algorithm 1's. ``fused`` chains learn nothing from
+        to the receiver's observer, and the step carries the :class:`GuardReport`. Without (None) each
+        vehicle's own guard (:meth:`~roadcollab.collaboration.guard.ReceiverGuard.attach`) is used; a
+        vehicle that has none refuses the message with a ``ParameterError``.
+    unguarded : bool
+        The named opt-out: every message applied as the paper's Algorithm 1 does, exactly (the
+        reproduction and the Theorem 1 measurement). ``fused`` chains learn nothing from
         the message: there the incoming average is checked the same way, refused bands are
         replaced by the receiver's own inversion and a wholly refused average restarts the chain.
 
@@ -131,7 +135,7 @@ class Relay:
     >>> pipe = rc.FleetPipeline(cfg, rc.sample_fleet(3, cfg.fleet, rng=1))
     >>> road = pipe.road(np.random.default_rng(2))
     >>> ys = rc.simulate_measurements(pipe.estimators, road.velocity, cfg.sensor_noise_std, rng=3)
-    >>> steps = rc.Relay(pipe.estimators, rc.Exchange("paper", cfg.obfuscation), rng=4).run(ys)
+    >>> steps = rc.Relay(pipe.estimators, rc.Exchange("paper", cfg.obfuscation), rng=4, unguarded=True).run(ys)
     >>> [s.message.mechanism for s in steps]
     ['paper', 'paper', 'paper']
     >>> steps[-1].result.estimate.shape == (cfg.n_samples, 2)   # vehicle 3's road velocity, m/s
@@ -139,7 +143,7 @@ class Relay:
     """
 
     def __init__(self, estimators: Sequence[CollaborativeEstimator], exchange: Exchange | str = "none", *,
-                 rng=None, guard: Sequence[ReceiverGuard | None] | None = None) -> None:
+                 rng=None, guard: Sequence[ReceiverGuard | None] | None = None, unguarded: bool = False) -> None:
         estimators = list(estimators)
         if not estimators or not all(isinstance(e, CollaborativeEstimator) for e in estimators):
             raise ParameterError("estimators must be a non-empty sequence of CollaborativeEstimator")
@@ -150,6 +154,9 @@ class Relay:
         if not isinstance(self.exchange, Exchange):
             raise ParameterError(f"exchange must be an Exchange or a mechanism name, got {type(exchange).__name__}")
         self.rng = np.random.default_rng(rng)
+        self.unguarded = bool(unguarded)
+        if self.unguarded and guard is not None:
+            raise ParameterError("guard and unguarded=True exclude each other")
         self.guard = None if guard is None else tuple(guard)
         if self.guard is not None and (len(self.guard) != len(estimators) or not all(
                 g is None or (isinstance(g, ReceiverGuard) and g.estimator is e) for g, e in zip(self.guard, estimators))):
@@ -233,13 +240,15 @@ class Relay:
         """
         est = self.estimators[j]
         fused = self.exchange.mechanism in ("fused", "fused_posterior")
-        guard = None if self.guard is None or incoming is None else self.guard[j]
+        # The relay's guards, else the vehicle's own (ReceiverGuard.attach); unguarded: the paper's Algorithm 1.
+        guard = (None if self.unguarded or incoming is None else
+                 est.guard if self.guard is None else self.guard[j])
         if fused and guard is not None:
             return self._guarded_fused_step(j, y, incoming, Y, guard)
         # The fused chain's estimate is the average itself: Algorithm 1 is not run on it.
         learn_from = None if fused else incoming
-        if guard is None:
-            return self.send(j, est.estimate(y, learn_from, Y=Y), incoming)
+        if guard is None:       # without unguarded=True, estimate refuses a message it cannot guard
+            return self.send(j, est.estimate(y, learn_from, Y=Y, unguarded=self.unguarded), incoming)
         Y = est.spectrum(y) if Y is None else Y
         Wf, report = guard.feedforward(learn_from, Y)
         return replace(self.send(j, est.estimate(y, Wf=Wf, Y=Y), incoming), guard=report)

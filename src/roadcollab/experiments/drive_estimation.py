@@ -274,7 +274,7 @@ def _relay_window(drives: list[Drive], cars: list, grid: SegmentGrid, lo: int, h
     ys = [d.accel[lo:hi] for d in drives]
     Ys = [grid.rfft(y) for y in ys]
     try:
-        plain = Relay(cars, "none").run(ys, spectra=Ys)
+        plain = Relay(cars, "none", unguarded=True).run(ys, spectra=Ys)
         fused = Relay(cars, "fused").run(ys, spectra=Ys)
     except (ValueError, np.linalg.LinAlgError, ArithmeticError) as err:  # a degenerate model mid-relay
         raise FileFormatError(f"{', '.join(str(d.params_path) for d in drives)}: the relay failed on these "

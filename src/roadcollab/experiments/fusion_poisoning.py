@@ -7,9 +7,10 @@ Two fusion nodes are compared on the same messages:
 
 - ``mean``: the plain average, weighted by each message's ``count`` (what the relayed
   ``fused_posterior`` average does), anomalies detected in it and reported as they are;
-- ``robust``: :class:`~roadcollab.collaboration.robust_fusion.RobustFusion` (weighted Huber) over the
+- ``robust``: :class:`~roadcollab.collaboration.robust_fusion.RobustFusion` (its default rule) over the
   messages it accepts, anomalies reported only when corroborated by
-  :data:`~roadcollab.detection.corroboration.DEFAULT_MIN_VOTES` vehicles' own detections.
+  :func:`~roadcollab.detection.corroboration.min_votes_for` ``(n)`` vehicles' own detections (pooling
+  colluders: :mod:`.collusion`).
 
 - ``secagg_guarded``: secure aggregation (:mod:`roadcollab.privacy.secure_aggregation`): nobody sees
   an individual input, so no robust combination is possible; what is kept is the clipping of every
@@ -36,7 +37,7 @@ from .._validation import check_int
 from ..collaboration.guard import ReceiverGuard
 from ..collaboration.robust_fusion import RobustFusion, fuse_inversions
 from ..privacy.secagg_messages import SecAggSpec
-from ..detection.corroboration import DEFAULT_MIN_VOTES, corroborate
+from ..detection.corroboration import DEFAULT_MIN_VOTES, corroborate, min_votes_for
 from ..detection.detector import MAX_ROAD_VELOCITY, Detection, detect_anomalies
 from ..detection.scoring import lost_anomalies, new_false_detections
 from ..errors import ParameterError
@@ -206,7 +207,12 @@ def _secagg_node(run: _Run, msgs: list[InversionMessage]) -> tuple[np.ndarray, i
 
 def _reported(target: str, run: _Run, zf: np.ndarray, own: list) -> list[Detection]:
     dets = run.detect(zf)
-    return dets if target == "mean" else corroborate(dets, own, min_votes=DEFAULT_MIN_VOTES, tolerance=_TOLERANCE)
+    if target == "mean":
+        return dets
+    # The robust node's map needs f + 1 of n votes (f = its breakdown), so a silent coalition it withstands
+    # cannot erase what the honest vehicles see (min_votes_for); secure aggregation keeps the fixed default.
+    votes = min_votes_for(len(own)) if target == "robust" else DEFAULT_MIN_VOTES
+    return corroborate(dets, own, min_votes=votes, tolerance=_TOLERANCE)
 
 
 def _score(run: _Run, zf: np.ndarray) -> float:

@@ -42,6 +42,7 @@ import numpy as np
 from ..collaboration.algorithm1 import CollaborativeEstimator
 from ..collaboration.guard import ReceiverGuard
 from ..collaboration.relay import Exchange, Relay
+from ..detection.corroboration import confirmed_by_own
 from ..detection.detector import MAX_ROAD_VELOCITY, detect_anomalies
 from ..detection.scoring import lost_anomalies, new_false_detections
 from ..errors import MessageError, ParameterError
@@ -99,8 +100,9 @@ class PoisoningRow:
     reason : str
         The decode error or the guard's first reason ("" if accepted).
     fake_anomalies : int
-        Detections in the receiver's estimate that match neither a true anomaly nor a detection
-        with the honest message.
+        Reported detections of the receiver's estimate (those its own data confirms,
+        :func:`~roadcollab.detection.corroboration.confirmed_by_own`) that match neither a true anomaly
+        nor a reported detection with the honest message.
     lost_anomalies : int
         True anomalies detected with the honest message and not with this one.
     """
@@ -316,7 +318,7 @@ def _run_constructions(pipe, guard, mech, run, ys, Ys, score, dz, anomalies) -> 
         else:
             step = guarded.step(0, ys[j], msg, Y=Ys[j])
             with np.errstate(all="ignore"):     # unguarded: Algorithm 1 as it is (may be NaN)
-                ratio_u = score(guard.estimator.estimate(None, msg, Y=Ys[j]).W_hat)[0] / obs
+                ratio_u = score(guard.estimator.estimate(None, msg, Y=Ys[j], unguarded=True).W_hat)[0] / obs
             rep = step.guard
             outcome = ("guard_refused" if rep.whole_message_refused else
                        "guard_partial" if rep.refused_bands else "accepted")
@@ -332,6 +334,30 @@ def _run_constructions(pipe, guard, mech, run, ys, Ys, score, dz, anomalies) -> 
             fake_anomalies=new_false_detections(dets, honest_dets, anomalies),
             lost_anomalies=lost_anomalies(dets, honest_dets, anomalies)))
     return rows
+
+
+def _scorer(pipe, config, road, est=None, Y=None):
+    """``score(X) -> (mse, reported anomalies)``; with the receiver ``est`` and its record ``Y``, reported
+    anomalies are those its own data confirms (:func:`~roadcollab.detection.corroboration.confirmed_by_own`)."""
+    grid, n, sl = pipe.grid, pipe.grid.n_samples, config.scored
+    truth = grid.band_limited(grid.rfft(road.velocity), n)[sl]
+
+    def detect(X):
+        w = grid.band_limited(X, n)
+        with np.errstate(all="ignore"):
+            m = float(np.mean((w[sl] - truth) ** 2))
+        if not np.all(np.abs(w) < MAX_ROAD_VELOCITY):
+            return m, []
+        return m, detect_anomalies(w, positions=road.positions[:n], speed=config.speed, sample_rate=config.sample_rate)
+    if est is None:
+        return detect
+    own = detect(est.estimate(None, Y=Y).W_obs)[1] + detect(est.invert(Y))[1]
+
+    def score(X):
+        """MSE on the scored stretch and the confirmed anomaly detections of a spectrum."""
+        m, dets = detect(X)
+        return m, confirmed_by_own(dets, own)
+    return score
 
 
 def poisoning_rows(config: ExperimentConfig | None = None, *, seed: int = 0, n_runs: int = 2, receiver: int = 1,
@@ -367,24 +393,15 @@ def poisoning_rows(config: ExperimentConfig | None = None, *, seed: int = 0, n_r
     if bad:
         raise ParameterError(f"mechanisms must be among {sorted(CONSTRUCTIONS)}, got {bad}")
     pipe = PipelineCache().pipeline(config, seed) if pipe is None else pipe
-    grid, n, sl = pipe.grid, pipe.grid.n_samples, config.scored
     guard = ReceiverGuard(pipe.estimators[receiver], pipe.road_moment, config.sensor_noise_std,
                           **(guard_options or {}))
-    dz = _pothole_dz(_nominal_estimator(config, grid), config)
+    dz = _pothole_dz(_nominal_estimator(config, pipe.grid), config)
     rows: list[PoisoningRow] = []
     for run, ss in enumerate(SeedPlan(seed).runs(n_runs)):
         road, ys, Ys = record_run(pipe, run_stream(ss, "road"), run_stream(ss, "noise"), config.sensor_noise_std)
-        truth = grid.band_limited(grid.rfft(road.velocity), n)[sl]
 
-        def score(X, road=road):
-            """MSE on the scored stretch and anomaly detections of a spectrum (none if not a road)."""
-            w = grid.band_limited(X, n)
-            with np.errstate(all="ignore"):
-                m = float(np.mean((w[sl] - truth) ** 2))
-            if not np.all(np.abs(w) < MAX_ROAD_VELOCITY):
-                return m, []
-            return m, detect_anomalies(w, positions=road.positions[:n], speed=config.speed,
-                                       sample_rate=config.sample_rate)
+        # Reported anomalies: those the receiver's own data confirms (confirmed_by_own, issue 20).
+        score = _scorer(pipe, config, road, guard.estimator, Ys[receiver])
 
         for mech in mechanisms:
             rows.extend(_run_constructions(pipe, guard, mech, run, ys, Ys, score, dz, road.anomalies))

@@ -127,11 +127,11 @@ def simulate_run(pipe: FleetPipeline, rng, *, keep_traces: int = 0, privacy: boo
         return float(np.mean((grid.band_limited(X, n)[sl] - truth) ** 2))
 
     ests = pipe.estimators
-    plain = Relay(ests, "none").run(ys, spectra=Ys)
-    hard = Relay(ests, "hardened").run(ys, spectra=Ys)
+    plain = Relay(ests, "none", unguarded=True).run(ys, spectra=Ys)
+    hard = Relay(ests, "hardened", unguarded=True).run(ys, spectra=Ys)
     fused = Relay(ests, "fused").run(ys, spectra=Ys)
     fused_post = Relay(ests, "fused_posterior").run(ys, spectra=Ys)
-    priv = Relay(ests, Exchange("paper", cfg.obfuscation), rng=np.random.default_rng(priv_ss)).run(
+    priv = Relay(ests, Exchange("paper", cfg.obfuscation), rng=np.random.default_rng(priv_ss), unguarded=True).run(
         ys, spectra=Ys) if privacy else plain
     V = cfg.n_vehicles
     out = {k: np.zeros(V) for k in ESTIMATORS}

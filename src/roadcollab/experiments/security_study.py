@@ -21,9 +21,11 @@ from .._validation import check_int
 from ..errors import ParameterError
 from ..privacy import baselines
 from .anomaly_config import AnomalyStudyConfig
+from .collusion import collusion_rows
 from .fusion_poisoning import PoisoningSummary, fusion_poisoning_rows
 from .pipeline import PipelineCache
 from .poisoning import poisoning_rows, summarize
+from .receiver_attacks import receiver_attack_rows
 from .runner import map_runs
 from .security_config import AttackStudyConfig
 from .security_replica import run_replica_attacks
@@ -97,10 +99,15 @@ def _poisoning(config: AttackStudyConfig, seed: int, pipe) -> list[PoisoningSumm
     """Hostile messages against vehicle 2 (guarded), one malicious vehicle against the fusion node."""
     receiver = summarize(poisoning_rows(config.experiment, seed=seed, n_runs=config.poisoning_runs, receiver=1,
                                         pipe=pipe))
+    # Guard-aware coherent lies (scaled to 0.8 x the threshold, fake pothole at 0.9 x, slow drift; issue 20).
+    receiver += receiver_attack_rows(config.experiment, seed=seed, n_runs=config.poisoning_runs, receiver=1, pipe=pipe)
     malicious = min(4, config.experiment.n_vehicles - 1)
     fused = fusion_poisoning_rows(AnomalyStudyConfig(experiment=config.experiment), seed,
                                   n_runs=config.poisoning_runs, malicious=malicious, pipe=pipe)
-    return receiver + fused
+    # Pooling colluders c = 1 ... 4 against the robust node (issue 20, section 3).
+    colluding = collusion_rows(AnomalyStudyConfig(experiment=config.experiment), seed, n_runs=config.poisoning_runs,
+                               fleet_sizes=(config.experiment.n_vehicles,), pipe=pipe)
+    return receiver + fused + colluding
 
 
 def run_attack_study(config: AttackStudyConfig, seed: int, *, progress: Callable[[int], None] | None = None,

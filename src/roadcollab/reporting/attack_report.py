@@ -77,9 +77,12 @@ def _tables_lines(result) -> list[str]:
         "`receiver_*`: hostile but well-formed messages to vehicle 2, which runs the receiver guard; `ratio` is "
         "its MSE over its MSE with the honest message, `max_ratio_to_observer` over its own observer-only MSE "
         "(target <= 2). `fused_mean`: one malicious vehicle of the fleet against the plain (count-weighted) "
-        "average; `fused_robust`: against the weighted-Huber fusion node with corroborated anomaly reports "
-        "(3 vehicles). Anomalies: reported ones matching neither truth nor an honest report, and true ones "
-        "reported honestly but lost.", "",
+        "average; `fused_robust`: against the robust fusion node (common-scale biweight) with anomaly reports "
+        "corroborated by f + 1 of n vehicles (f = floor((n - 1) / 2)); `collusion_c{c}_*`: c vehicles that "
+        "pool their inputs and send one message (docs/security-receivers.md). `receiver_*` rows "
+        "`coherent_*`, `fake_pothole_09`, `slow_drift`: lies built with the receiver guard's own statistics. "
+        "Anomalies: reported ones matching neither truth nor an honest report, and true ones reported "
+        "honestly but lost.", "",
         markdown_table(list(result.poisoning_rows), _POISON_SHOWN), "",
         "### DP composition (`dp_composition.csv`)", "",
         "A vehicle's parameters are the same in every message: its exposure composes over segments.", "",
