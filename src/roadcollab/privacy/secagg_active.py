@@ -164,13 +164,39 @@ class SecAggVehicle:
         return self._secrets.session
 
     def advertise(self, session: bytes, *, root: bytes | None = None) -> bytes:
-        """Round 0: fresh keys for ``session``, as a signed advert (``root``: see :func:`advertise_keys`)."""
+        """Round 0: fresh keys for ``session``, as a signed advert.
+
+        Parameters
+        ----------
+        session : bytes
+            ``session_id(segment, epoch)`` of the measurement to aggregate.
+        root : bytes, optional
+            32 bytes of every session secret (see :func:`advertise_keys`); default :func:`os.urandom`.
+
+        Returns
+        -------
+        bytes
+            The signed advert envelope.
+        """
         self._secrets, self._advert = advertise_keys(self.vehicle, session, root=root or os.urandom(KEY_NBYTES))
         self._roster = self._view = None
         return sign_advert(self.identity, self._advert)
 
     def share_keys(self, signed_roster: dict) -> tuple[dict, bytes]:
-        """Round 1: check the roster; sealed shares per recipient and the signed share commitments."""
+        """Round 1: check the roster; sealed shares per recipient and the signed share commitments.
+
+        Parameters
+        ----------
+        signed_roster : dict of int to bytes
+            ``U_1`` as relayed (untrusted): protocol id -> signed advert.
+
+        Returns
+        -------
+        sealed : dict of int to bytes
+            Recipient -> sealed shares.
+        commitments : bytes
+            The signed :class:`~roadcollab.wire.secagg_signed.ShareCommitments`.
+        """
         roster = verify_roster(signed_roster, self.trust, self.session, self.spec)
         if roster.adverts.get(self.vehicle) != self._advert:
             raise MessageError(f"roster does not carry vehicle {self.vehicle}'s own advert")
@@ -191,6 +217,17 @@ class SecAggVehicle:
     def mask_input(self, z, measured: tuple[int, int]) -> MaskedInput:
         """Round 2: ``y`` of the measurement ``measured = (segment, epoch)``, which must be this session's.
 
+        Parameters
+        ----------
+        z : (L, 2) array_like
+            The vehicle's inversion of that measurement, m/s.
+        measured : (int, int)
+            Its segment and epoch, as the vehicle knows them (not as the aggregator claims).
+
+        Returns
+        -------
+        MaskedInput
+
         Raises
         ------
         AggregationRefused
@@ -205,7 +242,18 @@ class SecAggVehicle:
         return mask_input(self._secrets, z, self._roster.adverts, self.spec)
 
     def sign_survivors(self, survivors) -> bytes:
-        """Round 2.5: the consistency signature on the announced ``U_3`` (one set per session, persisted)."""
+        """Round 2.5: the consistency signature on the announced ``U_3`` (one set per session, persisted).
+
+        Parameters
+        ----------
+        survivors : iterable of int
+            ``U_3`` as announced to this vehicle (untrusted).
+
+        Returns
+        -------
+        bytes
+            The signed view envelope.
+        """
         if self._roster is None:
             raise ParameterError("share_keys() first")
         view = sorted({int(i) for i in survivors})

@@ -29,7 +29,16 @@ _MAGIC_TABLE = "secagg_sessions"
 
 
 def view_digest(ids) -> bytes:
-    """SHA-256 of a sorted set of vehicle ids (a roster or a survivor set), 32 bytes."""
+    """SHA-256 of a sorted set of vehicle ids (a roster or a survivor set), 32 bytes.
+
+    Parameters
+    ----------
+    ids : iterable of int
+
+    Returns
+    -------
+    bytes
+    """
     return hashlib.sha256(b"roadcollab/secagg/ids/v1|" + b",".join(str(i).encode() for i in sorted(ids))).digest()
 
 
@@ -87,11 +96,27 @@ class SessionLedger:
                                 (bytes(session),)).fetchone()
 
     def contributed(self, session: bytes) -> bool:
-        """Whether this vehicle already sent a masked input for ``session`` (segment, epoch)."""
+        """Whether this vehicle already sent a masked input for ``session`` (segment, epoch).
+
+        Parameters
+        ----------
+        session : bytes
+
+        Returns
+        -------
+        bool
+        """
         return self._row(session) is not None
 
     def record_contribution(self, session: bytes, roster) -> None:
         """Record, before it is sent, that the masked input of ``session`` goes to ``roster``.
+
+        Parameters
+        ----------
+        session : bytes
+            ``session_id(segment, epoch)`` of the measurement.
+        roster : iterable of int
+            The verified ``U_1`` (its digest is kept).
 
         Raises
         ------
@@ -108,6 +133,12 @@ class SessionLedger:
 
     def record_view(self, session: bytes, view) -> None:
         """Record the survivor set this vehicle signs in ``session`` (the same set again is accepted).
+
+        Parameters
+        ----------
+        session : bytes
+        view : iterable of int
+            The announced ``U_3``.
 
         Raises
         ------
@@ -129,6 +160,15 @@ class SessionLedger:
             raise AggregationRefused("another survivor set was already signed in this session (equivocation)")
 
     def signed_view(self, session: bytes) -> bytes | None:
-        """The digest of the survivor set signed in ``session``, or None."""
+        """The digest of the survivor set signed in ``session``, or None.
+
+        Parameters
+        ----------
+        session : bytes
+
+        Returns
+        -------
+        bytes or None
+        """
         row = self._row(session)
         return None if row is None else row[1]

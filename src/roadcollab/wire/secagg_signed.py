@@ -51,13 +51,42 @@ def share_hash(session: bytes, dealer: int, holder: int, kind: bytes, share: int
 
     A share is a uniform element of ``GF(2^521 - 1)`` to anyone holding fewer than ``t`` shares, so the
     unsalted hash hides it; binding the session, dealer and holder stops a share being replayed elsewhere.
+
+    Parameters
+    ----------
+    session : bytes
+        16 bytes, ``session_id(segment, epoch)``.
+    dealer, holder : int
+        Protocol ids.
+    kind : bytes
+        ``b"s"`` (share of ``s_sk``) or ``b"b"`` (share of ``b``).
+    share : int
+        The share, in ``GF(2^521 - 1)``.
+
+    Returns
+    -------
+    bytes
+        32 bytes.
     """
     return hashlib.sha256(_HASH_DOMAIN + session + struct.pack("<II", dealer, holder) + kind
                           + int(share).to_bytes(66, "little")).digest()
 
 
 def secret_hash(session: bytes, dealer: int, secret: bytes) -> bytes:
-    """``SHA-256`` commitment to a dealer's 32-byte self-mask seed ``b``."""
+    """``SHA-256`` commitment to a dealer's 32-byte self-mask seed ``b``.
+
+    Parameters
+    ----------
+    session : bytes
+        16 bytes, ``session_id(segment, epoch)``.
+    dealer : int
+    secret : bytes
+        ``b``, 32 bytes.
+
+    Returns
+    -------
+    bytes
+    """
     return hashlib.sha256(_HASH_DOMAIN + session + _U32.pack(dealer) + b"B" + bytes(secret)).digest()
 
 
@@ -86,7 +115,16 @@ class ShareCommitments:
 
     @classmethod
     def from_bytes(cls, data: bytes) -> "ShareCommitments":
-        """Parse an (untrusted) payload; :class:`MessageError` if malformed."""
+        """Parse an (untrusted) payload; :class:`MessageError` if malformed.
+
+        Parameters
+        ----------
+        data : bytes
+
+        Returns
+        -------
+        ShareCommitments
+        """
         head = 4 + HASH_NBYTES + 4
         row = 4 + 2 * HASH_NBYTES
         if len(data) < head:
@@ -123,6 +161,13 @@ def sign_advert(identity: VehicleIdentity, advert: KeyAdvert) -> bytes:
 def open_advert(data: bytes, trust: FleetTrust, session: bytes) -> tuple[Certificate, KeyAdvert]:
     """Check a signed advert of ``session`` against the fleet's trust anchor.
 
+    Parameters
+    ----------
+    data : bytes
+        The envelope (untrusted).
+    trust : FleetTrust
+    session : bytes
+
     Returns
     -------
     (Certificate, KeyAdvert)
@@ -141,12 +186,33 @@ def open_advert(data: bytes, trust: FleetTrust, session: bytes) -> tuple[Certifi
 
 
 def sign_commitments(identity: VehicleIdentity, session: bytes, commitments: ShareCommitments) -> bytes:
-    """The signed envelope of a dealer's :class:`ShareCommitments` in ``session``."""
+    """The signed envelope of a dealer's :class:`ShareCommitments` in ``session``.
+
+    Parameters
+    ----------
+    identity : VehicleIdentity
+    session : bytes
+    commitments : ShareCommitments
+
+    Returns
+    -------
+    bytes
+    """
     return seal_envelope(identity, commitments.to_bytes(), COMMIT_CONTEXT + session)
 
 
 def open_commitments(data: bytes, trust: FleetTrust, session: bytes) -> tuple[Certificate, ShareCommitments]:
     """Check and parse a signed :class:`ShareCommitments` envelope of ``session``.
+
+    Parameters
+    ----------
+    data : bytes
+    trust : FleetTrust
+    session : bytes
+
+    Returns
+    -------
+    (Certificate, ShareCommitments)
 
     Raises
     ------
@@ -163,12 +229,34 @@ def _view_payload(signer: int, view) -> bytes:
 
 
 def sign_view(identity: VehicleIdentity, session: bytes, signer: int, view) -> bytes:
-    """The consistency signature of vehicle ``signer`` on the survivor set ``view`` (``U_3``) of ``session``."""
+    """The consistency signature of vehicle ``signer`` on the survivor set ``view`` (``U_3``) of ``session``.
+
+    Parameters
+    ----------
+    identity : VehicleIdentity
+    session : bytes
+    signer : int
+    view : iterable of int
+
+    Returns
+    -------
+    bytes
+    """
     return seal_envelope(identity, _view_payload(signer, view), VIEW_CONTEXT + session)
 
 
 def open_view(data: bytes, trust: FleetTrust, session: bytes) -> tuple[Certificate, int, tuple]:
     """Check a consistency signature of ``session``: ``(certificate, signer id, sorted view)``.
+
+    Parameters
+    ----------
+    data : bytes
+    trust : FleetTrust
+    session : bytes
+
+    Returns
+    -------
+    (Certificate, int, tuple of int)
 
     Raises
     ------
