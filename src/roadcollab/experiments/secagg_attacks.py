@@ -29,8 +29,9 @@ from ..privacy.secure_aggregation import (_open_share, _pair_mask, advertise_key
                                           share_keys)
 from ..wire.identity import FleetAuthority, VehicleIdentity
 from ..wire.secagg_signed import sign_advert
+from .security_rows import AttackRow, attack_row
 
-__all__ = ["SECAGG_ATTACKS", "active_spec", "legacy_attack", "active_attack"]
+__all__ = ["SECAGG_ATTACKS", "STUDY_ATTACKS", "active_spec", "legacy_attack", "active_attack", "secagg_attack_rows"]
 
 SECAGG_ATTACKS = ("differencing", "equivocation", "double_reveal", "sybil", "key_substitution")
 
@@ -241,3 +242,43 @@ def active_attack(attack: str, inputs, victim: int, spec: SecAggSpec | None = No
         run = run_active_session(fleet, zs, session, relay=_Substitute(victim, signed), rng=gen)
         return (None if victim in run.refusals else zs[victim]), run.refusals
     raise MessageError(f"attack must be one of {SECAGG_ATTACKS}, got {attack!r}")
+
+
+#: The attacks of ``attack.csv`` (``double_reveal`` is the per-vehicle form of ``equivocation``: tests only).
+STUDY_ATTACKS = ("differencing", "equivocation", "sybil", "key_substitution")
+
+
+def secagg_attack_rows(segs: list, n_targets: int, aggregate_errors: list, fit, seed: int) -> list[AttackRow]:
+    """``attack.csv`` rows of the active aggregator against the active protocol, one per attack.
+
+    For each segment and target vehicle the attack runs on the fleet's ``z``. What the aggregator then
+    fits the replica to is the victim's input if the attack recovered it, otherwise the most it can
+    get: an honest session's aggregate (the ``secure_aggregation`` / ``replica`` cell, whose errors are
+    reused).
+
+    Parameters
+    ----------
+    segs : list of dict
+        The replica study's segments (``z_all`` (n, nfft, 2), ``road``).
+    n_targets : int
+        Vehicles attacked (the first ones).
+    aggregate_errors : list of ndarray
+        Pole errors of the replica fit on the aggregate, per (segment, target) in that order.
+    fit : callable
+        ``fit(z, road, j) -> pole errors`` of a replica fit on a recovered input.
+    seed : int
+        Root of the session secrets.
+
+    Returns
+    -------
+    list of AttackRow
+    """
+    rows = []
+    for a, attack in enumerate(STUDY_ATTACKS):
+        errs = []
+        for r, s in enumerate(segs):
+            for j in range(n_targets):
+                got, _ = active_attack(attack, list(s["z_all"]), j + 1, segment=r, rng=[seed, a, r, j])
+                errs.append(aggregate_errors[r * n_targets + j] if got is None else fit(got, s["road"]["true"][j], j))
+        rows.append(attack_row("secure_aggregation", attack, "true", 1, errs))
+    return rows

@@ -13,7 +13,9 @@ sender's model to what a message hands it. Per mechanism:
 - ``secure_aggregation``: the aggregator learns the average of all ``n`` inputs (exact to the
   fixed-point resolution); with ``c`` colluding vehicles it learns the average of the other
   ``n - c``. The protocol enforces ``k`` *inputs*, not ``k`` *honest* inputs: with ``c = n - 1``
-  colluders the last honest input is exposed, shown as its own row.
+  colluders the last honest input is exposed, shown as its own row. Rows ``differencing``,
+  ``equivocation``, ``sybil`` and ``key_substitution``: an active aggregator against the active protocol
+  (:mod:`.secagg_attacks`).
 """
 
 from __future__ import annotations
@@ -31,6 +33,7 @@ from ..privacy.secagg_messages import SecAggSpec
 from ..privacy.secagg_run import run_secure_aggregation, secure_aggregation_cost
 from .replica_study import replica_messages
 from .security_config import AttackStudyConfig
+from .secagg_attacks import secagg_attack_rows
 from .security_rows import AttackRow, attack_row
 
 __all__ = ["EXACT_RELAYS", "ReplicaOutcome", "replica_fit_count", "run_replica_attacks"]
@@ -192,7 +195,7 @@ def run_replica_attacks(config: AttackStudyConfig, seed: int, pipe, *,
         if progress is not None:
             progress(done[0])
 
-    rows = []
+    rows, agg_errors = [], []
     for cell in _cells(config, n, T, R):
         mech, attack, road, L, _, _, eps_total = cell
         errs = _errors(_fit_inputs(cell, segs), targets, grid, nominal, tick)
@@ -200,5 +203,10 @@ def run_replica_attacks(config: AttackStudyConfig, seed: int, pipe, *,
             continue
         mechs = EXACT_RELAYS if mech == "hardened" else (mech,)
         rows += [attack_row(m, attack, road, L, errs, eps_total) for m in mechs]
+        if (mech, attack) == ("secure_aggregation", "replica"):
+            agg_errors = errs
+    # The active aggregator's attacks (issue 20): what it recovers, else the aggregate's fit above.
+    rows += secagg_attack_rows(segs, T, agg_errors, lambda z, road, j: _errors(
+        [([(z, road)], j)], targets, grid, nominal, lambda: None)[0], seed)
     exact, clipped, cost, spec = _secagg(config, segs[0], seed)
     return ReplicaOutcome(tuple(rows), exact, clipped, _mse(pipe, segs), cost, spec)
