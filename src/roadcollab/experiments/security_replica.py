@@ -30,10 +30,11 @@ from ..privacy.baselines.dp import gaussian_sigma
 from ..privacy.baselines.dp_composition import composed_epsilon
 from ..privacy.replica import replica_fit
 from ..privacy.secagg_messages import SecAggSpec
-from ..privacy.secagg_run import run_secure_aggregation, secure_aggregation_cost
+from ..privacy.secagg_active_run import active_secure_aggregation_cost
+from ..privacy.secagg_run import secure_aggregation_cost
 from .replica_study import replica_messages
 from .security_config import AttackStudyConfig
-from .secagg_attacks import secagg_attack_rows
+from .secagg_attacks import active_spec, secagg_attack_rows
 from .security_rows import AttackRow, attack_row
 
 __all__ = ["EXACT_RELAYS", "ReplicaOutcome", "replica_fit_count", "run_replica_attacks"]
@@ -52,15 +53,17 @@ class ReplicaOutcome:
     ----------
     rows : tuple of AttackRow
     secagg_exactness : float
-        Largest relative difference between the securely aggregated average and the plain average
-        of the same inputs (with and without dropouts).
+        Largest relative difference between the securely aggregated average (active protocol) and the
+        plain average of the same inputs (with and without dropouts).
     secagg_clipped : bool
         Whether any honest input reached the clipping bound (exactness then fails by design).
     mse : dict
         Receivers' road-velocity MSE, (m/s)^2: ``"fused"`` and ``"fused_posterior"`` (vehicles 2..3 of
         the relayed averages) and ``"secure_aggregation"`` (the average of all vehicles).
     secagg_cost : dict
-        :func:`~roadcollab.privacy.secagg_run.secure_aggregation_cost` of one segment.
+        :func:`~roadcollab.privacy.secagg_active_run.active_secure_aggregation_cost` of one segment (with
+        the dropouts), and under ``semi_honest`` the
+        :func:`~roadcollab.privacy.secagg_run.secure_aggregation_cost` of the semi-honest protocol.
     spec : SecAggSpec
     """
 
@@ -138,16 +141,17 @@ def _fit_inputs(cell, segs) -> list[tuple[list, int]]:
 
 
 def _secagg(config: AttackStudyConfig, seg: dict, seed: int) -> tuple[float, bool, dict, SecAggSpec]:
-    """Exactness (no dropout; two dropped after the key round), clipping and cost on one segment."""
+    """The active protocol on one segment: exactness (no dropout; dropouts after the key round up to
+    ``n - k``, at most 2), clipping and cost (the semi-honest cost is kept as ``semi_honest``)."""
     z = seg["z_all"]
     n = z.shape[0]
-    spec = SecAggSpec(min_inputs=config.secagg_min_inputs, threshold=config.secagg_min_inputs)
+    spec = active_spec(n)
     worst = 0.0
-    for dropped in ((), (n, n - 1) if n - 2 >= spec.min_inputs else ()):
-        run = run_secure_aggregation(list(z), spec, dropped_before_masking=dropped, rng=seed)
-        plain = np.mean([z[i - 1] for i in run.result.survivors], axis=0)
-        worst = max(worst, float(np.max(np.abs(run.average - plain)) / np.max(np.abs(plain))))
-    cost = secure_aggregation_cost(z[0], n_vehicles=n, spec=spec, repeats=3, rng=seed)
+    for dropped in ((), tuple(range(n, max(n - 2, spec.min_inputs), -1))):
+        cost = active_secure_aggregation_cost(list(z), spec, repeats=3, dropped=dropped, rng=seed)
+        worst = max(worst, cost["max_rel_error"])
+    legacy = SecAggSpec(min_inputs=config.secagg_min_inputs, threshold=config.secagg_min_inputs)
+    cost["semi_honest"] = secure_aggregation_cost(z[0], n_vehicles=n, spec=legacy, repeats=3, rng=seed)
     return worst, bool(np.max(np.abs(z)) >= spec.clip), cost, spec
 
 
