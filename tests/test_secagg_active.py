@@ -216,3 +216,35 @@ def test_one_vehicle_cannot_move_the_aggregate_by_more_than_clip_over_n():
     run = run_active_session(fleet, zs, session_id(9, 0), rng=9)
     honest = np.mean([_quantised(z, SPEC) for z in zs.values()], axis=0)
     assert run.aggregate is None or np.max(np.abs(run.aggregate.result.average - honest)) <= 2 * SPEC.clip / N
+
+
+def test_every_flipped_byte_and_truncation_of_signed_messages_is_refused():
+    from roadcollab.wire.secagg_signed import open_advert, open_commitments, open_view
+    fleet = SecAggFleet(N, SPEC)
+    session = session_id(8, 0)
+    signed = {i: v.advertise(session) for i, v in fleet.vehicles.items()}
+    _, com = fleet.vehicles[1].share_keys(signed)
+    fleet.vehicles[1].mask_input(np.zeros((2, 2)), (8, 0))
+    view = fleet.vehicles[1].sign_survivors(range(1, N + 1))
+    for data, opener in ((signed[1], open_advert), (com, open_commitments), (view, open_view)):
+        opener(data, fleet.trust, session)
+        for k in range(0, len(data), 7):
+            flipped = data[:k] + bytes([data[k] ^ 0x40]) + data[k + 1:]
+            with pytest.raises(MessageError):
+                opener(flipped, fleet.trust, session)
+        for cut in (0, 1, len(data) // 2, len(data) - 1):
+            with pytest.raises(MessageError):
+                opener(data[:cut], fleet.trust, session)
+
+
+def test_share_commitments_payload_is_checked():
+    from roadcollab.wire.secagg_signed import ShareCommitments
+    c = ShareCommitments(3, bytes(32), {1: (bytes(32), bytes(32)), 2: (b"\x01" * 32, b"\x02" * 32)})
+    assert ShareCommitments.from_bytes(c.to_bytes()) == c
+    for cut in range(len(c.to_bytes())):
+        with pytest.raises(MessageError):
+            ShareCommitments.from_bytes(c.to_bytes()[:cut])
+    data = c.to_bytes()     # dealer (4), H(b) (32), count (4), then rows of 4 + 32 + 32 bytes
+    twice = data[:36] + (2).to_bytes(4, "little") + data[40:108] * 2
+    with pytest.raises(MessageError, match="twice"):
+        ShareCommitments.from_bytes(twice)
