@@ -248,3 +248,32 @@ def test_share_commitments_payload_is_checked():
     twice = data[:36] + (2).to_bytes(4, "little") + data[40:108] * 2
     with pytest.raises(MessageError, match="twice"):
         ShareCommitments.from_bytes(twice)
+
+
+@pytest.mark.parametrize("a", range(0, 7))
+def test_equivocation_with_c_colluders_never_completes_both_thresholds(a):
+    """c = 3 colluders sign both survivor sets; the victim and ``a`` honest vehicles see it survive, the other
+    6 - a honest vehicles see it dropped. 2t > n + c: never t shares of both b and s_sk of the victim."""
+    from roadcollab.privacy.secagg_active_run import Relay
+    from roadcollab.wire.secagg_signed import sign_view
+    colluders, honest = (8, 9, 10), [i for i in range(1, 8) if i != VICTIM]
+    alive = {VICTIM, *honest[:a], *colluders}
+    fleet = SecAggFleet(N, SPEC)
+    session = session_id(11, 0)
+
+    class Colluding(Relay):
+        def survivors(self, recipient, survivors):
+            return survivors if recipient in alive else [i for i in survivors if i != VICTIM]
+
+        def signatures(self, recipient, sigs):
+            if recipient in alive:
+                return sigs
+            view = [i for i in range(1, N + 1) if i != VICTIM]
+            return {**sigs, **{c: sign_view(fleet.vehicles[c].identity, session, c, view) for c in colluders}}
+
+    run = run_active_session(fleet, {i + 1: z for i, z in enumerate(_inputs())}, session, relay=Colluding(), rng=a)
+    honest_b = sum(VICTIM in r.self_mask_shares for r in run.reveals if r.vehicle not in colluders)
+    honest_s = sum(VICTIM in r.key_shares for r in run.reveals if r.vehicle not in colluders)
+    c = len(colluders)      # each colluder holds both shares of the victim
+    assert not (honest_b + c >= SPEC.threshold and honest_s + c >= SPEC.threshold)
+    assert honest_b + honest_s > 0     # one side does complete (the test is not vacuous)
