@@ -19,7 +19,7 @@ from ..errors import MessageError
 from ..wire.identity import FleetAuthority, VehicleIdentity
 from ._secagg_kernels import KEY_NBYTES
 from .secagg_active import SecAggVehicle, VerifiedAggregate, unmask_verified, verify_roster
-from .secagg_messages import SecAggSpec  # noqa: F401 (the type of SecAggFleet.spec)
+from .secagg_messages import SecAggSpec
 from .secagg_store import SessionLedger
 
 __all__ = ["SecAggFleet", "Relay", "ActiveRun", "run_active_session"]
