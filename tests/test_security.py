@@ -92,6 +92,11 @@ def test_study_smoke():
     for mech in ("none", "paper", "paper_vehicle", "hardened", "dp(eps=1)", "fused", "secure_aggregation"):
         assert (mech, "replica") in keys, mech
     assert ("secure_aggregation", "replica_collusion_c3") in keys      # n - 1 colluders: the edge case
+    # The active aggregator's attacks recover nothing: each row scores the honest aggregate's fit.
+    agg = next(r for r in res.attack_rows if (r.mechanism, r.attack) == ("secure_aggregation", "replica"))
+    for attack in ("differencing", "equivocation", "sybil", "key_substitution"):
+        row = next(r for r in res.attack_rows if (r.mechanism, r.attack) == ("secure_aggregation", attack))
+        assert (row.median_rel_pole_error, row.success_rate) == (agg.median_rel_pole_error, agg.success_rate)
     assert all(r.max_rel_diff < 1e-9 for r in res.exactness_rows)
     assert "secure_aggregation" in [r.mechanism for r in res.exactness_rows]
     names = [r.mechanism for r in res.baseline_rows]

@@ -13,7 +13,9 @@ sender's model to what a message hands it. Per mechanism:
 - ``secure_aggregation``: the aggregator learns the average of all ``n`` inputs (exact to the
   fixed-point resolution); with ``c`` colluding vehicles it learns the average of the other
   ``n - c``. The protocol enforces ``k`` *inputs*, not ``k`` *honest* inputs: with ``c = n - 1``
-  colluders the last honest input is exposed, shown as its own row.
+  colluders the last honest input is exposed, shown as its own row. Rows ``differencing``,
+  ``equivocation``, ``sybil`` and ``key_substitution``: an active aggregator against the active protocol
+  (:mod:`.secagg_attacks`).
 """
 
 from __future__ import annotations
@@ -28,9 +30,11 @@ from ..privacy.baselines.dp import gaussian_sigma
 from ..privacy.baselines.dp_composition import composed_epsilon
 from ..privacy.replica import replica_fit
 from ..privacy.secagg_messages import SecAggSpec
-from ..privacy.secagg_run import run_secure_aggregation, secure_aggregation_cost
+from ..privacy.secagg_active_run import active_secure_aggregation_cost
+from ..privacy.secagg_run import secure_aggregation_cost
 from .replica_study import replica_messages
 from .security_config import AttackStudyConfig
+from .secagg_attacks import active_spec, secagg_attack_rows
 from .security_rows import AttackRow, attack_row
 
 __all__ = ["EXACT_RELAYS", "ReplicaOutcome", "replica_fit_count", "run_replica_attacks"]
@@ -49,15 +53,17 @@ class ReplicaOutcome:
     ----------
     rows : tuple of AttackRow
     secagg_exactness : float
-        Largest relative difference between the securely aggregated average and the plain average
-        of the same inputs (with and without dropouts).
+        Largest relative difference between the securely aggregated average (active protocol) and the
+        plain average of the same inputs (with and without dropouts).
     secagg_clipped : bool
         Whether any honest input reached the clipping bound (exactness then fails by design).
     mse : dict
         Receivers' road-velocity MSE, (m/s)^2: ``"fused"`` and ``"fused_posterior"`` (vehicles 2..3 of
         the relayed averages) and ``"secure_aggregation"`` (the average of all vehicles).
     secagg_cost : dict
-        :func:`~roadcollab.privacy.secagg_run.secure_aggregation_cost` of one segment.
+        :func:`~roadcollab.privacy.secagg_active_run.active_secure_aggregation_cost` of one segment (with
+        the dropouts), and under ``semi_honest`` the
+        :func:`~roadcollab.privacy.secagg_run.secure_aggregation_cost` of the semi-honest protocol.
     spec : SecAggSpec
     """
 
@@ -135,16 +141,17 @@ def _fit_inputs(cell, segs) -> list[tuple[list, int]]:
 
 
 def _secagg(config: AttackStudyConfig, seg: dict, seed: int) -> tuple[float, bool, dict, SecAggSpec]:
-    """Exactness (no dropout; two dropped after the key round), clipping and cost on one segment."""
+    """The active protocol on one segment: exactness (no dropout; dropouts after the key round up to
+    ``n - k``, at most 2), clipping and cost (the semi-honest cost is kept as ``semi_honest``)."""
     z = seg["z_all"]
     n = z.shape[0]
-    spec = SecAggSpec(min_inputs=config.secagg_min_inputs, threshold=config.secagg_min_inputs)
+    spec = active_spec(n)
     worst = 0.0
-    for dropped in ((), (n, n - 1) if n - 2 >= spec.min_inputs else ()):
-        run = run_secure_aggregation(list(z), spec, dropped_before_masking=dropped, rng=seed)
-        plain = np.mean([z[i - 1] for i in run.result.survivors], axis=0)
-        worst = max(worst, float(np.max(np.abs(run.average - plain)) / np.max(np.abs(plain))))
-    cost = secure_aggregation_cost(z[0], n_vehicles=n, spec=spec, repeats=3, rng=seed)
+    for dropped in ((), tuple(range(n, max(n - 2, spec.min_inputs), -1))):
+        cost = active_secure_aggregation_cost(list(z), spec, repeats=3, dropped=dropped, rng=seed)
+        worst = max(worst, cost["max_rel_error"])
+    legacy = SecAggSpec(min_inputs=config.secagg_min_inputs, threshold=config.secagg_min_inputs)
+    cost["semi_honest"] = secure_aggregation_cost(z[0], n_vehicles=n, spec=legacy, repeats=3, rng=seed)
     return worst, bool(np.max(np.abs(z)) >= spec.clip), cost, spec
 
 
@@ -192,7 +199,7 @@ def run_replica_attacks(config: AttackStudyConfig, seed: int, pipe, *,
         if progress is not None:
             progress(done[0])
 
-    rows = []
+    rows, agg_errors = [], []
     for cell in _cells(config, n, T, R):
         mech, attack, road, L, _, _, eps_total = cell
         errs = _errors(_fit_inputs(cell, segs), targets, grid, nominal, tick)
@@ -200,5 +207,10 @@ def run_replica_attacks(config: AttackStudyConfig, seed: int, pipe, *,
             continue
         mechs = EXACT_RELAYS if mech == "hardened" else (mech,)
         rows += [attack_row(m, attack, road, L, errs, eps_total) for m in mechs]
+        if (mech, attack) == ("secure_aggregation", "replica"):
+            agg_errors = errs
+    # The active aggregator's attacks (issue 20): what it recovers, else the aggregate's fit above.
+    rows += secagg_attack_rows(segs, T, agg_errors, lambda z, road, j: _errors(
+        [([(z, road)], j)], targets, grid, nominal, lambda: None)[0], seed)
     exact, clipped, cost, spec = _secagg(config, segs[0], seed)
     return ReplicaOutcome(tuple(rows), exact, clipped, _mse(pipe, segs), cost, spec)

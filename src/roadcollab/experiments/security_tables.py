@@ -172,9 +172,12 @@ def baseline_rows(config: AttackStudyConfig, runs: list[SegmentAttacks], he: dic
     c, spec = replica.secagg_cost, replica.spec
     agg = replica.mse["secure_aggregation"]
     rows.append(row("secure_aggregation", (agg,) * 3, c["ms_per_message"], c["bytes_per_message"],
-                    f"every vehicle receives the average of all {config.experiment.n_vehicles} inversions; k={spec.min_inputs}, "
-                    f"t={spec.threshold}, {c['rounds']} rounds, X25519 + ChaCha20 masks in Z_2^64, resolution "
-                    f"{spec.resolution:.2g} m/s, clip {spec.clip:g} m/s; aggregator {c['aggregator_ms']:.1f} ms"))
+                    f"every vehicle receives the average of all {config.experiment.n_vehicles} inversions; active "
+                    f"protocol, k={spec.min_inputs}, t={spec.threshold}, c={spec.max_colluders}, {c['rounds']} rounds, "
+                    f"Ed25519-signed adverts, share commitments and consistency round, X25519 + ChaCha20 masks in "
+                    f"Z_2^64, resolution {spec.resolution:.2g} m/s, clip {spec.clip:g} m/s; aggregator "
+                    f"{c['aggregator_ms']:.1f} ms; semi-honest protocol {c['semi_honest']['ms_per_message']:.1f} ms, "
+                    f"{c['semi_honest']['bytes_per_message']} bytes"))
     return rows
 
 

@@ -44,18 +44,30 @@ class SecAggSpec:
         source (this also bounds what a malicious vehicle can add to the sum).
     frac_bits : int
         Fixed-point fraction bits ``f``: resolution ``2^-f`` m/s (default 40: 9.1e-13 m/s).
+    max_colluders : int
+        ``c``: vehicles that may collude with an *active* aggregator (:mod:`.secagg_active`). The
+        active protocol holds for ``c < t`` and rosters of ``n <= 2t - c - 1`` vehicles
+        (:attr:`max_roster`): two disjoint groups of honest vehicles that each complete a
+        threshold with the colluders cannot exist, so equivocation gains nothing.
     """
 
     min_inputs: int = 5
     threshold: int = 5
     clip: float = 16.0
     frac_bits: int = 40
+    max_colluders: int = 0
 
     def __post_init__(self) -> None:
         k = check_int("min_inputs", self.min_inputs, low=2)
         check_int("threshold", self.threshold, low=1, high=k)
         f = check_int("frac_bits", self.frac_bits, low=8, high=52)
         check_real("clip", self.clip, low=0.0, low_open=True, high=float(2 ** (53 - f)))
+        check_int("max_colluders", self.max_colluders, low=0, high=self.threshold - 1)
+
+    @property
+    def max_roster(self) -> int:
+        """Largest roster the active protocol accepts: ``2t - c - 1`` (so that ``2t > n + c``)."""
+        return 2 * self.threshold - self.max_colluders - 1
 
     @property
     def resolution(self) -> float:

@@ -27,10 +27,11 @@ What it protects against: an honest-but-curious aggregator colluding with fewer 
 only the sum over ``U_2`` (so, minus its colluders' own inputs, the sum of ``>= k - c`` honest vehicles);
 a masked ``y_i`` is uniform on the ring. The self mask keeps an input that arrives after its sender was
 declared dropped (so ``s_i`` was reconstructed) masked. Honest vehicles and the aggregator refuse to
-unmask fewer than ``k`` inputs (:class:`AggregationRefused`). Not covered: an actively malicious aggregator
-that lies about ``U_2`` to different vehicles (Bonawitz's signatures and consistency round), and robust
-fusion: the aggregator cannot inspect single inputs, so a malicious vehicle is only limited by the public
-clipping bound ``clip``.
+unmask fewer than ``k`` inputs (:class:`AggregationRefused`). Not covered here: an actively malicious
+aggregator (differencing two sessions, equivocating about ``U_2``, Sybil rosters, substituted keys) and
+wrong shares from malicious vehicles; :mod:`.secagg_active` builds the active protocol on these functions
+(signed adverts, share commitments, consistency round, a persistent per-vehicle ledger). Neither bounds a
+malicious vehicle's input: ``clip`` is applied by honest vehicles only.
 
 References
 ----------

@@ -1,0 +1,174 @@
+"""A vehicle's persistent record of its secure-aggregation sessions (what it sent, what it signed).
+
+Bonawitz et al.'s protocol is secure against an active aggregator only if every honest vehicle keeps
+state across rounds *and restarts*: it sends its masked input at most once per segment and epoch
+(otherwise two sessions on one segment, one without the victim, difference its ``z`` out), and it
+signs and answers at most one survivor set ``U_3`` per session (otherwise, told "dropped" by one
+announcement and "survived" by another, it would reveal both shares of a vehicle). This module is that
+record: a small SQLite file (``sqlite3`` of the standard library; every change is one committed
+transaction, so a crash leaves the old or the new state, never half of one).
+
+The session key is the 16-byte :func:`~roadcollab.privacy.secagg_messages.session_id` of the
+*measurement* (segment, epoch): one ``z`` of the vehicle per key.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import sqlite3
+from pathlib import Path
+
+from ..errors import FileFormatError
+from .secagg_messages import AggregationRefused
+
+__all__ = ["SessionLedger", "view_digest"]
+
+_SCHEMA = ("CREATE TABLE IF NOT EXISTS secagg_sessions (session BLOB PRIMARY KEY, roster BLOB NOT NULL, "
+           "view BLOB)")
+_MAGIC_TABLE = "secagg_sessions"
+
+
+def view_digest(ids) -> bytes:
+    """SHA-256 of a sorted set of vehicle ids (a roster or a survivor set), 32 bytes.
+
+    Parameters
+    ----------
+    ids : iterable of int
+
+    Returns
+    -------
+    bytes
+    """
+    return hashlib.sha256(b"roadcollab/secagg/ids/v1|" + b",".join(str(i).encode() for i in sorted(ids))).digest()
+
+
+class SessionLedger:
+    """Per-session state of one vehicle: masked input sent (with its roster), survivor set signed.
+
+    Parameters
+    ----------
+    path : str or os.PathLike or None
+        The SQLite file (created if missing; an existing file that is not a ledger is refused, never
+        replaced). ``None``: in memory (simulation and tests; lost on restart).
+
+    Raises
+    ------
+    FileFormatError
+        ``path`` exists and is not a ledger written by this class.
+    """
+
+    def __init__(self, path=None) -> None:
+        self.path = None if path is None else Path(path)
+        if self.path is not None and self.path.exists():
+            self._check_existing(self.path)
+        try:
+            self._db = sqlite3.connect(":memory:" if self.path is None else str(self.path), isolation_level=None)
+            self._db.execute("PRAGMA synchronous = FULL")
+            self._db.execute(_SCHEMA)
+        except sqlite3.DatabaseError as err:
+            raise FileFormatError(f"{self.path}: cannot open as a secure-aggregation ledger ({err})") from None
+
+    @staticmethod
+    def _check_existing(path: Path) -> None:
+        if not path.is_file():
+            raise FileFormatError(f"{path}: not a regular file (expected a secure-aggregation ledger)")
+        try:
+            with path.open("rb") as fh:
+                head = fh.read(16)
+            if head and head != b"SQLite format 3\x00":
+                raise FileFormatError(f"{path}: not an SQLite file (expected a secure-aggregation ledger)")
+            if head:
+                db = sqlite3.connect(f"file:{path}?mode=ro", uri=True)
+                names = {r[0] for r in db.execute("SELECT name FROM sqlite_master WHERE type = 'table'")}
+                db.close()
+                if names and _MAGIC_TABLE not in names:
+                    raise FileFormatError(f"{path}: an SQLite file without table {_MAGIC_TABLE!r} "
+                                          "(expected a secure-aggregation ledger)")
+        except sqlite3.DatabaseError as err:
+            raise FileFormatError(f"{path}: unreadable SQLite file ({err})") from None
+
+    def close(self) -> None:
+        """Close the database (further calls fail)."""
+        self._db.close()
+
+    def _row(self, session: bytes):
+        return self._db.execute("SELECT roster, view FROM secagg_sessions WHERE session = ?",
+                                (bytes(session),)).fetchone()
+
+    def contributed(self, session: bytes) -> bool:
+        """Whether this vehicle already sent a masked input for ``session`` (segment, epoch).
+
+        Parameters
+        ----------
+        session : bytes
+
+        Returns
+        -------
+        bool
+        """
+        return self._row(session) is not None
+
+    def record_contribution(self, session: bytes, roster) -> None:
+        """Record, before it is sent, that the masked input of ``session`` goes to ``roster``.
+
+        Parameters
+        ----------
+        session : bytes
+            ``session_id(segment, epoch)`` of the measurement.
+        roster : iterable of int
+            The verified ``U_1`` (its digest is kept).
+
+        Raises
+        ------
+        AggregationRefused
+            A masked input of this session (segment and epoch) was already sent, in any session attempt:
+            a second one would let the aggregator difference two aggregates.
+        """
+        try:
+            self._db.execute("INSERT INTO secagg_sessions (session, roster, view) VALUES (?, ?, NULL)",
+                             (bytes(session), view_digest(roster)))
+        except sqlite3.IntegrityError:
+            raise AggregationRefused("this vehicle already contributed its input for this segment and epoch; "
+                                     "a second session gets nothing") from None
+
+    def record_view(self, session: bytes, view) -> None:
+        """Record the survivor set this vehicle signs in ``session`` (the same set again is accepted).
+
+        Parameters
+        ----------
+        session : bytes
+        view : iterable of int
+            The announced ``U_3``.
+
+        Raises
+        ------
+        AggregationRefused
+            No masked input was sent in ``session`` (a vehicle outside ``U_2`` does not take part in
+            unmasking), or another survivor set was already signed (equivocation).
+        """
+        row = self._row(session)
+        if row is None:
+            raise AggregationRefused("no masked input of this vehicle in this session: it does not sign or reveal")
+        digest = view_digest(view)
+        if row[1] is None:
+            cur = self._db.execute("UPDATE secagg_sessions SET view = ? WHERE session = ? AND view IS NULL",
+                                   (digest, bytes(session)))
+            if cur.rowcount == 1:
+                return
+            row = self._row(session)
+        if row[1] != digest:
+            raise AggregationRefused("another survivor set was already signed in this session (equivocation)")
+
+    def signed_view(self, session: bytes) -> bytes | None:
+        """The digest of the survivor set signed in ``session``, or None.
+
+        Parameters
+        ----------
+        session : bytes
+
+        Returns
+        -------
+        bytes or None
+        """
+        row = self._row(session)
+        return None if row is None else row[1]
