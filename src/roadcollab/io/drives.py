@@ -69,6 +69,7 @@ from ..errors import FileFormatError, ParameterError
 from ..models.vehicle import HalfCarParameters, half_car_model
 from .drive_log import CSV_COLUMNS, MAX_SAMPLE_RATE, MIN_ROWS, OPTIONAL_COLUMNS, UNIFORM_RTOL, DriveLog, read_drive_log
 from .drive_params import params_path_for, read_drive_params
+from .gps import GpsFixes, read_gps_log
 from .limits import FileLimits
 
 __all__ = ["CSV_COLUMNS", "MIN_ROWS", "MAX_SAMPLE_RATE", "UNIFORM_RTOL", "MIN_SAMPLE_RATE", "MODE_FACTOR", "Drive",
@@ -110,6 +111,8 @@ class Drive:
         True if jittery time stamps were resampled (:mod:`roadcollab.io.drive_log`).
     max_jitter : float
         Largest relative deviation of a logged time step from the median step.
+    gps : GpsFixes or None
+        The ``lat_deg, lon_deg`` fixes of the log, if it has them (:mod:`roadcollab.io.gps`).
     """
 
     csv_path: Path
@@ -125,6 +128,7 @@ class Drive:
     speed_source: str = "parameters"
     resampled: bool = False
     max_jitter: float = 0.0
+    gps: GpsFixes | None = None
 
     @property
     def n_samples(self) -> int:
@@ -241,7 +245,7 @@ def load_drive(csv_path, params_path=None, *, limits: FileLimits | None = None) 
     if csv_path.suffix.lower() in (".toml", ".json"):
         raise FileFormatError(f"{csv_path}: expected the drive's acceleration CSV here (its parameters file is "
                              f"found beside it), got a parameters file")
-    log = read_drive_log(csv_path, limits=limits)
+    log, gps = read_gps_log(csv_path, limits=limits)
     params_path = params_path_for(csv_path) if params_path is None else Path(params_path)
     p = read_drive_params(params_path, speed_column=log.column)
     _check_rate(log, csv_path, params_path, p["params"])
@@ -252,7 +256,7 @@ def load_drive(csv_path, params_path=None, *, limits: FileLimits | None = None) 
     return Drive(csv_path=csv_path, params_path=params_path, time=log.time, accel=log.accel,
                  sample_rate=log.sample_rate, speed=speed, start_m=p["start_m"],
                  sensor_noise_std=p["sensor_noise_std"], params=p["params"], positions=positions,
-                 speed_source=source, resampled=log.resampled, max_jitter=log.max_jitter)
+                 speed_source=source, resampled=log.resampled, max_jitter=log.max_jitter, gps=gps)
 
 
 def load_drives(paths, *, limits: FileLimits | None = None) -> list[Drive]:
