@@ -17,10 +17,14 @@ ALLOWED = {
     "privacy": {"lti", "models", "estimation", "wire"},
     "collaboration": {"lti", "models", "estimation", "wire", "privacy"},
     "io": {"lti", "models"},
-    "experiments": {"lti", "models", "estimation", "detection", "wire", "privacy", "collaboration", "io"},
-    "reporting": {"lti", "models", "estimation", "detection", "wire", "privacy", "collaboration", "io", "experiments"},
+    "geo": {"lti", "models", "io"},
+    "store": {"lti", "models", "io", "geo"},
+    "experiments": {"lti", "models", "estimation", "detection", "wire", "privacy", "collaboration", "io", "geo",
+                    "store"},
+    "reporting": {"lti", "models", "estimation", "detection", "wire", "privacy", "collaboration", "io", "experiments",
+                  "geo", "store"},
     "cli": {"lti", "models", "estimation", "detection", "wire", "privacy", "collaboration", "io", "experiments",
-            "reporting"},
+            "reporting", "geo", "store"},
 }
 BASE = {"errors", "_validation", "__version__"}
 #: Imports allowed inside functions: optional or heavy third-party modules only.
