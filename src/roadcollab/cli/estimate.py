@@ -26,7 +26,8 @@ def _detector_config() -> dict | None:
     return asdict(DetectorSpec())
 
 
-def _time_grid(drives, out, *, command: str, segment_length: float, t0: float) -> dict:
+def _time_grid(drives, out, *, command: str, segment_length: float, t0: float, cleaning: list[dict],
+               notes: list[str]) -> dict:
     """The drives share one time grid: relay in time as the simulations do, then IRI of the fused elevation."""
     from ..experiments.drive_estimation import estimate_drives, find_anomalies
     from ..models.iri import iri_segments
@@ -44,17 +45,29 @@ def _time_grid(drives, out, *, command: str, segment_length: float, t0: float) -
         iri, iri_note = None, f"IRI was not computed: {err}."
     return write_estimates(est, out, command=command, anomalies=anomalies, anomaly_note=note,
                            elapsed=time.perf_counter() - t0, detector_config=_detector_config(), iri=iri,
-                           iri_note=iri_note)
+                           iri_note=iri_note, cleaning=cleaning, extra_notes=notes)
+
+
+def _stretches_note(stretches) -> str:
+    """Which drives cover which separate stretch of road."""
+    parts = [f"drive{'s' if len(g) > 1 else ''} {', '.join(map(str, g))} on {lo:.1f}-{hi:.1f} m"
+             for g, lo, hi in stretches]
+    return f"{len(stretches)} separate stretches of road: {'; '.join(parts)}"
 
 
 def _distance_grid(drives, out, *, command: str, segment_length: float, align: bool, max_offset: float,
-                   spacing: float, t0: float) -> dict:
+                   spacing: float, t0: float, notes: list[str]) -> dict:
     """Drives on different grids (or aligned): every estimate on one distance grid."""
-    from ..experiments.fleet_estimation import estimate_fleet, find_fleet_anomalies, fused_iri
+    from ..experiments.fleet_estimation import drive_stretches, estimate_fleet, find_fleet_anomalies, fused_iri
     from ..reporting.fleet_report import write_fleet_estimates
 
     est = estimate_fleet(drives, spacing=spacing, align=align, max_offset=max_offset)
-    notes = []
+    notes = list(notes)
+    stretches = drive_stretches(drives, segment_length, est.offsets)
+    if len(stretches) > 1:
+        notes.append(f"The drives do not all overlap by a segment ({segment_length:g} m): "
+                     f"{_stretches_note(stretches)}. Each stretch is estimated from its own drives only; nothing is "
+                     "fused across the gaps.")
     try:
         anomalies = find_fleet_anomalies(est)
     except ParameterError as err:
@@ -66,8 +79,9 @@ def _distance_grid(drives, out, *, command: str, segment_length: float, align: b
     resampled = [d.csv_path.name for d in drives if d.resampled]
     if resampled:
         notes.append(f"Jittery time stamps were resampled (cubic spline at the mean rate): {', '.join(resampled)}.")
-    return write_fleet_estimates(est, out, command=command, anomalies=anomalies, iri=iri, notes=notes,
-                                 elapsed=time.perf_counter() - t0)
+    summary = write_fleet_estimates(est, out, command=command, anomalies=anomalies, iri=iri, notes=notes,
+                                    elapsed=time.perf_counter() - t0)
+    return {**summary, "stretches": [{"drives": g, "start_m": lo, "end_m": hi} for g, lo, hi in stretches]}
 
 
 def estimate_command(drive_paths: list[str], out_dir, *, command: str, limits: FileLimits | None = None,
@@ -115,15 +129,22 @@ def estimate_command(drive_paths: list[str], out_dir, *, command: str, limits: F
     from ..io.limits import FileLimits
     from ..reporting.records import staged_output
 
+    from ..io.drive_clean import clean_drive, cleaning_note
+
     t0 = time.perf_counter()
     with staged_output(out_dir) as out:
-        drives = load_drives(drive_paths, limits=limits)
+        raw = load_drives(drive_paths, limits=limits)
+        cleaned = [clean_drive(d) for d in raw]
+        drives = [d for d, _ in cleaned]
+        cleanings = [c for _, c in cleaned]
+        notes = [cleaning_note(drives, cleanings)]
         if common_time_grid(drives) and not align:
-            summary = _time_grid(drives, out, command=command, segment_length=segment_length, t0=t0)
+            summary = _time_grid(drives, out, command=command, segment_length=segment_length, t0=t0, notes=notes,
+                                 cleaning=[c.describe(d.sample_rate) for d, c in cleaned])
         else:
             summary = _distance_grid(drives, out, command=command, segment_length=segment_length, align=align,
-                                     max_offset=max_offset, spacing=spacing, t0=t0)
-    return {**summary, "out_dir": str(out_dir)}
+                                     max_offset=max_offset, spacing=spacing, t0=t0, notes=notes)
+    return {**summary, "out_dir": str(out_dir), "spikes_repaired": [c.n_spikes for c in cleanings]}
 
 
 def add_estimate_arguments(parser: argparse.ArgumentParser) -> None:
@@ -178,6 +199,11 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
     return p
 
 
+def _stretch_text(s: dict) -> str:
+    g = s["drives"]
+    return f"drive{'s' if len(g) > 1 else ''} {','.join(map(str, g))}: {s['start_m']:.1f}-{s['end_m']:.1f} m"
+
+
 def run(args: argparse.Namespace, command_line: str) -> int:
     """Estimate the road from ``args.drive``, write the outputs to ``args.out`` and print the notes.
 
@@ -198,6 +224,10 @@ def run(args: argparse.Namespace, command_line: str) -> int:
                                spacing=args.grid_step)
     for note in summary.get("notes", []):
         print(f"note: {note}")
-    print(f"estimated {summary['n_drives']} drives over {summary['length_m']:.1f} m ({summary['grid']} grid); "
+    n = summary["n_drives"]
+    stretches = summary.get("stretches") or []
+    where = (f"{len(stretches)} separate stretches ({'; '.join(_stretch_text(s) for s in stretches)})"
+             if len(stretches) > 1 else f"{summary['length_m']:.1f} m")
+    print(f"estimated {n} drive{'s' if n != 1 else ''} over {where} ({summary['grid']} grid); "
           f"wrote {args.out}/report.md")
     return 0

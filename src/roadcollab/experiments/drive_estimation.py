@@ -38,7 +38,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .._validation import check_positive, check_signal
+from .._validation import check_int, check_positive, check_signal
 from ..collaboration.algorithm1 import CollaborativeEstimator
 from ..collaboration.relay import Relay
 from ..detection.detector import DetectorSpec, detect_anomalies
@@ -48,10 +48,12 @@ from .config import ExperimentConfig
 from ..io.drives import Drive, common_time_grid
 from ..models.vehicle import Vehicle
 
-__all__ = ["ESTIMATORS", "AnomalyRow", "DriveEstimates", "integrate_elevation", "estimate_drives",
-           "find_anomalies"]
+__all__ = ["ESTIMATORS", "DEFAULT_WINDOW", "DEFAULT_MARGIN_PERIODS", "AnomalyRow", "DriveEstimates",
+           "integrate_elevation", "window_slices", "estimate_drives", "find_anomalies"]
 
 ESTIMATORS = ("single", "collaborative", "fused")
+DEFAULT_WINDOW = 2 ** 16          # samples (328 s at 200 Hz): longer records are estimated in windows
+DEFAULT_MARGIN_PERIODS = 10.0     # margin = 10 periods of the band edge (20 s at 0.5 Hz) either side
 
 
 @dataclass(frozen=True)
@@ -132,6 +134,8 @@ class DriveEstimates:
         velocity (m/s) and its elevation (m), columns ``[left, right]``.
     gamma, band_low_hz : float
         Observer parameter and band edge used.
+    n_windows : int
+        Overlapping windows the record was estimated in (1: in one piece).
     """
 
     drives: list
@@ -145,6 +149,7 @@ class DriveEstimates:
     elevation: dict
     gamma: float
     band_low_hz: float
+    n_windows: int = 1
 
     @property
     def truncated(self) -> bool:
@@ -198,8 +203,71 @@ def _drive_estimators(drives: list[Drive], grid: SegmentGrid, *, speed: float, s
     return cars
 
 
-def estimate_drives(drives: list[Drive], *, gamma: float | None = None, band_low_hz: float | None = None
-                    ) -> DriveEstimates:
+def _window_plan(n: int, fs: float, band_low_hz: float, window: int | None, margin_s: float | None
+                 ) -> tuple[int, int]:
+    """Window length and margin (samples) for ``n`` samples: one window of ``n`` if it fits."""
+    window = DEFAULT_WINDOW if window is None else check_int("window", window, low=64)
+    margin_s = DEFAULT_MARGIN_PERIODS / band_low_hz if margin_s is None else check_positive("margin_s", margin_s)
+    margin = int(np.ceil(margin_s * fs))
+    if n <= window:
+        return n, 0
+    if window < 4 * margin:
+        raise ParameterError(f"window must be at least 4 margins ({4 * margin} samples, margin {margin_s:g} s), "
+                             f"got {window}")
+    return window, margin
+
+
+def window_slices(n: int, length: int, margin: int) -> list[tuple[int, int, int, int]]:
+    """Overlapping windows of ``length`` samples over ``n`` and the core each one contributes.
+
+    The cores tile ``[0, n)``; every core lies at least ``margin`` samples inside its window except
+    at the record's own ends (where the unwindowed estimate has its edge effects too). Every
+    window has the same length (the last one is moved back to end at ``n``), so one estimator
+    design serves them all.
+
+    Parameters
+    ----------
+    n, length, margin : int
+        Record length, window length (``<= n``) and margin, samples.
+
+    Returns
+    -------
+    list of (lo, hi, c0, c1)
+        Window ``[lo, hi)`` and its core ``[c0, c1)``.
+    """
+    if length >= n:
+        return [(0, n, 0, n)]
+    core = length - 2 * margin
+    out, c0 = [], 0
+    while c0 < n:
+        c1 = min(n, c0 + core if c0 else length - margin)
+        if n - c1 < margin:        # too little left for a core of its own: end the record here
+            c1 = n
+        lo = min(max(0, c0 - margin), n - length)
+        out.append((lo, lo + length, c0, c1))
+        c0 = c1
+    return out
+
+
+def _relay_window(drives: list[Drive], cars: list, grid: SegmentGrid, lo: int, hi: int) -> dict:
+    """Band-limited single, collaborative and fused road velocities (m/s) of samples ``[lo, hi)``."""
+    n = hi - lo
+    ys = [d.accel[lo:hi] for d in drives]
+    Ys = [grid.rfft(y) for y in ys]
+    try:
+        plain = Relay(cars, "none").run(ys, spectra=Ys)
+        fused = Relay(cars, "fused").run(ys, spectra=Ys)
+    except (ValueError, np.linalg.LinAlgError, ArithmeticError) as err:  # a degenerate model mid-relay
+        raise FileFormatError(f"{', '.join(str(d.params_path) for d in drives)}: the relay failed on these "
+                              f"drives' vehicle models ({type(err).__name__}: {err}); check the [vehicle] "
+                              "parameters") from None
+    return {"single": np.array([grid.band_limited(s.result.W_obs, n) for s in plain]),
+            "collaborative": np.array([grid.band_limited(s.result.W_hat, n) for s in plain]),
+            "fused": np.array([grid.band_limited(s.estimate_spectrum, n) for s in fused])}
+
+
+def estimate_drives(drives: list[Drive], *, gamma: float | None = None, band_low_hz: float | None = None,
+                    window: int | None = None, margin_s: float | None = None) -> DriveEstimates:
     """Run the single-vehicle, collaborative (Algorithm 1) and fused estimators down the drives.
 
     Relays through the same engine as :func:`roadcollab.experiments.reproduction.run_estimates`
@@ -214,6 +282,11 @@ def estimate_drives(drives: list[Drive], *, gamma: float | None = None, band_low
     gamma, band_low_hz : float, optional
         Observer parameter and band edge (Hz). Default: the
         :class:`~roadcollab.experiments.reproduction.ExperimentConfig` defaults (512, 0.5 Hz).
+    window : int, optional
+        Longest record estimated in one piece, samples (default :data:`DEFAULT_WINDOW`); a longer
+        one is estimated in overlapping windows of this length (:func:`window_slices`).
+    margin_s : float, optional
+        Overlap on either side of a window's core, s (default ``DEFAULT_MARGIN_PERIODS / band_low_hz``).
 
     Returns
     -------
@@ -241,29 +314,20 @@ def estimate_drives(drives: list[Drive], *, gamma: float | None = None, band_low
         raise ParameterError(f"{d0.csv_path}: expected a sample rate above {2 * band_low_hz:g} Hz (twice the "
                              f"{band_low_hz:g} Hz band edge), got {fs:.9g} Hz")
     n = min(d.n_samples for d in drives)
-    grid = SegmentGrid(n, fs, band_low_hz=band_low_hz)
-    def band(X):
-        return grid.band_limited(X, n)
-
+    length, margin = _window_plan(n, fs, band_low_hz, window, margin_s)
+    grid = SegmentGrid(length, fs, band_low_hz=band_low_hz)
     cars = _drive_estimators(drives, grid, speed=speed, sample_rate=fs, gamma=gamma, band_low_hz=band_low_hz)
-    ys = [d.accel[:n] for d in drives]
-    Ys = [grid.rfft(y) for y in ys]
-    try:
-        plain = Relay(cars, "none").run(ys, spectra=Ys)
-        fused = Relay(cars, "fused").run(ys, spectra=Ys)
-    except (ValueError, np.linalg.LinAlgError, ArithmeticError) as err:  # a degenerate model mid-relay
-        raise FileFormatError(f"{', '.join(str(d.params_path) for d in drives)}: the relay failed on these "
-                              f"drives' vehicle models ({type(err).__name__}: {err}); check the [vehicle] "
-                              "parameters") from None
-    out = {"single": [band(s.result.W_obs) for s in plain],
-           "collaborative": [band(s.result.W_hat) for s in plain],
-           "fused": [band(s.estimate_spectrum) for s in fused]}
-    velocity = {k: np.array(v) for k, v in out.items()}
+    velocity = {k: np.zeros((len(drives), n, 2)) for k in ESTIMATORS}
+    windows = window_slices(n, length, margin)
+    for lo, hi, c0, c1 in windows:
+        part = _relay_window(drives, cars, grid, lo, hi)
+        for k in ESTIMATORS:
+            velocity[k][:, c0:c1] = part[k][:, c0 - lo:c1 - lo]
     elevation = {k: np.array([integrate_elevation(x, fs) for x in v]) for k, v in velocity.items()}
     t = np.arange(n) / fs
     return DriveEstimates(drives=list(drives), sample_rate=fs, speed=speed, start_m=d0.start_m, n_samples=n, time=t,
                           positions=d0.start_m + speed * t, velocity=velocity, elevation=elevation, gamma=float(gamma),
-                          band_low_hz=float(band_low_hz))
+                          band_low_hz=float(band_low_hz), n_windows=len(windows))
 
 
 def find_anomalies(est: DriveEstimates, spec=None) -> list[AnomalyRow]:

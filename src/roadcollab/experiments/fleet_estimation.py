@@ -55,7 +55,7 @@ from .distance_maps import band_limit_stretch, covered, distance_grid, elevation
 from .drive_estimation import AnomalyRow, integrate_elevation
 
 __all__ = ["FLEET_ESTIMATORS", "FleetEstimates", "VehicleRecord", "invert_drive", "estimate_fleet",
-           "find_fleet_anomalies", "fused_iri"]
+           "find_fleet_anomalies", "fused_iri", "drive_stretches"]
 
 FLEET_ESTIMATORS = ("single", "inversion", "collaborative", "fused")
 
@@ -334,3 +334,33 @@ def fused_iri(est: FleetEstimates, segment_length: float) -> tuple[IRISegments |
         return iri_segments(est.position[ok], est.fused[ok], segment_length), None
     except ParameterError as err:
         return None, f"IRI was not computed: {err}."
+
+
+def drive_stretches(drives: list[Drive], min_overlap: float, offsets=None) -> list[tuple[list[int], float, float]]:
+    """Group drives into stretches of road they share: two drives are together if they overlap by at
+    least ``min_overlap`` metres (directly or through other drives).
+
+    Parameters
+    ----------
+    drives : list of Drive
+    min_overlap : float
+        m (``roadcollab estimate`` uses the IRI segment length).
+    offsets : (V,) array_like, optional
+        Corrections added to every drive's positions, m (default zeros).
+
+    Returns
+    -------
+    list of (drives, start_m, end_m)
+        1-based drive numbers of each stretch and the stretch it covers, m, in road order.
+    """
+    shift = np.zeros(len(drives)) if offsets is None else np.asarray(offsets, dtype=float)
+    spans = sorted((float(d.positions[0] + s), float(d.positions[-1] + s), j + 1)
+                   for j, (d, s) in enumerate(zip(drives, shift)))
+    groups: list[list] = []
+    for lo, hi, j in spans:
+        if groups and min(hi, groups[-1][2]) - lo >= min_overlap:
+            groups[-1][0].append(j)
+            groups[-1][2] = max(groups[-1][2], hi)
+        else:
+            groups.append([[j], lo, hi])
+    return [(sorted(g), lo, hi) for g, lo, hi in groups]

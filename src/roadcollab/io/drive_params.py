@@ -18,10 +18,13 @@ from ..errors import FileFormatError, ParameterError
 from ..models.vehicle import HalfCarParameters
 from .limits import PARAMS_MAX_BYTES, check_file_size, short_repr
 
-__all__ = ["DEFAULT_SENSOR_NOISE_STD", "PARAMETER_RANGES", "params_path_for", "read_drive_params",
-           "write_drive_params"]
+__all__ = ["DEFAULT_SENSOR_NOISE_STD", "ACCEL_UNITS", "STANDARD_GRAVITY", "PARAMETER_RANGES", "params_path_for",
+           "read_drive_params", "write_drive_params"]
 
 DEFAULT_SENSOR_NOISE_STD = 0.05
+STANDARD_GRAVITY = 9.80665          # m/s^2 per g (CGPM 1901, the value accelerometer vendors use)
+#: Accepted ``accel_unit`` values and their factor to m/s^2.
+ACCEL_UNITS = {"m/s^2": 1.0, "g": STANDARD_GRAVITY}
 _VEHICLE_KEYS = tuple(f.name for f in fields(HalfCarParameters))
 #: Accepted range (low, high, unit) of every key. The vehicle ranges are about 4x wider on either side
 #: than the published sets: quarter cars from 208 kg / 13.1 kN/m / 350 N s/m (small car, CTMS bus
@@ -40,7 +43,7 @@ PARAMETER_RANGES = {
     "vehicle.stiffness": (2_000.0, 1_500_000.0, "N/m"),
     "vehicle.damping": (50.0, 100_000.0, "N s/m"),
 }
-_TOP_KEYS = ("speed_mps", "vehicle", "sensor_noise_std", "start_m")
+_TOP_KEYS = ("speed_mps", "vehicle", "sensor_noise_std", "start_m", "accel_unit")
 
 
 def read_text(path: Path, what: str, max_bytes: int = PARAMS_MAX_BYTES, flag: str | None = None) -> str:
@@ -185,7 +188,8 @@ def read_drive_params(path, *, speed_column: str | None = None) -> dict:
     -------
     dict
         ``speed`` (m/s; None with ``speed_column``), ``sensor_noise_std`` (m/s^2), ``start_m`` (m), ``params``
-        (:class:`~roadcollab.models.vehicle.HalfCarParameters`).
+        (:class:`~roadcollab.models.vehicle.HalfCarParameters`), ``accel_unit`` (a key of :data:`ACCEL_UNITS`;
+        default ``"m/s^2"``).
 
     Raises
     ------
@@ -203,17 +207,22 @@ def read_drive_params(path, *, speed_column: str | None = None) -> dict:
     speed = None if speed_column else _number(path, "speed_mps", data["speed_mps"])
     noise = _number(path, "sensor_noise_std", data.get("sensor_noise_std", DEFAULT_SENSOR_NOISE_STD))
     start = _number(path, "start_m", data.get("start_m", 0.0))
+    unit = data.get("accel_unit", "m/s^2")
+    if not isinstance(unit, str) or unit not in ACCEL_UNITS:
+        raise FileFormatError(f"{path}: key 'accel_unit' must be one of {', '.join(repr(u) for u in ACCEL_UNITS)} "
+                              f"(the unit of the CSV's accel_left and accel_right), got {short_repr(unit)}")
     veh = data["vehicle"]
     if not isinstance(veh, dict):
         raise FileFormatError(f"{path}: key 'vehicle' must be a table ([vehicle] in TOML, an object in JSON) of "
                               f"{', '.join(_VEHICLE_KEYS)}, got {short_repr(veh)} ({type(veh).__name__})")
     _check_keys(path, veh, _VEHICLE_KEYS, _VEHICLE_KEYS, "vehicle.")
     values = {k: _number(path, f"vehicle.{k}", veh[k]) for k in _VEHICLE_KEYS}
-    return {"speed": speed, "sensor_noise_std": noise, "start_m": start, "params": HalfCarParameters(**values)}
+    return {"speed": speed, "sensor_noise_std": noise, "start_m": start, "params": HalfCarParameters(**values),
+            "accel_unit": unit}
 
 
 def write_drive_params(path, *, speed: float | None, params: HalfCarParameters, sensor_noise_std: float | None = None,
-                       start_m: float | None = None) -> Path:
+                       start_m: float | None = None, accel_unit: str | None = None) -> Path:
     """Write a parameters file (``.toml`` or ``.json`` by suffix), full precision.
 
     Values are not validated here; :func:`read_drive_params` checks them.
@@ -230,6 +239,8 @@ def write_drive_params(path, *, speed: float | None, params: HalfCarParameters, 
         m/s^2; the key is omitted if None (readers then use 0.05).
     start_m : float, optional
         Road distance of the first sample, m; the key is omitted if None (readers then use 0).
+    accel_unit : str, optional
+        ``"m/s^2"`` or ``"g"``; the key is omitted if None (readers then use m/s^2).
 
     Returns
     -------
@@ -247,6 +258,8 @@ def write_drive_params(path, *, speed: float | None, params: HalfCarParameters, 
         top["sensor_noise_std"] = float(sensor_noise_std)
     if start_m is not None:
         top["start_m"] = float(start_m)
+    if accel_unit is not None:
+        top["accel_unit"] = str(accel_unit)
     veh = {k: float(v) for k, v in params.as_dict().items()}
     if path.suffix.lower() == ".json":
         path.write_text(json.dumps({**top, "vehicle": veh}, indent=2) + "\n")

@@ -12,7 +12,7 @@ File formats
 names; spaces around them are ignored), optionally followed by ``,speed_mps`` (the vehicle's speed
 per sample, 0.5-70 m/s) or ``,distance_m`` (an odometer reading per sample, m, increasing), then one
 row per sample of finite numbers: time in s and the left and right body-tip vertical accelerations
-in m/s^2 (and the fourth column). Blank lines are ignored. Numbers are plain ASCII decimals
+in m/s^2 (or g with ``accel_unit = "g"``; and the fourth column). Blank lines are ignored. Numbers are plain ASCII decimals
 (``nan``, ``inf``, ``1_000`` and other scripts' digits are refused); an acceleration beyond
 +-200 m/s^2 is a logger glitch and refused with its line. Time stamps (:mod:`roadcollab.io.drive_log`):
 uniform ones (every step within 1e-6 of the median) are used as logged, jittery ones are resampled
@@ -29,6 +29,8 @@ differences are used: ``time_s`` may start anywhere.
                                  # has a speed_mps or distance_m column (then it must be absent)
     sensor_noise_std = 0.05      # optional, 0-20, m/s^2 per sample (default 0.05)
     start_m = 0.0                # optional, +-1e7: road distance of the first sample, m (default 0)
+    accel_unit = "m/s^2"         # optional, "m/s^2" (default) or "g" (9.80665 m/s^2): unit of the CSV's
+                                 # accel_left and accel_right; anything else is refused
 
     [vehicle]                    # required: the vehicle's *estimated* half-car parameters, SI units
     sprung_mass = 750.0          # kg, 100-20000
@@ -68,9 +70,9 @@ from .._validation import check_signal
 from ..errors import FileFormatError, ParameterError
 from ..models.vehicle import HalfCarParameters, half_car_model
 from .drive_log import CSV_COLUMNS, MAX_SAMPLE_RATE, MIN_ROWS, OPTIONAL_COLUMNS, UNIFORM_RTOL, DriveLog, read_drive_log
-from .drive_params import params_path_for, read_drive_params
+from .drive_params import ACCEL_UNITS, params_path_for, read_drive_params
 from .gps import GpsFixes, read_gps_log
-from .limits import FileLimits
+from .limits import MAX_ACCEL, FileLimits
 
 __all__ = ["CSV_COLUMNS", "MIN_ROWS", "MAX_SAMPLE_RATE", "UNIFORM_RTOL", "MIN_SAMPLE_RATE", "MODE_FACTOR", "Drive",
            "read_drive_csv", "body_mode_hz", "load_drive", "load_drives", "common_time_grid", "write_drive_csv"]
@@ -111,6 +113,8 @@ class Drive:
         True if jittery time stamps were resampled (:mod:`roadcollab.io.drive_log`).
     max_jitter : float
         Largest relative deviation of a logged time step from the median step.
+    accel_unit : str
+        The ``accel_unit`` of the parameters file; ``accel`` is in m/s^2 whatever it is.
     gps : GpsFixes or None
         The ``lat_deg, lon_deg`` fixes of the log, if it has them (:mod:`roadcollab.io.gps`).
     """
@@ -128,6 +132,7 @@ class Drive:
     speed_source: str = "parameters"
     resampled: bool = False
     max_jitter: float = 0.0
+    accel_unit: str = "m/s^2"
     gps: GpsFixes | None = None
 
     @property
@@ -151,7 +156,7 @@ class Drive:
                 "sample_rate_hz": self.sample_rate, "speed_mps": self.speed, "speed_source": self.speed_source,
                 "speed_min_mps": float(v.min()), "speed_max_mps": float(v.max()), "start_m": self.start_m,
                 "end_m": float(self.positions[-1]), "resampled": self.resampled, "max_jitter": self.max_jitter,
-                "sensor_noise_std": self.sensor_noise_std, "vehicle": self.params.as_dict()}
+                "accel_unit": self.accel_unit, "sensor_noise_std": self.sensor_noise_std, "vehicle": self.params.as_dict()}
 
 
 def read_drive_csv(path, *, limits: FileLimits | None = None) -> tuple[np.ndarray, np.ndarray, float]:
@@ -249,14 +254,21 @@ def load_drive(csv_path, params_path=None, *, limits: FileLimits | None = None) 
     params_path = params_path_for(csv_path) if params_path is None else Path(params_path)
     p = read_drive_params(params_path, speed_column=log.column)
     _check_rate(log, csv_path, params_path, p["params"])
+    accel = log.accel * ACCEL_UNITS[p["accel_unit"]]
+    if p["accel_unit"] != "m/s^2" and np.max(np.abs(accel)) > MAX_ACCEL:
+        k = int(np.argmax(np.max(np.abs(accel), axis=1)))
+        raise FileFormatError(f"{csv_path}: expected accelerations within +-{MAX_ACCEL:g} m/s^2 (beyond it a sample "
+                              f"is a logger glitch), got {float(np.max(np.abs(accel[k]))):.6g} m/s^2 at sample {k + 1} "
+                              f"(accel_unit = {p['accel_unit']!r} in {params_path.name})")
     positions = _positions(log, p["speed"], p["start_m"])
     duration = (log.time.shape[0] - 1) / log.sample_rate
     speed = p["speed"] if log.column is None else float((positions[-1] - positions[0]) / duration)
     source = "parameters" if log.column is None else f"{log.column} column"
-    return Drive(csv_path=csv_path, params_path=params_path, time=log.time, accel=log.accel,
+    return Drive(csv_path=csv_path, params_path=params_path, time=log.time, accel=accel,
                  sample_rate=log.sample_rate, speed=speed, start_m=p["start_m"],
                  sensor_noise_std=p["sensor_noise_std"], params=p["params"], positions=positions,
-                 speed_source=source, resampled=log.resampled, max_jitter=log.max_jitter, gps=gps)
+                 speed_source=source, resampled=log.resampled, max_jitter=log.max_jitter,
+                 accel_unit=p["accel_unit"], gps=gps)
 
 
 def load_drives(paths, *, limits: FileLimits | None = None) -> list[Drive]:

@@ -14,7 +14,8 @@ from ..experiments.config import ExperimentConfig
 from . import plotting_drives
 from ..models.iri import IRISegments
 from .fleet_report import iri_lines, write_iri_csv
-from .records import markdown_table, row_columns, write_config, write_csv, write_rows
+from .drive_tables import write_array_csv, write_final_estimate
+from .records import markdown_table, row_columns, write_config, write_rows
 
 __all__ = ["ESTIMATE_FILES", "write_estimates"]
 
@@ -35,13 +36,6 @@ def _length_m(est: DriveEstimates) -> float:
 
 # --- CSV tables ----------------------------------------------------------------------------------
 
-def _table_rows(est: DriveEstimates, named: list[tuple[str, np.ndarray]]) -> tuple[list[dict], list[str]]:
-    """Rows ``position_m, time_s, <name>...`` of the named (n,) series, as floats, and the column names."""
-    cols = ["position_m", "time_s"] + [name for name, _ in named]
-    table = np.column_stack([est.positions, est.time] + [series for _, series in named])
-    return [dict(zip(cols, map(float, r))) for r in table], cols
-
-
 def _estimate_series(est: DriveEstimates) -> list[tuple[str, np.ndarray]]:
     """``w_<estimator>_v<k>_<side>`` (m/s), then ``elevation_<estimator>_v<k>_<side>`` (m), every drive k."""
     named = []
@@ -53,22 +47,14 @@ def _estimate_series(est: DriveEstimates) -> list[tuple[str, np.ndarray]]:
     return named
 
 
-def _final_series(est: DriveEstimates) -> list[tuple[str, np.ndarray]]:
-    """The last drive's collaborative and fused ``w_<estimator>_<side>`` and ``elevation_<estimator>_<side>``."""
-    named = []
-    for kind, data in (("w", est.velocity), ("elevation", est.elevation)):
-        for name in ("collaborative", "fused"):
-            for c, side in enumerate(_SIDES):
-                named.append((f"{kind}_{name}_{side}", data[name][-1, :, c]))
-    return named
-
-
 def _write_tables(est: DriveEstimates, out: Path, anomaly_rows: list[AnomalyRow]) -> None:
-    """``road_estimates.csv``, ``final_estimate.csv`` and ``anomalies.csv`` in ``out``."""
-    rows, cols = _table_rows(est, _estimate_series(est))
-    write_csv(out / "road_estimates.csv", rows, cols)
-    rows, cols = _table_rows(est, _final_series(est))
-    write_csv(out / "final_estimate.csv", rows, cols)
+    """``road_estimates.csv``, ``final_estimate.csv`` (:data:`~roadcollab.reporting.drive_tables.FINAL_COLUMNS`)
+    and ``anomalies.csv`` in ``out``."""
+    named = _estimate_series(est)
+    write_array_csv(out / "road_estimates.csv", ["position_m", "time_s"] + [n for n, _ in named],
+                    np.column_stack([est.positions, est.time] + [series for _, series in named]))
+    write_final_estimate(out / "final_estimate.csv", est.positions, est.elevation["fused"][-1],
+                         est.elevation["collaborative"][-1], np.full(est.n_samples, len(est.drives)))
     write_rows(out / "anomalies.csv", anomaly_rows, AnomalyRow)
 
 
@@ -109,6 +95,9 @@ def _write_figures(est: DriveEstimates, out: Path) -> tuple[float, float] | None
 def _notes(est: DriveEstimates, anomaly_note: str | None) -> list[str]:
     """Caveats for the report and ``config.json``: truncation, a window too short, the anomaly note."""
     notes = []
+    if est.n_windows > 1:
+        notes.append(f"The {est.n_samples} samples were estimated in {est.n_windows} overlapping windows (memory "
+                     "stays bounded; within 1e-9 relative of one window in the tests).")
     if est.truncated:
         lengths = [d.n_samples for d in est.drives]
         notes.append(f"Drives have {', '.join(map(str, lengths))} samples; all were truncated to the shortest, "
@@ -123,7 +112,7 @@ def _notes(est: DriveEstimates, anomaly_note: str | None) -> list[str]:
 
 
 def _write_config_json(est: DriveEstimates, path: Path, *, command: str, notes: list[str], elapsed: float | None,
-                       detector_config: dict | None) -> None:
+                       detector_config: dict | None, cleaning: list[dict] | None) -> None:
     """``config.json``: the drives, the common grid, the estimator design and the detector settings."""
     design = ExperimentConfig()
     config = {
@@ -134,6 +123,8 @@ def _write_config_json(est: DriveEstimates, path: Path, *, command: str, notes: 
         "estimator_design": {"iso_class": design.iso_class, "anomaly_density": design.anomaly_density,
                              "note": "noise model of ExperimentConfig(speed, sample_rate, sensor_noise_std)"},
         "anomaly_detector": detector_config,
+        "n_windows": est.n_windows,
+        "cleaning": cleaning,
     }
     extra = {"notes": notes}
     if elapsed is not None:
@@ -194,8 +185,10 @@ def _method_section(est: DriveEstimates) -> list[str]:
         "- The first and last second or so of every estimate carry window-edge effects of the offline filters.",
         "- `road_estimates.csv`: `position_m`, `time_s` (since each drive's first sample), then "
         "`w_<estimator>_v<k>_<left|right>` (m/s) and `elevation_<estimator>_v<k>_<left|right>` (m) for every "
-        "drive k and estimator single/collaborative/fused. `final_estimate.csv`: the last drive's collaborative "
-        "and fused estimates. `anomalies.csv`: every detection of every estimator and drive.",
+        "drive k and estimator single/collaborative/fused. `final_estimate.csv`: `position_m`, "
+        "`elevation_fused_left|right` (all drives), `coverage` (drives), `elevation_collaborative_left|right` "
+        "(the last drive), the same columns whichever grid ran. `anomalies.csv`: every detection of every "
+        "estimator and drive.",
         "",
     ]
 
@@ -245,14 +238,15 @@ def _anomalies_section(est: DriveEstimates, anomalies: list[AnomalyRow] | None, 
 def write_estimates(est: DriveEstimates, out, *, command: str, anomalies: list[AnomalyRow] | None,
                     anomaly_note: str | None = None, elapsed: float | None = None,
                     detector_config: dict | None = None, iri: IRISegments | None = None,
-                    iri_note: str | None = None) -> dict:
+                    iri_note: str | None = None, cleaning: list[dict] | None = None,
+                    extra_notes: list[str] | None = None) -> dict:
     """Write every output of ``roadcollab estimate`` to the folder ``out``; returns the summary.
 
     Files: ``road_estimates.csv`` (wide: ``position_m, time_s``, then
     ``w_<estimator>_v<k>_<side>`` in m/s and ``elevation_<estimator>_v<k>_<side>`` in m for every
     drive ``k`` (1-based, driving order), estimator single/collaborative/fused and side left/right),
-    ``final_estimate.csv`` (the last drive's collaborative and fused estimates:
-    ``w_<estimator>_<side>``, ``elevation_<estimator>_<side>``), ``anomalies.csv``,
+    ``final_estimate.csv`` (:mod:`roadcollab.reporting.drive_tables`: the fused and the last
+    drive's collaborative elevation, one schema for both grids), ``anomalies.csv``,
     ``road_velocity.png``, ``elevation.png``, ``config.json`` and ``report.md``.
 
     Parameters
@@ -277,6 +271,10 @@ def write_estimates(est: DriveEstimates, out, *, command: str, anomalies: list[A
         IRI per segment of the last drive's fused elevation (``iri.csv``; header only if None).
     iri_note : str, optional
         Why the IRI was not computed (a note in the report and ``config.json``).
+    cleaning : list of dict, optional
+        Per drive, what :func:`roadcollab.io.drive_clean.clean_drive` did (``config.json``).
+    extra_notes : list of str, optional
+        More notes, first in the report (e.g. the spikes repaired).
 
     Returns
     -------
@@ -293,9 +291,9 @@ def write_estimates(est: DriveEstimates, out, *, command: str, anomalies: list[A
     write_iri_csv(out / "iri.csv", iri)
     zoom = _write_figures(est, out)
     counts = _anomaly_counts(est, anomaly_rows)
-    notes = _notes(est, anomaly_note) + ([iri_note] if iri_note else [])
+    notes = list(extra_notes or []) + _notes(est, anomaly_note) + ([iri_note] if iri_note else [])
     _write_config_json(est, out / "config.json", command=command, notes=notes, elapsed=elapsed,
-                       detector_config=detector_config)
+                       detector_config=detector_config, cleaning=cleaning)
     lines = (_report_header(est, command=command, notes=notes, elapsed=elapsed) + _inputs_section(est)
              + _method_section(est) + _figures_section(est, zoom) + _anomalies_section(est, anomalies, counts)
              + iri_lines(iri, iri_note, f"The elevation holds wavelengths below {est.speed / est.band_low_hz:g} m "

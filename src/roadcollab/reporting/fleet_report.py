@@ -2,8 +2,8 @@
 
 Files: ``road_estimates.csv`` (``position_m`` and ``elevation_<estimator>_v<k>_<side>`` for every
 drive ``k`` and estimator single/inversion/collaborative/fused, blank where drive ``k`` did not pass),
-``final_estimate.csv`` (``position_m, elevation_fused_left, elevation_fused_right, coverage``, then
-every drive's inversion), ``offsets.csv``, ``iri.csv``, ``anomalies.csv``, ``elevation.png``,
+``final_estimate.csv`` (one schema with the time grid, :mod:`roadcollab.reporting.drive_tables`),
+``offsets.csv``, ``iri.csv``, ``anomalies.csv``, ``elevation.png``,
 ``config.json`` and ``report.md``.
 """
 
@@ -17,6 +17,7 @@ from ..experiments.drive_estimation import AnomalyRow
 from ..experiments.fleet_estimation import FLEET_ESTIMATORS, FleetEstimates
 from ..models.iri import IRISegments
 from . import plotting_drives
+from .drive_tables import write_final_estimate
 from .records import markdown_table, write_config, write_csv, write_rows
 
 __all__ = ["FLEET_FILES", "iri_lines", "write_iri_csv", "write_fleet_estimates"]
@@ -78,11 +79,8 @@ def _tables(est: FleetEstimates, out: Path, anomalies: list[AnomalyRow]) -> None
     named = [(f"elevation_{name}_v{j + 1}_{side}", est.elevation[name][j][:, c])
              for j in range(V) for name in FLEET_ESTIMATORS for c, side in enumerate(_SIDES)]
     write_csv(out / "road_estimates.csv", *_wide(est.position, named))
-    final = [(f"elevation_fused_{side}", est.fused[:, c]) for c, side in enumerate(_SIDES)]
-    final.append(("coverage", np.where(est.coverage > 0, est.coverage, np.nan).astype(float)))
-    final += [(f"elevation_inversion_v{j + 1}_{side}", est.elevation["inversion"][j][:, c])
-              for j in range(V) for c, side in enumerate(_SIDES)]
-    write_csv(out / "final_estimate.csv", *_wide(est.position, final))
+    write_final_estimate(out / "final_estimate.csv", est.position, est.fused, est.elevation["collaborative"][-1],
+                         est.coverage)
     rows = [{"drive": j + 1, "csv": d.csv_path.name, "start_m_given": d.start_m,
              "offset_m": float(est.offsets[j]), "start_m_used": d.start_m + float(est.offsets[j]),
              "correlation_peak": _blank(est.offset_peaks[j])} for j, d in enumerate(est.drives)]
