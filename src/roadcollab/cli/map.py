@@ -98,6 +98,7 @@ def map_command(drive_paths: list[str], out_dir, *, store_url, command: str, net
     from ..store import RoadStore
 
     t0 = time.perf_counter()
+    RoadStore.path_of(store_url)                  # a URL it cannot open is refused before any work
     with staged_output(out_dir) as out:
         network = read_network(network_path) if network_path is not None else None
         drives = load_drives(drive_paths, limits=limits)

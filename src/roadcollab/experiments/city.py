@@ -35,7 +35,7 @@ from ..models.vehicle import FleetSpec, sample_fleet
 from .mixed_fleet import simulate_drive
 
 __all__ = ["CITY_ORIGIN", "CITY_ROADS", "CITY_POTHOLES", "ROUTE_SPEEDS", "SERVICE_SPEEDS", "CityTruth",
-           "city_network", "city_profiles", "simulate_city", "write_city"]
+           "city_network", "city_profiles", "default_potholes", "simulate_city", "network_geojson", "write_city"]
 
 CITY_ORIGIN = (48.137, 11.575)   # lat, lon (degrees)
 #: Road positions in metres east/north of the origin.
@@ -61,8 +61,12 @@ class CityTruth:
     ----------
     network : RoadNetwork
     profiles : dict
-        ``{"route": RoadProfile, "service": RoadProfile}``: ``route`` runs ``main`` (measure = route
-        distance) then ``cross`` (measure = route distance - 600 m).
+        ``{route: RoadProfile}`` with ``route`` the roads' ids joined by ``+``: ``"main+cross"`` runs
+        ``main`` (measure = route distance) then ``cross`` (measure = route distance - 600 m).
+    road_start : dict
+        ``{road_id: (route, start_m)}``: where each road lies on its route's profile.
+    potholes : tuple
+        ``(road_id, measure_m, side, depth_m, length_m)`` of every pothole.
     drives : list of Drive
         As simulated (positions = true route or road distance), with GPS fixes.
     roads_driven : list of tuple
@@ -71,6 +75,8 @@ class CityTruth:
 
     network: RoadNetwork
     profiles: dict
+    road_start: dict
+    potholes: tuple
     drives: list
     roads_driven: list
 
@@ -85,11 +91,8 @@ class CityTruth:
         -------
         measure, elevation : ndarray
         """
-        if road_id == "service":
-            p = self.profiles["service"]
-            return np.asarray(p.distance), np.asarray(p.elevation)
-        p = self.profiles["route"]
-        start = 0.0 if road_id == "main" else self.network.roads["main"].length
+        route, start = self.road_start[road_id]
+        p = self.profiles[route]
         keep = (p.distance >= start - 1e-9) & (p.distance <= start + self.network.roads[road_id].length + 1e-9)
         return np.asarray(p.distance[keep]) - start, np.asarray(p.elevation[keep])
 
@@ -101,7 +104,7 @@ class CityTruth:
         list of dict
         """
         out = []
-        for road, m, side, depth, length in CITY_POTHOLES:
+        for road, m, side, depth, length in self.potholes:
             line = self.network.roads[road].line
             pt = line.interpolate(m)
             lon, lat = self.network.projection.to_lonlat(pt.x, pt.y)
@@ -139,29 +142,53 @@ def _with_potholes(profile: RoadProfile, potholes: list[tuple[float, str, float,
     return RoadProfile(d, profile.elevation + moving_average(bumps, spacing, 0.25), tuple(truth), profile.source)
 
 
-def city_profiles(network: RoadNetwork, *, rng=None) -> dict:
-    """The true profiles (module docstring).
+def city_profiles(network: RoadNetwork, routes, potholes, *, rng=None) -> tuple[dict, dict]:
+    """The true profiles of every route (module docstring).
 
     Parameters
     ----------
     network : RoadNetwork
+    routes : sequence of tuple
+        Each a sequence of road ids driven one after the other.
+    potholes : sequence of tuple
+        ``(road_id, measure_m, side, depth_m, length_m)``.
     rng : numpy.random.Generator | int | None
 
     Returns
     -------
-    dict
-        ``{"route": RoadProfile, "service": RoadProfile}``.
+    profiles : dict
+        ``{route name: RoadProfile}`` (ISO class B, 20 m longer than the route, with the potholes).
+    road_start : dict
+        ``{road_id: (route name, start_m)}``.
     """
     rng = np.random.default_rng(rng)
-    main = network.roads["main"].length
-    route_len = main + network.roads["cross"].length
-    route = generate_road(RoadSpec(length=route_len + 20.0, iso_class="B", anomaly_density=0.0), rng=rng)
-    service = generate_road(RoadSpec(length=network.roads["service"].length + 20.0, iso_class="B",
-                                     anomaly_density=0.0), rng=rng)
-    on_route = [(m + (main if road == "cross" else 0.0), side, depth, length)
-                for road, m, side, depth, length in CITY_POTHOLES if road in _ROUTE]
-    on_service = [(m, side, depth, length) for road, m, side, depth, length in CITY_POTHOLES if road == "service"]
-    return {"route": _with_potholes(route, on_route), "service": _with_potholes(service, on_service)}
+    profiles, road_start = {}, {}
+    for route in routes:
+        name = "+".join(route)
+        start = 0.0
+        for r in route:
+            road_start[r] = (name, start)
+            start += network.roads[r].length
+        base = generate_road(RoadSpec(length=start + 20.0, iso_class="B", anomaly_density=0.0), rng=rng)
+        on = [(m + road_start[r][1], side, depth, length) for r, m, side, depth, length in potholes if r in route]
+        profiles[name] = _with_potholes(base, on)
+    return profiles, road_start
+
+
+def default_potholes(network: RoadNetwork) -> tuple:
+    """Potholes for a user's network: 5 cm (both tracks) at 30 % and 4 cm (left) at 70 % of every road.
+
+    Parameters
+    ----------
+    network : RoadNetwork
+
+    Returns
+    -------
+    tuple
+        ``(road_id, measure_m, side, depth_m, length_m)``.
+    """
+    return tuple(p for rid, r in network.roads.items()
+                 for p in ((rid, 0.3 * r.length, "both", 0.05, 0.6), (rid, 0.7 * r.length, "left", 0.04, 0.5)))
 
 
 def _gps(drive: Drive, network: RoadNetwork, roads: tuple, rng: np.random.Generator) -> tuple[np.ndarray, ...]:
@@ -182,13 +209,21 @@ def _gps(drive: Drive, network: RoadNetwork, roads: tuple, rng: np.random.Genera
     return full_lat, full_lon
 
 
-def simulate_city(*, seed: int = 0) -> tuple[CityTruth, list[tuple[np.ndarray, np.ndarray]]]:
+def simulate_city(*, seed: int = 0, network: RoadNetwork | None = None, speeds=None, vehicles: int = 3
+                  ) -> tuple[CityTruth, list[tuple[np.ndarray, np.ndarray]]]:
     """The simulated drives with their GPS (module docstring).
 
     Parameters
     ----------
     seed : int
         Seeds the profiles, the fleet, the sensor noise and the GPS errors (independent children).
+    network : RoadNetwork, optional
+        A user's network instead of the built-in city: every road is driven on its own, forward, by
+        ``vehicles`` vehicles at ``speeds`` (cycled), with :func:`default_potholes`.
+    speeds : sequence of float, optional
+        m/s, for a user's network (default 12, 15, 18).
+    vehicles : int
+        Drives per road of a user's network.
 
     Returns
     -------
@@ -196,23 +231,30 @@ def simulate_city(*, seed: int = 0) -> tuple[CityTruth, list[tuple[np.ndarray, n
     list of (lat, lon)
         Per drive, (N,) arrays with NaN between fixes.
     """
-    network = city_network()
+    if network is None:
+        network, potholes = city_network(), CITY_POTHOLES
+        plan = [(_ROUTE, v) for v in ROUTE_SPEEDS] + [(("service",), v) for v in SERVICE_SPEEDS]
+    else:
+        speeds = (12.0, 15.0, 18.0) if speeds is None else tuple(speeds)
+        potholes = default_potholes(network)
+        plan = [((rid,), speeds[j % len(speeds)]) for rid in network.roads for j in range(vehicles)]
     ss = np.random.SeedSequence(seed)
-    road_rng, fleet_rng, *drive_seeds = ss.spawn(2 + len(ROUTE_SPEEDS) + len(SERVICE_SPEEDS))
-    profiles = city_profiles(network, rng=np.random.default_rng(road_rng))
-    plan = [("route", _ROUTE, v) for v in ROUTE_SPEEDS] + [("service", ("service",), v) for v in SERVICE_SPEEDS]
+    road_rng, fleet_rng, *drive_seeds = ss.spawn(2 + len(plan))
+    routes = list(dict.fromkeys(route for route, _ in plan))
+    profiles, road_start = city_profiles(network, routes, potholes, rng=np.random.default_rng(road_rng))
     fleet = sample_fleet(len(plan), FleetSpec(), rng=np.random.default_rng(fleet_rng))
-    drives, gps, roads = [], [], []
-    for j, ((prof, route, speed), child) in enumerate(zip(plan, drive_seeds)):
+    drives, gps = [], []
+    for j, ((route, speed), child) in enumerate(zip(plan, drive_seeds)):
         rng = np.random.default_rng(child)
-        road = profiles[prof]
+        road = profiles["+".join(route)]
         end = sum(network.roads[r].length for r in route)
         d = simulate_drive(road, fleet[j], speed, start=0.0, end_margin=float(road.distance[-1]) - end + 5.0,
                            sample_rate=SAMPLE_RATE, rng=rng)
         drives.append(d)
         gps.append(_gps(d, network, route, rng))
-        roads.append(route)
-    return CityTruth(network=network, profiles=profiles, drives=drives, roads_driven=roads), gps
+    truth = CityTruth(network=network, profiles=profiles, road_start=road_start, potholes=tuple(potholes),
+                      drives=drives, roads_driven=[route for route, _ in plan])
+    return truth, gps
 
 
 def network_geojson(network: RoadNetwork) -> dict:
@@ -232,14 +274,14 @@ def network_geojson(network: RoadNetwork) -> dict:
         for rid, r in network.roads.items()]}
 
 
-def write_city(out, *, seed: int = 0) -> dict:
+def write_city(out, *, seed: int = 0, network: RoadNetwork | None = None, speeds=None, vehicles: int = 3) -> dict:
     """Write the city: ``network.geojson``, ``drive<j>.csv`` + ``.toml`` and ``truth.json`` into ``out``.
 
     Parameters
     ----------
     out : Path
         An existing directory (the command stages it).
-    seed : int
+    seed, network, speeds, vehicles
         See :func:`simulate_city`.
 
     Returns
@@ -248,7 +290,7 @@ def write_city(out, *, seed: int = 0) -> dict:
         ``{"network": path, "drives": [paths], "truth": path}``.
     """
     out = Path(out)
-    truth, gps = simulate_city(seed=seed)
+    truth, gps = simulate_city(seed=seed, network=network, speeds=speeds, vehicles=vehicles)
     net = out / "network.geojson"
     net.write_text(json.dumps(network_geojson(truth.network), indent=1))
     paths = []

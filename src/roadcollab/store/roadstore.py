@@ -162,6 +162,25 @@ class RoadStore:
         self._db = connection
         self.path = path
 
+    @staticmethod
+    def path_of(url) -> Path:
+        """The SQLite file of a store URL (to check ``--store`` before any work).
+
+        Parameters
+        ----------
+        url : str or Path
+
+        Returns
+        -------
+        Path
+
+        Raises
+        ------
+        ParameterError
+            A PostgreSQL or other URL.
+        """
+        return _path_of(url)
+
     @classmethod
     def open(cls, url) -> "RoadStore":
         """Open (or create) a store.
