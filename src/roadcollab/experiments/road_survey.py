@@ -16,7 +16,9 @@ Pipeline
 4. Segments (:func:`roadcollab.geo.segments.segment_bounds`, fixed in the road's measure) fully
    covered by the fused profile get the IRI: the mean of the two wheel tracks' IRIs (the mean
    roughness index, MRI, which agencies report as "IRI"), m/km and in/mi; a 95 % bootstrap interval
-   over the drives (``bootstrap`` resamples of the passes with replacement, re-fused); the number
+   over the drives (``bootstrap`` resamples of the passes with replacement, re-fused; none below
+   :data:`MIN_BOOTSTRAP_VEHICLES` vehicles). It is the drive-to-drive spread only: the estimate's
+   bias (sensor noise adds roughness, +3 to +8 % on the simulated city) is not in it. The number
    of vehicles is the number of passes covering at least half of the segment.
 5. Anomalies are found in the fused profile (:func:`~roadcollab.experiments.fleet_estimation.find_fleet_anomalies`);
    their votes are the passes whose own inversion shows an anomaly of the same kind within
@@ -39,7 +41,10 @@ from ..models.iri import iri
 from ..store import RoadStore
 from .fleet_estimation import estimate_fleet, find_fleet_anomalies
 
-__all__ = ["SegmentEstimate", "AnomalyEstimate", "RoadSurvey", "survey_drives", "lane_survey", "store_survey"]
+__all__ = ["MIN_BOOTSTRAP_VEHICLES", "SegmentEstimate", "AnomalyEstimate", "RoadSurvey", "survey_drives",
+           "lane_survey", "store_survey"]
+
+MIN_BOOTSTRAP_VEHICLES = 3   # two drives resample into three distinct sets: no interval worth the name
 
 
 @dataclass(frozen=True, eq=False)
@@ -54,7 +59,8 @@ class SegmentEstimate:
     from_m, to_m : float
         Road measure of the segment, m (``from_m < to_m`` whatever the direction).
     iri_m_per_km, iri_low, iri_high : float
-        IRI (mean of the two tracks) and its 95 % bootstrap interval, m/km (NaN bounds with one vehicle).
+        IRI (mean of the two tracks) and its 95 % bootstrap interval, m/km (NaN bounds with fewer than
+        :data:`MIN_BOOTSTRAP_VEHICLES` vehicles).
     n_vehicles : int
     spacing : float
         Profile grid step, m.
@@ -158,7 +164,7 @@ def _segment_iri(h: np.ndarray, spacing: float) -> float:
 def _bootstrap(stack: np.ndarray, sel: np.ndarray, spacing: float, n: int, rng: np.random.Generator
                ) -> tuple[float, float]:
     V = stack.shape[0]
-    if V < 2 or n == 0:
+    if V < MIN_BOOTSTRAP_VEHICLES or n == 0:
         return float("nan"), float("nan")
     vals = []
     for _ in range(n):
