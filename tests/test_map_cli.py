@@ -44,6 +44,8 @@ def test_map_refuses_bad_inputs_in_one_line(tmp_path, capsys):
     assert code == 2 and err.count("\n") == 1
     assert "bad.geojson: expected a GeoJSON FeatureCollection of 1-10000 LineString features" in err
     assert not (tmp_path / "out").exists() and not (tmp_path / "s.sqlite").exists()
-    code = main(["map", "--drive", "x.csv", "--store", "postgresql://u@h/db", "--out", str(tmp_path / "o2")])
-    assert code == 2 and "PostgreSQL/PostGIS stores are not implemented yet" in capsys.readouterr().err
+    code = main(["map", "--drive", "x.csv", "--store", "postgresql://u:pw@127.0.0.1:9/db", "--out",
+                 str(tmp_path / "o2")])
+    err = capsys.readouterr().err
+    assert code == 2 and "--store postgresql://u:***@127.0.0.1:9/db: cannot connect" in err and "pw" not in err
     assert main(["simulate-drives", "--network", "n.geojson", "--out", str(tmp_path / "o3")]) == 2

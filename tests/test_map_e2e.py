@@ -128,3 +128,47 @@ def test_map_in_headless_chromium(city, tmp_path):
     assert got["requests"] == [] and got["errors"] == []        # offline: nothing asked of the network
     assert "IRI" in got["popup"] and "m/km" in got["popup"]
     assert (tmp_path / "map.png").stat().st_size > 10_000
+
+
+def test_direction_of_travel_is_kept(city, tmp_path):
+    """The service road digitised the other way: drives 6-7 now travel against its measure (direction -1),
+    and every number must be the forward run's at the mirrored measures (the lane coordinate is the same)."""
+    net = json.loads(city["files"]["network"].read_text())
+    feat = next(f for f in net["features"] if f["properties"]["road_id"] == "service")
+    feat["geometry"]["coordinates"] = feat["geometry"]["coordinates"][::-1]
+    rev = tmp_path / "reversed.geojson"
+    rev.write_text(json.dumps({"type": "FeatureCollection", "features": [feat]}))
+    drives = [str(p) for p in city["files"]["drives"][5:]]
+    s = map_command(drives, tmp_path / "out", store_url=tmp_path / "r.sqlite", command="rev", network_path=rev,
+                    bootstrap=0)
+    assert {p["direction"] for p in s["passes"]} == {-1}
+    with RoadStore.open(tmp_path / "r.sqlite") as store:
+        back, back_an = store.segments(), store.anomalies()
+    with RoadStore.open(city["root"] / "roads.sqlite") as store:
+        fwd = {(x.from_m, x.to_m): x for x in store.segments() if x.road_id == "service"}
+        fwd_an = [a for a in store.anomalies() if a.road_id == "service"]
+    length = 600.0
+    assert len(back) == len(fwd) == 4 and all(b.direction == -1 for b in back)
+    for b in back:
+        f = fwd[(round(length - b.to_m, 6), round(length - b.from_m, 6))]
+        # The same lane on a grid laid from other floats: a segment may gain or lose its edge point (1 of 2000)
+        assert abs(b.iri_m_per_km / f.iri_m_per_km - 1) < 1e-3
+        n = min(len(b.profile), len(f.profile)) - 1
+        best = max(np.corrcoef(b.profile[k:k + n - 1, 0], f.profile[j:j + n - 1, 0])[0, 1]
+                   for k in (0, 1) for j in (0, 1))
+        assert best > 0.999                                           # stored in the direction of travel
+    for a in back_an:
+        d = min(float(geodesic_m(a.lon, a.lat, f.lon, f.lat)) for f in fwd_an if f.kind == a.kind)
+        assert d < 0.01
+
+
+def test_without_a_network_the_track_is_the_road(city, tmp_path):
+    s = map_command([str(city["files"]["drives"][5])], tmp_path / "out", store_url=tmp_path / "t.sqlite",
+                    command="track", bootstrap=0)
+    assert {p["road_id"] for p in s["passes"]} == {"drive6"}
+    with RoadStore.open(tmp_path / "t.sqlite") as store:
+        segs, found = store.segments(), [a for a in store.anomalies() if a.kind == "pothole"]
+    assert len(segs) >= 3
+    (p,) = [p for p in city["truth"].potholes_lonlat() if p["road_id"] == "service"]
+    d = min(float(geodesic_m(a.lon, a.lat, p["lon"], p["lat"])) for a in found)
+    assert d <= 3.0, d                 # the road is the smoothed GPS track itself: metres, not centimetres

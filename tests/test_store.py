@@ -76,8 +76,10 @@ def test_store_refuses_foreign_files_and_urls(tmp_path):
         db.execute("CREATE TABLE t (x)")
     with pytest.raises(ParameterError, match="expected a roadcollab road store"):
         RoadStore.open(other)
-    with pytest.raises(ParameterError, match="PostgreSQL/PostGIS stores are not implemented yet"):
-        RoadStore.open("postgresql://user:secret@db.example/roads")
+    with pytest.raises(ParameterError, match=r"--store postgresql://user:\*\*\*@127.0.0.1:9/roads: cannot connect"):
+        RoadStore.open("postgresql://user:secret@127.0.0.1:9/roads")          # port 9: nothing listens
+    with pytest.raises(ParameterError, match="expected a path, sqlite:///path or postgresql"):
+        RoadStore.open("mysql://x/y")
     with pytest.raises(ParameterError, match=r"direction must be \+1 or -1"):
         with RoadStore.open(tmp_path / "ok.sqlite") as s:
             s.record_segment("a", 0, 0.0, 1.0, LINE, 1.0)

@@ -98,7 +98,8 @@ def map_command(drive_paths: list[str], out_dir, *, store_url, command: str, net
     from ..store import RoadStore
 
     t0 = time.perf_counter()
-    RoadStore.path_of(store_url)                  # a URL it cannot open is refused before any work
+    if RoadStore.path_of(store_url) is None:      # a server it cannot reach is refused before any work
+        RoadStore.open(store_url).close()
     with staged_output(out_dir) as out:
         network = read_network(network_path) if network_path is not None else None
         drives = load_drives(drive_paths, limits=limits)
@@ -149,7 +150,8 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
                    help="road network: GeoJSON FeatureCollection of LineStrings with a road_id property "
                         "(default: each drive's own GPS track is its road)")
     p.add_argument("--store", required=True, metavar="FILE",
-                   help="road store: an SQLite file (created if missing) or sqlite:///path")
+                   help="road store: an SQLite file (created if missing), sqlite:///path or "
+                        "postgresql://user@host/db (PostGIS)")
     p.add_argument("--out", required=True, metavar="DIR", help="output folder")
     p.add_argument("--segment-length", type=positive_float, default=100.0, metavar="M",
                    help="segment length along each road, m (default 100)")

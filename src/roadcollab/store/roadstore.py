@@ -1,9 +1,8 @@
 """The road-condition store: segments and anomalies with their history, in SQLite (one file).
 
-Open it with :meth:`RoadStore.open` (``"results/roads.sqlite"``, ``"sqlite:///abs/path.sqlite"``);
-``postgresql://`` URLs are refused with a clear message: PostgreSQL/PostGIS is not implemented yet
-(the schema below is plain SQL with the geometry as GeoJSON text, so a PostGIS backend would add a
-``geometry`` column and keep the rest).
+Open it with :meth:`RoadStore.open`: ``"results/roads.sqlite"`` or ``"sqlite:///abs/path.sqlite"``
+(SQLite, the default), or ``"postgresql://user@host/db"`` (PostgreSQL with PostGIS, through psycopg:
+the same schema, plus PostGIS ``geom`` columns; :mod:`roadcollab.store.backends`).
 
 Schema (``schema_version`` 1 in table ``meta``)
 -----------------------------------------------
@@ -36,6 +35,7 @@ import numpy as np
 
 from .._validation import check_int, check_real
 from ..errors import FileFormatError, ParameterError
+from .backends import TYPES, backend_for, sqlite_path
 
 __all__ = ["SCHEMA_VERSION", "StoredSegment", "StoredAnomaly", "RoadStore"]
 
@@ -44,20 +44,20 @@ IN_PER_MI = 63.36
 _SCHEMA = """
 CREATE TABLE IF NOT EXISTS meta (key TEXT PRIMARY KEY, value TEXT NOT NULL);
 CREATE TABLE IF NOT EXISTS segment_records (
-    id INTEGER PRIMARY KEY, road_id TEXT NOT NULL, direction INTEGER NOT NULL CHECK (direction IN (-1, 1)),
-    from_m REAL NOT NULL, to_m REAL NOT NULL, geometry TEXT NOT NULL,
-    iri_m_per_km REAL NOT NULL, iri_in_per_mi REAL NOT NULL, iri_low REAL, iri_high REAL,
-    n_vehicles INTEGER NOT NULL, profile_spacing_m REAL NOT NULL, profile BLOB NOT NULL,
+    id {id}, road_id TEXT NOT NULL, direction INTEGER NOT NULL CHECK (direction IN (-1, 1)),
+    from_m {real} NOT NULL, to_m {real} NOT NULL, geometry TEXT NOT NULL,
+    iri_m_per_km {real} NOT NULL, iri_in_per_mi {real} NOT NULL, iri_low {real}, iri_high {real},
+    n_vehicles INTEGER NOT NULL, profile_spacing_m {real} NOT NULL, profile {blob} NOT NULL,
     recorded_at TEXT NOT NULL, source TEXT NOT NULL);
 CREATE INDEX IF NOT EXISTS segment_key ON segment_records (road_id, direction, from_m, to_m, recorded_at);
 CREATE TABLE IF NOT EXISTS anomalies (
-    id INTEGER PRIMARY KEY, road_id TEXT NOT NULL, direction INTEGER NOT NULL, measure_m REAL NOT NULL,
-    lon REAL NOT NULL, lat REAL NOT NULL, kind TEXT NOT NULL, side TEXT NOT NULL, depth_m REAL NOT NULL,
+    id {id}, road_id TEXT NOT NULL, direction INTEGER NOT NULL, measure_m {real} NOT NULL,
+    lon {real} NOT NULL, lat {real} NOT NULL, kind TEXT NOT NULL, side TEXT NOT NULL, depth_m {real} NOT NULL,
     votes INTEGER NOT NULL, first_seen TEXT NOT NULL, last_seen TEXT NOT NULL);
 CREATE TABLE IF NOT EXISTS anomaly_records (
-    id INTEGER PRIMARY KEY, anomaly_id INTEGER NOT NULL REFERENCES anomalies (id), measure_m REAL NOT NULL,
-    lon REAL NOT NULL, lat REAL NOT NULL, depth_m REAL NOT NULL, votes INTEGER NOT NULL,
-    recorded_at TEXT NOT NULL, source TEXT NOT NULL);
+    id {id}, anomaly_id BIGINT NOT NULL REFERENCES anomalies (id), measure_m {real} NOT NULL,
+    lon {real} NOT NULL, lat {real} NOT NULL, depth_m {real} NOT NULL, votes INTEGER NOT NULL,
+    recorded_at TEXT NOT NULL, source TEXT NOT NULL)
 """
 
 
@@ -137,34 +137,22 @@ def _now(at: str | None) -> str:
     return datetime.now(timezone.utc).isoformat(timespec="seconds") if at is None else str(at)
 
 
-def _path_of(url) -> Path:
-    text = str(url)
-    if text.startswith(("postgresql://", "postgres://")):
-        raise ParameterError(f"--store {text.split('@')[-1]!r}: PostgreSQL/PostGIS stores are not implemented yet; "
-                             "expected an SQLite file (a path or sqlite:///path)")
-    if "://" in text and not text.startswith("sqlite:///"):
-        raise ParameterError(f"--store: expected a path or an sqlite:///path URL, got {text!r}")
-    return Path(text[len("sqlite:///") - 1:] if text.startswith("sqlite:///") else text)
-
-
 class RoadStore:
     """The road-condition store (module docstring). Use :meth:`open`; close with :meth:`close` or ``with``.
 
     Parameters
     ----------
-    connection : sqlite3.Connection
-        An open connection with the schema in place.
-    path : Path
-        Its file.
+    backend : SqliteBackend or PostgresBackend
+        An open database with the schema in place.
     """
 
-    def __init__(self, connection: sqlite3.Connection, path: Path):
-        self._db = connection
-        self.path = path
+    def __init__(self, backend):
+        self._db = backend
+        self.label = backend.label
 
     @staticmethod
-    def path_of(url) -> Path:
-        """The SQLite file of a store URL (to check ``--store`` before any work).
+    def path_of(url) -> Path | None:
+        """Check a store URL before any work: the SQLite file, or None for a PostgreSQL URL.
 
         Parameters
         ----------
@@ -172,14 +160,15 @@ class RoadStore:
 
         Returns
         -------
-        Path
+        Path or None
 
         Raises
         ------
         ParameterError
-            A PostgreSQL or other URL.
+            Another URL scheme.
         """
-        return _path_of(url)
+        text = str(url)
+        return None if text.startswith(("postgresql://", "postgres://")) else sqlite_path(text)
 
     @classmethod
     def open(cls, url) -> "RoadStore":
@@ -188,7 +177,7 @@ class RoadStore:
         Parameters
         ----------
         url : str or Path
-            A file path or ``sqlite:///path``.
+            A file path, ``sqlite:///path`` or ``postgresql://user@host/db`` (PostGIS).
 
         Returns
         -------
@@ -199,27 +188,32 @@ class RoadStore:
         FileFormatError
             The file exists and is not a roadcollab store (it is left untouched).
         ParameterError
-            A PostgreSQL or other URL.
+            Another URL scheme, or a PostgreSQL server that cannot be reached.
         """
-        path = _path_of(url)
-        existed = path.exists() and path.stat().st_size > 0
+        path = cls.path_of(url)
+        existed = path is not None and path.exists() and path.stat().st_size > 0
+        db = backend_for(url)
         try:
-            db = sqlite3.connect(path)
-            if existed:
-                names = {r[0] for r in db.execute("SELECT name FROM sqlite_master WHERE type = 'table'")}
-                row = db.execute("SELECT value FROM meta WHERE key = 'schema_version'").fetchone() \
-                    if "meta" in names else None
-                if row is None or row[0] != str(SCHEMA_VERSION):
-                    db.close()
-                    raise FileFormatError(f"{path}: expected a roadcollab road store (schema_version "
-                                          f"{SCHEMA_VERSION}), got an SQLite file without it; not modified")
-            with db:
-                db.executescript(_SCHEMA)
-                db.execute("INSERT OR IGNORE INTO meta VALUES ('schema_version', ?)", (str(SCHEMA_VERSION),))
-                db.execute("INSERT OR IGNORE INTO meta VALUES ('application', 'roadcollab')")
+            names = db.tables() if existed or path is None else set()
+            ours = "meta" in names and db.query("SELECT value FROM meta WHERE key = 'schema_version'")
+            if (existed or "segment_records" in names) and not (ours and ours[0][0] == str(SCHEMA_VERSION)):
+                raise FileFormatError(f"{db.label}: expected a roadcollab road store (schema_version "
+                                      f"{SCHEMA_VERSION}), got a database without it; not modified")
+            with db.transaction():
+                for statement in _SCHEMA.format(**TYPES[db.kind]).split(";"):
+                    db.execute(statement)
+                for key, value in (("schema_version", str(SCHEMA_VERSION)), ("application", "roadcollab")):
+                    db.execute("INSERT INTO meta (key, value) VALUES (?, ?) ON CONFLICT (key) DO NOTHING",
+                               (key, value))
+                if db.kind == "postgresql":
+                    db.add_spatial_columns()
         except sqlite3.DatabaseError as err:
-            raise FileFormatError(f"{path}: expected an SQLite road store, got {err}; not modified") from None
-        return cls(db, path)
+            db.close()
+            raise FileFormatError(f"{db.label}: expected an SQLite road store, got {err}; not modified") from None
+        except BaseException:
+            db.close()
+            raise
+        return cls(db)
 
     def close(self) -> None:
         """Close the connection."""
@@ -273,15 +267,16 @@ class RoadStore:
         def opt(v):
             return None if v is None or not np.isfinite(v) else float(v)
 
-        with self._db:
-            cur = self._db.execute(
+        with self._db.transaction():
+            rid = self._db.insert(
                 "INSERT INTO segment_records (road_id, direction, from_m, to_m, geometry, iri_m_per_km, iri_in_per_mi,"
                 " iri_low, iri_high, n_vehicles, profile_spacing_m, profile, recorded_at, source)"
                 " VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
                 (str(road_id), int(direction), float(from_m), float(to_m), geom, float(iri_m_per_km),
                  float(iri_m_per_km) * IN_PER_MI, opt(iri_low), opt(iri_high), int(n_vehicles),
                  float(profile_spacing_m), prof.astype("<f8").tobytes(), _now(at), str(source)))
-        return int(cur.lastrowid)
+            self._db.spatial("segment_records", rid)
+        return rid
 
     def record_anomaly(self, road_id: str, direction: int, measure_m: float, lon: float, lat: float, kind: str,
                        side: str, depth_m: float, votes: int = 1, *, merge_m: float = 2.0, source: str = "",
@@ -314,19 +309,19 @@ class RoadStore:
         """
         votes = check_int("votes", votes, low=1)
         t = _now(at)
-        with self._db:
-            row = self._db.execute(
+        with self._db.transaction():
+            rows = self._db.query(
                 "SELECT id, measure_m, lon, lat, depth_m, votes FROM anomalies WHERE road_id = ? AND direction = ?"
                 " AND kind = ? AND abs(measure_m - ?) <= ? ORDER BY abs(measure_m - ?) LIMIT 1",
-                (road_id, int(direction), kind, float(measure_m), float(merge_m), float(measure_m))).fetchone()
-            if row is None:
-                aid = int(self._db.execute(
+                (road_id, int(direction), kind, float(measure_m), float(merge_m), float(measure_m)))
+            if not rows:
+                aid = self._db.insert(
                     "INSERT INTO anomalies (road_id, direction, measure_m, lon, lat, kind, side, depth_m, votes,"
                     " first_seen, last_seen) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
                     (road_id, int(direction), float(measure_m), float(lon), float(lat), kind, side, float(depth_m),
-                     votes, t, t)).lastrowid)
+                     votes, t, t))
             else:
-                aid, m0, lon0, lat0, d0, v0 = row
+                aid, m0, lon0, lat0, d0, v0 = rows[0]
                 w = v0 + votes
 
                 def mix(a, b):
@@ -335,6 +330,7 @@ class RoadStore:
                 self._db.execute("UPDATE anomalies SET measure_m = ?, lon = ?, lat = ?, depth_m = ?, votes = ?,"
                                  " last_seen = ? WHERE id = ?",
                                  (mix(m0, measure_m), mix(lon0, lon), mix(lat0, lat), mix(d0, depth_m), w, t, aid))
+            self._db.spatial("anomalies", aid)
             self._db.execute("INSERT INTO anomaly_records (anomaly_id, measure_m, lon, lat, depth_m, votes,"
                              " recorded_at, source) VALUES (?, ?, ?, ?, ?, ?, ?, ?)",
                              (aid, float(measure_m), float(lon), float(lat), float(depth_m), votes, t, source))
@@ -349,12 +345,12 @@ class RoadStore:
         -------
         list of StoredSegment
         """
-        rows = self._db.execute(
+        rows = self._db.query(
             "SELECT r.road_id, r.direction, r.from_m, r.to_m, r.geometry, r.iri_m_per_km, r.iri_in_per_mi, r.iri_low,"
-            " r.iri_high, r.n_vehicles, r.profile_spacing_m, r.profile, k.first, k.last, k.n FROM segment_records r"
-            " JOIN (SELECT road_id, direction, from_m, to_m, MIN(recorded_at) AS first, MAX(recorded_at) AS last,"
+            " r.iri_high, r.n_vehicles, r.profile_spacing_m, r.profile, k.first_at, k.last_at, k.n FROM segment_records r"
+            " JOIN (SELECT road_id, direction, from_m, to_m, MIN(recorded_at) AS first_at, MAX(recorded_at) AS last_at,"
             " MAX(id) AS latest, COUNT(*) AS n FROM segment_records GROUP BY road_id, direction, from_m, to_m) k"
-            " ON r.id = k.latest ORDER BY r.road_id, r.direction DESC, r.from_m").fetchall()
+            " ON r.id = k.latest ORDER BY r.road_id, r.direction DESC, r.from_m")
         return [self._segment(r) for r in rows]
 
     @staticmethod
@@ -372,9 +368,9 @@ class RoadStore:
         -------
         list of StoredAnomaly
         """
-        rows = self._db.execute("SELECT id, road_id, direction, measure_m, lon, lat, kind, side, depth_m, votes,"
-                                " first_seen, last_seen FROM anomalies ORDER BY road_id, direction DESC, measure_m")
-        return [StoredAnomaly(*r) for r in rows.fetchall()]
+        rows = self._db.query("SELECT id, road_id, direction, measure_m, lon, lat, kind, side, depth_m, votes,"
+                              " first_seen, last_seen FROM anomalies ORDER BY road_id, direction DESC, measure_m")
+        return [StoredAnomaly(*r) for r in rows]
 
     def history(self, road_id: str, direction: int | None = None, from_m: float | None = None) -> list[dict]:
         """Every stored estimate of a road's segments, oldest first.
@@ -403,4 +399,4 @@ class RoadStore:
             args.append(float(from_m))
         keys = ("road_id", "direction", "from_m", "to_m", "iri_m_per_km", "iri_low", "iri_high", "n_vehicles",
                 "recorded_at", "source")
-        return [dict(zip(keys, r)) for r in self._db.execute(sql + " ORDER BY id", args).fetchall()]
+        return [dict(zip(keys, r)) for r in self._db.query(sql + " ORDER BY id", args)]
