@@ -8,7 +8,9 @@ one ``serve`` and ``export`` will share.
 Reads the drives (with ``lat_deg, lon_deg`` columns, :mod:`roadcollab.io.gps`), matches them to
 the network (:mod:`roadcollab.geo.matching`; without ``--network`` each drive's own GPS track is
 its road), surveys every lane (:mod:`roadcollab.experiments.road_survey`), adds the result to the
-store (:mod:`roadcollab.store`), and writes the store's whole content as files.
+store (:mod:`roadcollab.store`), and writes the store's whole content as files. The store is
+updated before the files are written: if writing them fails, ``--out`` is left as it was and the
+store keeps the new estimates (a second run rewrites the files from it).
 """
 
 from __future__ import annotations
@@ -46,14 +48,18 @@ def _write_outputs(out, store, *, tiles: str | None) -> dict:
     seg_fc, an_fc = export.segments_geojson(segs), export.anomalies_geojson(anoms)
     export.write_geojson(out / "segments.geojson", seg_fc)
     export.write_geojson(out / "anomalies.geojson", an_fc)
-    export.write_geopackage(out / "roads.gpkg", segs, anoms)
+    notes = []
+    if segs:
+        export.write_geopackage(out / "roads.gpkg", segs, anoms)
+    else:
+        notes.append("no segment is fully covered by the drives yet: roads.gpkg was not written")
     export.write_segment_csv(out / "segments.csv", segs)
     (out / "profiles").mkdir()
     for s in segs:
         export.write_opencrg(out / "profiles" / f"{s.road_id}_{'fwd' if s.direction > 0 else 'bwd'}_"
                                                 f"{s.from_m:06.0f}.crg", s)
     write_map(out / "map.html", seg_fc, an_fc, tiles=tiles)
-    return {"n_segments": len(segs), "n_anomalies": len(anoms)}
+    return {"n_segments": len(segs), "n_anomalies": len(anoms), "notes": notes}
 
 
 def map_command(drive_paths: list[str], out_dir, *, store_url, command: str, network_path=None,
@@ -188,5 +194,7 @@ def run(args: argparse.Namespace, command_line: str) -> int:
     roads = sorted({(p["road_id"], p["direction"]) for p in s["passes"]})
     print(f"matched {len(s['passes'])} passes on {len(roads)} lane(s): "
           + ", ".join(f"{r}{d:+d}" for r, d in roads))
+    for note in s["notes"]:
+        print(f"note: {note}")
     print(f"store {args.store}: {s['n_segments']} segments, {s['n_anomalies']} anomalies; wrote {args.out}/map.html")
     return 0

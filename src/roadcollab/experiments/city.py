@@ -44,7 +44,7 @@ CITY_ROADS = {"main": [(0.0, 0.0), (300.0, 0.0), (600.0, 0.0)], "cross": [(600.0
 #: (road, measure of the centre m, track, depth m, length m) of every pothole.
 CITY_POTHOLES = (("main", 150.0, "both", 0.05, 0.6), ("main", 420.0, "left", 0.04, 0.5),
                  ("cross", 230.0, "right", 0.06, 0.8), ("cross", 380.0, "both", 0.035, 0.5),
-                 ("service", 300.0, "both", 0.05, 0.6))
+                 ("service", 330.0, "both", 0.05, 0.6))
 ROUTE_SPEEDS = (12.0, 15.0, 18.0, (13.0, 17.0), 14.0)
 SERVICE_SPEEDS = (15.0, 16.0)
 SAMPLE_RATE = 100.0
