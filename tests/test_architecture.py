@@ -17,14 +17,19 @@ ALLOWED = {
     "privacy": {"lti", "models", "estimation", "wire"},
     "collaboration": {"lti", "models", "estimation", "wire", "privacy"},
     "io": {"lti", "models"},
-    "experiments": {"lti", "models", "estimation", "detection", "wire", "privacy", "collaboration", "io"},
-    "reporting": {"lti", "models", "estimation", "detection", "wire", "privacy", "collaboration", "io", "experiments"},
+    "geo": {"lti", "models", "io"},
+    "store": {"lti", "models", "io", "geo"},
+    "experiments": {"lti", "models", "estimation", "detection", "wire", "privacy", "collaboration", "io", "geo",
+                    "store"},
+    "reporting": {"lti", "models", "estimation", "detection", "wire", "privacy", "collaboration", "io", "experiments",
+                  "geo", "store"},
     "cli": {"lti", "models", "estimation", "detection", "wire", "privacy", "collaboration", "io", "experiments",
-            "reporting"},
+            "reporting", "geo", "store"},
 }
 BASE = {"errors", "_validation", "__version__"}
 #: Imports allowed inside functions: optional or heavy third-party modules only.
-LAZY_OK = {"control", "slycot", "dask", "matplotlib", "phe", "cryptography", "rich", "tomllib", "tomli", "gmpy2"}
+LAZY_OK = {"control", "slycot", "dask", "matplotlib", "phe", "cryptography", "rich", "tomllib", "tomli", "gmpy2",
+           "psycopg"}
 #: Heavy submodules of a core dependency that may be imported inside functions (SciPy's ``signal`` and
 #: ``stats`` packages take about 1 s to import; the kernels that use them import them when first called).
 LAZY_OK_SUBMODULES = {"scipy.signal", "scipy.stats"}

@@ -20,6 +20,8 @@ COMMANDS = {
     "sweep": ["sweep", "--runs", "1"],
     "iri": ["iri"],
     "estimate": ["estimate", "--drive", "{drive}"],
+    "simulate-drives": ["simulate-drives"],
+    "map": ["map", "--drive", "{drive}", "--store", "{store}"],
 }
 
 
@@ -46,7 +48,7 @@ def test_no_command_touches_a_users_folder(name, tmp_path, monkeypatch, capsys):
     elsewhere = tmp_path / "elsewhere"
     elsewhere.mkdir()
     before = _snapshot(tmp_path)
-    args = [a.format(drive=drive) for a in COMMANDS[name]]
+    args = [a.format(drive=drive, store=tmp_path / "elsewhere" / "road.sqlite") for a in COMMANDS[name]]
     cases = [(elsewhere, str(home)), (elsewhere, str(home / "drives")), (elsewhere, str(tmp_path)),
              (home / "drives", "."), (home / "drives", ".."), (home, "drives")]
     for cwd, out in cases:

@@ -9,6 +9,7 @@ module parses the options and stages the folder (``d1.csv``, ``d1.toml``, ..., `
 from __future__ import annotations
 
 import argparse
+from pathlib import Path
 
 from ..errors import ParameterError
 from ._arguments import SEED, count, help_range, ranged, ranged_list
@@ -20,7 +21,7 @@ _LENGTH = ranged("road length", 50, 200_000, "m")
 _RATE = ranged("sample rate", 20, 10_000, "Hz")
 _NOISE = ranged("noise standard deviation", 0, 20, "m/s^2")
 
-__all__ = ["NAME", "add_parser", "simulate_command", "run"]
+__all__ = ["NAME", "add_parser", "simulate_command", "simulate_gps_command", "run"]
 
 NAME = "simulate-drives"
 
@@ -65,6 +66,49 @@ def simulate_command(out_dir, *, command: str, vehicles: int = 3, speeds=(15.0,)
             "speeds_mps": [s.drive.speed for s in sim.drives]}
 
 
+def simulate_gps_command(out_dir, *, command: str, network_path=None, vehicles: int = 3, speeds=None,
+                         seed: int = 0) -> dict:
+    """``simulate-drives --gps [--network FILE]``: GPS drives on a road network (:mod:`roadcollab.experiments.city`).
+
+    Parameters
+    ----------
+    out_dir : str or Path
+        Output folder (staged).
+    command : str
+        The command line, recorded in ``config.json``.
+    network_path : str or Path, optional
+        A road network GeoJSON whose every road is driven; default the built-in city.
+    vehicles : int
+        Drives per road of ``network_path``.
+    speeds : sequence of float, optional
+        m/s, cycled (``network_path`` only; the city has its own mix).
+    seed : int
+        Root seed.
+
+    Returns
+    -------
+    dict
+        ``out_dir``, ``drives`` (CSV names), ``network``.
+    """
+    from ..experiments.city import write_city
+    from ..geo.network import read_network
+    from ..reporting.records import staged_output, write_config
+
+    network = None if network_path is None else read_network(network_path)
+    with staged_output(out_dir, NAME) as out:
+        files = write_city(out, seed=seed, network=network, speeds=speeds, vehicles=vehicles)
+        write_config(out / "config.json", command=command, seed=seed,
+                     config={"network": None if network_path is None else str(network_path), "vehicles": vehicles,
+                             "speeds_mps": None if speeds is None else list(speeds)})
+        drives = " ".join(f"--drive {out_dir}/{p.name}" for p in files["drives"])
+        (out / "README.md").write_text(
+            f"# Simulated GPS drives\n\nMade by `{command}` (true potholes in `truth.json`).\n\nMap them:\n\n"
+            f"    roadcollab map {drives} --network {out_dir}/network.geojson --store {out_dir}-roads.sqlite "
+            f"--out {out_dir}-map\n")
+    return {"out_dir": str(out_dir), "drives": [p.name for p in files["drives"]],
+            "network": str(Path(out_dir) / "network.geojson")}
+
+
 def add_parser(subparsers) -> argparse.ArgumentParser:
     """Add the ``simulate-drives`` subcommand and its options.
 
@@ -104,6 +148,13 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
                    help=f"accelerometer noise per sample (default 0.05; {help_range(_NOISE)})")
     p.add_argument("--gravity", action="store_true", help="log the accelerations with gravity (+9.80665 m/s^2)")
     p.add_argument("--seed", type=SEED, default=0, help=f"root seed (default 0; {help_range(SEED)})")
+    p.add_argument("--gps", action="store_true",
+                   help="GPS drives on a road network instead (lat_deg,lon_deg at 5 Hz with 3 m errors, 100 Hz "
+                        "accelerometers): the built-in city (a junction and a road 10 m from another) or --network; "
+                        "writes network.geojson, drive<j>.csv/.toml, truth.json")
+    p.add_argument("--network", metavar="FILE", default=None,
+                   help="with --gps: a road network GeoJSON (LineStrings with road_id); every road is driven forward "
+                        "by --vehicles vehicles at --speeds")
     return p
 
 
@@ -122,6 +173,16 @@ def run(args: argparse.Namespace, command_line: str) -> int:
     int
         Exit status 0.
     """
+    if args.network is not None and not args.gps:
+        raise ParameterError("--network applies to --gps only")
+    if args.gps:
+        given = "--speeds" in command_line.split() or any(a.startswith("--speeds=") for a in command_line.split())
+        summary = simulate_gps_command(args.out, command=command_line, network_path=args.network,
+                                       vehicles=args.vehicles, speeds=args.speeds if given else None, seed=args.seed)
+        print(f"wrote {len(summary['drives'])} GPS drives and {summary['network']}; map them: roadcollab map "
+              + " ".join(f"--drive {args.out}/{d}" for d in summary["drives"])
+              + f" --network {summary['network']} --store {args.out}-roads.sqlite --out {args.out}-map")
+        return 0
     road = "synthetic" if args.length_m is not None else args.road
     if args.length_m is not None and args.road == "measured" and "--road" in command_line.split():
         raise ParameterError("--length-m applies to --road synthetic only (the measured profile is 544 m)")

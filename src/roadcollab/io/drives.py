@@ -71,6 +71,7 @@ from ..errors import FileFormatError, ParameterError
 from ..models.vehicle import HalfCarParameters, half_car_model
 from .drive_log import CSV_COLUMNS, MAX_SAMPLE_RATE, MIN_ROWS, OPTIONAL_COLUMNS, UNIFORM_RTOL, DriveLog, read_drive_log
 from .drive_params import ACCEL_UNITS, params_path_for, read_drive_params
+from .gps import GpsFixes, read_gps_log
 from .limits import MAX_ACCEL, FileLimits
 
 __all__ = ["CSV_COLUMNS", "MIN_ROWS", "MAX_SAMPLE_RATE", "UNIFORM_RTOL", "MIN_SAMPLE_RATE", "MODE_FACTOR", "Drive",
@@ -114,6 +115,8 @@ class Drive:
         Largest relative deviation of a logged time step from the median step.
     accel_unit : str
         The ``accel_unit`` of the parameters file; ``accel`` is in m/s^2 whatever it is.
+    gps : GpsFixes or None
+        The ``lat_deg, lon_deg`` fixes of the log, if it has them (:mod:`roadcollab.io.gps`).
     """
 
     csv_path: Path
@@ -130,6 +133,7 @@ class Drive:
     resampled: bool = False
     max_jitter: float = 0.0
     accel_unit: str = "m/s^2"
+    gps: GpsFixes | None = None
 
     @property
     def n_samples(self) -> int:
@@ -246,7 +250,7 @@ def load_drive(csv_path, params_path=None, *, limits: FileLimits | None = None) 
     if csv_path.suffix.lower() in (".toml", ".json"):
         raise FileFormatError(f"{csv_path}: expected the drive's acceleration CSV here (its parameters file is "
                              f"found beside it), got a parameters file")
-    log = read_drive_log(csv_path, limits=limits)
+    log, gps = read_gps_log(csv_path, limits=limits)
     params_path = params_path_for(csv_path) if params_path is None else Path(params_path)
     p = read_drive_params(params_path, speed_column=log.column)
     _check_rate(log, csv_path, params_path, p["params"])
@@ -264,7 +268,7 @@ def load_drive(csv_path, params_path=None, *, limits: FileLimits | None = None) 
                  sample_rate=log.sample_rate, speed=speed, start_m=p["start_m"],
                  sensor_noise_std=p["sensor_noise_std"], params=p["params"], positions=positions,
                  speed_source=source, resampled=log.resampled, max_jitter=log.max_jitter,
-                 accel_unit=p["accel_unit"])
+                 accel_unit=p["accel_unit"], gps=gps)
 
 
 def load_drives(paths, *, limits: FileLimits | None = None) -> list[Drive]:
