@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from ..experiments.drive_estimation import AnomalyRow
-from ..experiments.fleet_estimation import FLEET_ESTIMATORS, FleetEstimates
+from ..experiments.fleet_estimation import FLEET_ESTIMATORS, FleetEstimates, covered_runs
 from ..models.iri import IRISegments
 from . import plotting_drives
 from .drive_tables import write_array_csv, write_final_estimate
@@ -155,8 +155,9 @@ def write_fleet_estimates(est: FleetEstimates, out, *, command: str, anomalies: 
     _tables(est, out, anomalies)
     write_iri_csv(out / "iri.csv", iri)
     _figure(est, out)
-    ok = est.coverage > 0
-    length = float(est.position[ok][-1] - est.position[ok][0])
+    # Road covered by any drive, m (separate stretches are summed, not bridged).
+    length = float(sum(est.position[r][-1] - est.position[r][0] for r in covered_runs(
+        np.where(est.coverage[:, None] > 0, 0.0, np.nan))))
     config = {"drives": [d.describe() for d in est.drives], "grid": "distance", "spacing_m": est.spacing,
               "band_low_per_m": est.band_low_per_m, "band_low_hz": est.band_low_hz, "gamma": est.gamma,
               "aligned": est.aligned, "offsets_m": est.offsets.tolist()}
