@@ -73,7 +73,7 @@ def _tables(est: FleetEstimates, out: Path, anomalies: list[AnomalyRow]) -> None
     named = [(f"elevation_{name}_v{j + 1}_{side}", est.elevation[name][j][:, c])
              for j in range(V) for name in FLEET_ESTIMATORS for c, side in enumerate(_SIDES)]
     write_array_csv(out / "road_estimates.csv", ["position_m"] + [n for n, _ in named],    # blank: did not pass
-                    np.column_stack([est.position] + [series for _, series in named]))
+                    [est.position] + [series for _, series in named])
     write_final_estimate(out / "final_estimate.csv", est.position, est.fused, est.elevation["collaborative"][-1],
                          est.coverage)
     rows = [{"drive": j + 1, "csv": d.csv_path.name, "start_m_given": d.start_m,
