@@ -126,7 +126,8 @@ def _method_lines(est: FleetEstimates) -> list[str]:
 
 
 def write_fleet_estimates(est: FleetEstimates, out, *, command: str, anomalies: list[AnomalyRow],
-                          iri: IRISegments | None, notes: list[str], elapsed: float | None = None) -> dict:
+                          iri: IRISegments | None, notes: list[str], elapsed: float | None = None,
+                          cleaning: list[dict] | None = None) -> dict:
     """Write every output of ``roadcollab estimate`` on distance (module docstring); returns the summary.
 
     Parameters
@@ -144,6 +145,8 @@ def write_fleet_estimates(est: FleetEstimates, out, *, command: str, anomalies: 
         Caveats for the report and ``config.json``.
     elapsed : float, optional
         Wall time, s.
+    cleaning : list of dict, optional
+        Per drive, what :func:`roadcollab.io.drive_clean.clean_drive` did (``config.json``).
 
     Returns
     -------
@@ -160,7 +163,7 @@ def write_fleet_estimates(est: FleetEstimates, out, *, command: str, anomalies: 
         np.where(est.coverage[:, None] > 0, 0.0, np.nan))))
     config = {"drives": [d.describe() for d in est.drives], "grid": "distance", "spacing_m": est.spacing,
               "band_low_per_m": est.band_low_per_m, "band_low_hz": est.band_low_hz, "gamma": est.gamma,
-              "aligned": est.aligned, "offsets_m": est.offsets.tolist()}
+              "aligned": est.aligned, "offsets_m": est.offsets.tolist(), "cleaning": cleaning}
     write_config(out / "config.json", command=command, seed=None, config=config,
                  extra={"notes": notes, **({"elapsed_s": elapsed} if elapsed is not None else {})})
     band_note = (f"The elevation holds wavelengths below about {1 / est.band_low_per_m:.3g} m only; the Golden Car "
