@@ -244,6 +244,14 @@ def test_separate_stretches_are_named(fleet, tmp_path, capsys):
     report = (tmp_path / "out" / "report.md").read_text()
     assert "do not all overlap by a segment" in report and "drive 2 on 3000.0-35" in report
     assert list(_columns(tmp_path / "out" / "final_estimate.csv")) == list(FINAL_COLUMNS)
+    cfg = json.loads((tmp_path / "out" / "config.json").read_text())
+    assert [c["spikes_repaired"] for c in cfg["config"]["cleaning"]] == [0, 0]
+    # IRI and anomalies on each stretch (the gap is not bridged; before, neither was computed).
+    starts = _columns(tmp_path / "out" / "iri.csv")["start_m"]
+    assert starts.min() == 0.0 and np.any(starts == 3000.0) and not np.any((starts > 600) & (starts < 3000))
+    with open(tmp_path / "out" / "anomalies.csv") as fh:
+        pos = [float(r["position_m"]) for r in csv.DictReader(fh)]
+    assert any(p < 600 for p in pos) and any(p > 3000 for p in pos)
 
 
 def test_final_estimate_has_one_schema(clean_run, fleet, tmp_path):

@@ -58,7 +58,7 @@ def _stretches_note(stretches) -> str:
 
 
 def _distance_grid(drives, out, *, command: str, segment_length: float, align: bool, max_offset: float,
-                   spacing: float, t0: float, notes: list[str]) -> dict:
+                   spacing: float, t0: float, notes: list[str], cleaning: list[dict]) -> dict:
     """Drives on different grids (or aligned): every estimate on one distance grid."""
     from ..experiments.fleet_estimation import drive_stretches, estimate_fleet, find_fleet_anomalies, fused_iri
     from ..reporting.fleet_report import write_fleet_estimates
@@ -82,7 +82,7 @@ def _distance_grid(drives, out, *, command: str, segment_length: float, align: b
     if resampled:
         notes.append(f"Jittery time stamps were resampled (cubic spline at the mean rate): {', '.join(resampled)}.")
     summary = write_fleet_estimates(est, out, command=command, anomalies=anomalies, iri=iri, notes=notes,
-                                    elapsed=time.perf_counter() - t0)
+                                    elapsed=time.perf_counter() - t0, cleaning=cleaning)
     return {**summary, "stretches": [{"drives": g, "start_m": lo, "end_m": hi} for g, lo, hi in stretches]}
 
 
@@ -141,12 +141,13 @@ def estimate_command(drive_paths: list[str], out_dir, *, command: str, limits: F
         drives = [d for d, _ in cleaned]
         cleanings = [c for _, c in cleaned]
         notes = [cleaning_note(drives, cleanings)]
+        described = [c.describe(d.sample_rate) for d, c in cleaned]
         if common_time_grid(drives) and not align:
             summary = _time_grid(drives, out, command=command, segment_length=segment_length, t0=t0, notes=notes,
-                                 cleaning=[c.describe(d.sample_rate) for d, c in cleaned])
+                                 cleaning=described)
         else:
             summary = _distance_grid(drives, out, command=command, segment_length=segment_length, align=align,
-                                     max_offset=max_offset, spacing=spacing, t0=t0, notes=notes)
+                                     max_offset=max_offset, spacing=spacing, t0=t0, notes=notes, cleaning=described)
     return {**summary, "out_dir": str(out_dir), "spikes_repaired": [c.n_spikes for c in cleanings]}
 
 

@@ -54,7 +54,7 @@ def simulate_command(out_dir, *, command: str, vehicles: int = 3, speeds=(15.0,)
     with staged_output(out_dir, NAME) as out:
         paths = write_drives(sim, out)
         write_array_csv(out / "road.csv", ["distance_m", "elevation_left_m", "elevation_right_m"],
-                        [[x, *h] for x, h in zip(sim.road.distance.tolist(), sim.road.elevation.tolist())])
+                        [sim.road.distance, sim.road.elevation[:, 0], sim.road.elevation[:, 1]])
         write_config(out / "config.json", command=command, seed=seed, config=sim.config)
         drives = " ".join(f"--drive {out_dir}/{p.name}" for p in paths)
         (out / "README.md").write_text(

@@ -55,7 +55,7 @@ from .distance_maps import band_limit_stretch, covered, distance_grid, elevation
 from .drive_estimation import AnomalyRow, integrate_elevation, window_plan, window_slices
 
 __all__ = ["FLEET_ESTIMATORS", "FleetEstimates", "VehicleRecord", "invert_drive", "estimate_fleet",
-           "find_fleet_anomalies", "fused_iri", "drive_stretches"]
+           "find_fleet_anomalies", "fused_iri", "drive_stretches", "covered_runs"]
 
 FLEET_ESTIMATORS = ("single", "inversion", "collaborative", "fused")
 
@@ -325,19 +325,48 @@ def find_fleet_anomalies(est: FleetEstimates, spec: DetectorSpec | None = None) 
         Estimator ``fused``, vehicle = the number of drives.
     """
     spec = DetectorSpec() if spec is None else spec
-    ok = covered(est.fused)
-    x, h = est.position[ok], est.fused[ok]
     v = float(np.mean([d.speed for d in est.drives]))
     rate = v / est.spacing
-    w = np.zeros_like(h)
-    w[:-1] = np.diff(h, axis=0) * rate
     V = len(est.drives)
-    return [AnomalyRow("fused", V, float(det.position), det.side, det.kind, float(det.depth), float(det.confidence))
-            for det in detect_anomalies(w, positions=x, speed=v, sample_rate=rate, spec=spec)]
+    rows, errors = [], []
+    for run in covered_runs(est.fused):       # separate stretches of road: one search each
+        x, h = est.position[run], est.fused[run]
+        w = np.zeros_like(h)
+        w[:-1] = np.diff(h, axis=0) * rate
+        try:
+            dets = detect_anomalies(w, positions=x, speed=v, sample_rate=rate, spec=spec)
+        except ParameterError as err:          # e.g. a stretch shorter than the longest template
+            errors.append(err)
+            continue
+        rows += [AnomalyRow("fused", V, float(det.position), det.side, det.kind, float(det.depth),
+                            float(det.confidence)) for det in dets]
+    if errors and len(errors) == len(covered_runs(est.fused)):
+        raise errors[0]
+    return rows
+
+
+def covered_runs(elevation: np.ndarray) -> list[slice]:
+    """The contiguous covered stretches of an elevation on the grid, in road order.
+
+    Parameters
+    ----------
+    elevation : (n, C) ndarray
+        m, NaN where not covered.
+
+    Returns
+    -------
+    list of slice
+        Grid index ranges.
+    """
+    ok = covered(elevation).astype(np.int8)
+    edges = np.flatnonzero(np.diff(np.concatenate([[0], ok, [0]])))
+    return [slice(int(a), int(b)) for a, b in zip(edges[::2], edges[1::2])]
 
 
 def fused_iri(est: FleetEstimates, segment_length: float) -> tuple[IRISegments | None, str | None]:
-    """IRI per segment of the fused elevation over the stretch any drive passed, or a note why not.
+    """IRI per segment of the fused elevation over the stretches any drive passed, or a note why not.
+
+    Every separate covered stretch (drives that do not overlap) has its own segments from its start.
 
     Parameters
     ----------
@@ -348,15 +377,21 @@ def fused_iri(est: FleetEstimates, segment_length: float) -> tuple[IRISegments |
     Returns
     -------
     IRISegments or None
-        None if the fused stretch is shorter than one segment (or the IRI's initialisation).
+        None if every fused stretch is shorter than one segment (or the IRI's initialisation).
     str or None
-        The note in that case.
+        The note for the stretches without an IRI (None if every stretch has one).
     """
-    ok = covered(est.fused)
-    try:
-        return iri_segments(est.position[ok], est.fused[ok], segment_length), None
-    except ParameterError as err:
-        return None, f"IRI was not computed: {err}."
+    parts, notes = [], []
+    for run in covered_runs(est.fused):       # separate stretches of road: segments of each
+        try:
+            parts.append(iri_segments(est.position[run], est.fused[run], segment_length))
+        except ParameterError as err:
+            notes.append(f"{est.position[run][0]:.1f}-{est.position[run][-1]:.1f} m: {err}")
+    if not parts:
+        return None, f"IRI was not computed: {'; '.join(notes) or 'no drive covers the grid'}."
+    iri = IRISegments(*(np.concatenate([getattr(p, k) for p in parts]) for k in ("start", "end", "left", "right")),
+                      tracks=parts[0].tracks)
+    return iri, (f"IRI was not computed on {'; '.join(notes)}." if notes else None)
 
 
 def drive_stretches(drives: list[Drive], min_overlap: float, offsets=None) -> list[tuple[list[int], float, float]]:

@@ -31,8 +31,10 @@ def _cell(v: float) -> str:
     return repr(v) if v == v else ""
 
 
-def write_array_csv(path, columns, table) -> Path:
-    """Write a float table as CSV at full precision (``repr``), NaN as an empty cell.
+def write_array_csv(path, columns, series) -> Path:
+    """Write columns of floats as CSV at full precision (``repr``), NaN as an empty cell.
+
+    The rows are assembled a chunk at a time, so no copy of the whole table is made.
 
     Parameters
     ----------
@@ -40,8 +42,8 @@ def write_array_csv(path, columns, table) -> Path:
         Output file (overwritten).
     columns : sequence of str
         Header, one name per column.
-    table : (n, len(columns)) array_like
-        Values.
+    series : sequence of (n,) array_like
+        The columns' values, one array per name.
 
     Returns
     -------
@@ -49,11 +51,12 @@ def write_array_csv(path, columns, table) -> Path:
         ``path``.
     """
     path = Path(path)
-    table = np.asarray(table, dtype=float)
+    series = [np.asarray(s, dtype=float) for s in series]
+    n = series[0].shape[0] if series else 0
     with path.open("w", newline="") as fh:
         fh.write(",".join(columns) + "\r\n")
-        for i in range(0, table.shape[0], _CHUNK):
-            rows = table[i:i + _CHUNK].tolist()
+        for i in range(0, n, _CHUNK):
+            rows = np.column_stack([s[i:i + _CHUNK] for s in series]).tolist()
             fh.write("".join(",".join(map(_cell, r)) + "\r\n" for r in rows))
     return path
 
@@ -76,5 +79,6 @@ def write_final_estimate(path, position, fused, collaborative, coverage) -> Path
     Path
     """
     cov = np.asarray(coverage, dtype=float)
-    table = np.column_stack([position, fused, np.where(cov > 0, cov, np.nan), collaborative])
-    return write_array_csv(path, FINAL_COLUMNS, table)
+    fused, collaborative = np.asarray(fused), np.asarray(collaborative)
+    return write_array_csv(path, FINAL_COLUMNS, [position, fused[:, 0], fused[:, 1], np.where(cov > 0, cov, np.nan),
+                                                 collaborative[:, 0], collaborative[:, 1]])

@@ -52,7 +52,7 @@ def _write_tables(est: DriveEstimates, out: Path, anomaly_rows: list[AnomalyRow]
     and ``anomalies.csv`` in ``out``."""
     named = _estimate_series(est)
     write_array_csv(out / "road_estimates.csv", ["position_m", "time_s"] + [n for n, _ in named],
-                    np.column_stack([est.positions, est.time] + [series for _, series in named]))
+                    [est.positions, est.time] + [series for _, series in named])
     write_final_estimate(out / "final_estimate.csv", est.positions, est.elevation["fused"][-1],
                          est.elevation["collaborative"][-1], np.full(est.n_samples, len(est.drives)))
     write_rows(out / "anomalies.csv", anomaly_rows, AnomalyRow)

@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from ..experiments.drive_estimation import AnomalyRow
-from ..experiments.fleet_estimation import FLEET_ESTIMATORS, FleetEstimates
+from ..experiments.fleet_estimation import FLEET_ESTIMATORS, FleetEstimates, covered_runs
 from ..models.iri import IRISegments
 from . import plotting_drives
 from .drive_tables import write_array_csv, write_final_estimate
@@ -73,7 +73,7 @@ def _tables(est: FleetEstimates, out: Path, anomalies: list[AnomalyRow]) -> None
     named = [(f"elevation_{name}_v{j + 1}_{side}", est.elevation[name][j][:, c])
              for j in range(V) for name in FLEET_ESTIMATORS for c, side in enumerate(_SIDES)]
     write_array_csv(out / "road_estimates.csv", ["position_m"] + [n for n, _ in named],    # blank: did not pass
-                    np.column_stack([est.position] + [series for _, series in named]))
+                    [est.position] + [series for _, series in named])
     write_final_estimate(out / "final_estimate.csv", est.position, est.fused, est.elevation["collaborative"][-1],
                          est.coverage)
     rows = [{"drive": j + 1, "csv": d.csv_path.name, "start_m_given": d.start_m,
@@ -126,7 +126,8 @@ def _method_lines(est: FleetEstimates) -> list[str]:
 
 
 def write_fleet_estimates(est: FleetEstimates, out, *, command: str, anomalies: list[AnomalyRow],
-                          iri: IRISegments | None, notes: list[str], elapsed: float | None = None) -> dict:
+                          iri: IRISegments | None, notes: list[str], elapsed: float | None = None,
+                          cleaning: list[dict] | None = None) -> dict:
     """Write every output of ``roadcollab estimate`` on distance (module docstring); returns the summary.
 
     Parameters
@@ -144,6 +145,8 @@ def write_fleet_estimates(est: FleetEstimates, out, *, command: str, anomalies: 
         Caveats for the report and ``config.json``.
     elapsed : float, optional
         Wall time, s.
+    cleaning : list of dict, optional
+        Per drive, what :func:`roadcollab.io.drive_clean.clean_drive` did (``config.json``).
 
     Returns
     -------
@@ -155,11 +158,12 @@ def write_fleet_estimates(est: FleetEstimates, out, *, command: str, anomalies: 
     _tables(est, out, anomalies)
     write_iri_csv(out / "iri.csv", iri)
     _figure(est, out)
-    ok = est.coverage > 0
-    length = float(est.position[ok][-1] - est.position[ok][0])
+    # Road covered by any drive, m (separate stretches are summed, not bridged).
+    length = float(sum(est.position[r][-1] - est.position[r][0] for r in covered_runs(
+        np.where(est.coverage[:, None] > 0, 0.0, np.nan))))
     config = {"drives": [d.describe() for d in est.drives], "grid": "distance", "spacing_m": est.spacing,
               "band_low_per_m": est.band_low_per_m, "band_low_hz": est.band_low_hz, "gamma": est.gamma,
-              "aligned": est.aligned, "offsets_m": est.offsets.tolist()}
+              "aligned": est.aligned, "offsets_m": est.offsets.tolist(), "cleaning": cleaning}
     write_config(out / "config.json", command=command, seed=None, config=config,
                  extra={"notes": notes, **({"elapsed_s": elapsed} if elapsed is not None else {})})
     band_note = (f"The elevation holds wavelengths below about {1 / est.band_low_per_m:.3g} m only; the Golden Car "
