@@ -16,6 +16,7 @@ import pytest
 
 from roadcollab import FileFormatError, ParameterError
 from roadcollab.cli.main import build_parser, main
+from roadcollab.reporting.output_folder import MANIFEST
 from roadcollab.io.drive_params import write_drive_params
 from roadcollab.io.drives import load_drive, read_drive_csv
 from roadcollab.io.limits import FileLimits
@@ -218,6 +219,7 @@ def test_failed_or_interrupted_run_leaves_previous_results(tmp_path, capsys, mon
     out = tmp_path / "out"
     out.mkdir()
     (out / "report.md").write_text("previous")
+    (out / MANIFEST).write_text(json.dumps({"command": "estimate", "files": ["report.md"]}))  # an earlier result
     bad = _drive(tmp_path, rows=_with_row(3, "0.015,nan,0"))
     assert _cli(capsys, ["estimate", "--drive", str(bad), "--out", str(out)])[0] == 2
     import roadcollab.reporting.drives_report as report   # the command imports it when it runs
@@ -226,9 +228,9 @@ def test_failed_or_interrupted_run_leaves_previous_results(tmp_path, capsys, mon
         raise KeyboardInterrupt
 
     monkeypatch.setattr(report, "write_estimates", killed)
-    with pytest.raises(KeyboardInterrupt):
-        main(["estimate", "--drive", str(path), "--out", str(out)])
-    assert [p.name for p in out.iterdir()] == ["report.md"] and (out / "report.md").read_text() == "previous"
+    assert main(["estimate", "--drive", str(path), "--out", str(out)]) == 130  # Ctrl-C: one line, status 130
+    assert sorted(p.name for p in out.iterdir()) == [MANIFEST, "report.md"]
+    assert (out / "report.md").read_text() == "previous"
     assert not list(tmp_path.glob(".out.*"))
 
 

@@ -15,9 +15,10 @@ import re
 from ..errors import FileFormatError, ParameterError
 from ..io.limits import DEFAULT_MAX_FILE_MB, DEFAULT_MAX_ROWS, FileLimits, check_regular_file
 from ._arguments import MAX_FILE_MB, MAX_ROWS, SEED, SPEED, WORKERS, add_check, count, help_range, plural, ranged
+from ._outputs import input_paths, out_path
 from ._table import print_table
 
-__all__ = ["positive_int", "nonneg_int", "positive_float", "paillier_bits", "add_out_option", "add_dask_options",
+__all__ = ["input_paths", "out_path", "positive_int", "nonneg_int", "positive_float", "paillier_bits", "add_out_option", "add_dask_options",
            "add_road_options", "add_limit_options", "add_seed_option", "file_limits", "dask_options",
            "check_dask_options", "command_line", "progress", "run_with_progress", "print_table", "plural",
            "config_from_args"]
@@ -144,8 +145,11 @@ class _HelpFormatter(argparse.RawDescriptionHelpFormatter):
 # --- common options ------------------------------------------------------------------------------
 
 def add_out_option(p: argparse.ArgumentParser) -> None:
-    """``--out DIR`` (required): the folder every study writes its outputs to."""
-    p.add_argument("--out", type=Path, required=True, help="output folder")
+    """``--out DIR`` (required): the folder every study writes its outputs to (absent, empty or a previous
+    result of the same command: README "Output folders")."""
+    p.add_argument("--out", type=out_path, required=True,
+                   help="output folder: absent, empty, or a previous result of this command (never a folder "
+                        "holding other files)")
 
 
 def add_study_options(p: argparse.ArgumentParser, *, runs: int, runs_help: str, vehicles_help: str,

@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 
 from ._arguments import NOISE, help_range, iso_class
-from ._common import (command_parser, add_dask_options, add_road_options, add_study_options, check_dask_options,
+from ._common import (input_paths, command_parser, add_dask_options, add_road_options, add_study_options, check_dask_options,
                       config_from_args, dask_options, plural, print_table, run_with_progress)
 
 __all__ = ["NAME", "add_parser", "run"]
@@ -70,7 +70,7 @@ def run(args: argparse.Namespace, command_line: str) -> int:
                             road_profile=args.road_profile, noise=args.noise, iso_class=args.iso_class,
                             uncertainty=None, max_rows=args.max_rows, max_file_mb=args.max_file_mb)
     check_dask_options(args)
-    with staged_output(args.out) as out:
+    with staged_output(args.out, NAME, input_paths(args)) as out:
         exp = config_from_args(ns)
         kw = {"depths": (), "noise_levels": ()} if args.no_sweeps else {}
         cfg = AnomalyStudyConfig(experiment=exp, n_runs=args.runs, **kw)

@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 
 from ._arguments import count, help_range
-from ._common import (command_parser, add_dask_options, add_study_options, check_dask_options, dask_options,
+from ._common import (input_paths, command_parser, add_dask_options, add_study_options, check_dask_options, dask_options,
                       paillier_bits, plural, print_table, run_with_progress)
 
 #: Vehicles the replica attacks target (AttackStudyConfig.replica_targets): the fleet needs at least as many.
@@ -81,7 +81,7 @@ def run(args: argparse.Namespace, command_line: str) -> int:
                             paillier_bits=args.paillier_bits, replica_runs=args.replica_runs,
                             poisoning_runs=args.poisoning_runs)
     check_dask_options(args)
-    with staged_output(args.out) as out:
+    with staged_output(args.out, NAME, input_paths(args)) as out:
         steps = cfg.n_runs + replica_fit_count(cfg)
         result, elapsed = run_with_progress(steps, NAME, lambda cb: run_attack_study(
             cfg, args.seed, progress=cb, **dask_options(args)))

@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 
 from ._arguments import SEED_MAX, add_check, count, help_range, ranged
-from ._common import (MAX_VEHICLES, command_parser, add_dask_options, add_out_option, check_dask_options, dask_options,
+from ._common import (input_paths, MAX_VEHICLES, command_parser, add_dask_options, add_out_option, check_dask_options, dask_options,
                       plural, progress)
 
 _RUNS_PER_SEED = count("number of roads", 1, 1000)
@@ -128,7 +128,7 @@ def run(args: argparse.Namespace, command_line: str) -> int:
                                    experiment=ExperimentConfig(n_vehicles=args.vehicles, n_runs=1), **kw)
     n = len(cfg.seeds) * cfg.runs_per_seed
     check_dask_options(args)
-    with staged_output(args.out) as out:
+    with staged_output(args.out, NAME, input_paths(args)) as out:
         prog, cb = progress(n, NAME)
         with prog:
             result = calibrate_anomalies(cfg, progress=cb, **dask_options(args))

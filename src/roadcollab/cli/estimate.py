@@ -13,7 +13,7 @@ from dataclasses import asdict
 
 from ..errors import ParameterError
 from ._arguments import add_check, help_range
-from ._common import (GRID_STEP, MAX_OFFSET, SEGMENT_LENGTH, add_limit_options, check_file_options,
+from ._common import (out_path, GRID_STEP, MAX_OFFSET, SEGMENT_LENGTH, add_limit_options, check_file_options,
                       check_segment_length, command_parser, file_limits, plural)
 
 __all__ = ["NAME", "add_estimate_arguments", "estimate_command", "add_parser", "run"]
@@ -118,7 +118,7 @@ def estimate_command(drive_paths: list[str], out_dir, *, command: str, limits: F
     from ..reporting.records import staged_output
 
     t0 = time.perf_counter()
-    with staged_output(out_dir) as out:
+    with staged_output(out_dir, NAME, drive_paths) as out:
         drives = load_drives(drive_paths, limits=limits)
         if common_time_grid(drives) and not align:
             summary = _time_grid(drives, out, command=command, segment_length=segment_length, t0=t0)
@@ -140,8 +140,9 @@ def add_estimate_arguments(parser: argparse.ArgumentParser) -> None:
                         help="drive CSV 'time_s,accel_left,accel_right[,speed_mps|,distance_m]' (m/s^2) with FILE's "
                              "stem + .toml or .json beside it (speed_mps unless a column gives it, start_m, [vehicle] "
                              "estimated parameters); repeat in driving order")
-    parser.add_argument("--out", required=True, metavar="DIR",
-                        help="output folder (written as a whole at the end; a failed run leaves it untouched)")
+    parser.add_argument("--out", type=out_path, required=True, metavar="DIR",
+                        help="output folder: absent, empty or a previous estimate result (never a folder holding "
+                             "other files or the drives); written at the end, a failed run leaves it untouched")
     parser.add_argument("--segment-length", type=SEGMENT_LENGTH, default=100.0, metavar="M",
                         help="IRI segment length of the fused elevation, m (default 100; "
                              f"{help_range(SEGMENT_LENGTH)}, and at least 10 --grid-step)")

@@ -7,7 +7,7 @@ import time
 
 from ..errors import ParameterError
 from ._arguments import add_check, help_range
-from ._common import (SEGMENT_LENGTH, add_limit_options, add_out_option, check_file_options, check_segment_length,
+from ._common import (input_paths, SEGMENT_LENGTH, add_limit_options, add_out_option, check_file_options, check_segment_length,
                       command_parser, file_limits, plural)
 
 __all__ = ["NAME", "add_parser", "run"]
@@ -73,6 +73,7 @@ def run(args: argparse.Namespace, command_line: str) -> int:
     from ..io.profiles import load_profile, packaged_profile_path
     from ..models.iri import GOLDEN_CAR, iri_segments
     from ..reporting.iri_report import write_iri
+    from ..reporting.output_folder import staged_output
 
     path = packaged_profile_path() if args.road_profile in (None, "packaged") else args.road_profile
     profile = load_profile(path, limits=file_limits(args))
@@ -84,7 +85,8 @@ def run(args: argparse.Namespace, command_line: str) -> int:
     result = iri_segments(profile.distance, profile.elevation, args.segment_length, car=GOLDEN_CAR)
     elapsed = time.perf_counter() - t0
     source = profile.source if args.road_profile not in (None, "packaged") else "packaged data/profile_1.txt"
-    write_iri(result, args.out, command=command_line, source=source, car=GOLDEN_CAR, elapsed=elapsed)
+    with staged_output(args.out, NAME, input_paths(args)) as out:
+        write_iri(result, out, command=command_line, source=source, car=GOLDEN_CAR, elapsed=elapsed)
     mean = result.mean
     print(f"IRI over {plural(len(mean), 'segment')} of {args.segment_length:g} m: mean {mean.mean():.3f} m/km "
           f"(min {mean.min():.3f}, max {mean.max():.3f}); wrote {args.out}/iri.csv and report.md")

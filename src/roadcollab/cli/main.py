@@ -11,7 +11,7 @@ Each subcommand is a module of this package with ``NAME``, ``add_parser(subparse
 from __future__ import annotations
 
 import argparse
-import os
+import signal
 import sys
 from pathlib import Path
 
@@ -69,7 +69,8 @@ def main(argv: list[str] | None = None) -> int:
     int
         Exit status: 0 on success, 2 if the command rejects its input (a ``ValueError`` such as
         ``ParameterError`` or ``FileFormatError``) or the system refuses a file operation
-        (``OSError``); the message is printed to stderr on one line, without a traceback.
+        (``OSError``); the message is printed to stderr on one line, without a traceback. 130 after
+        SIGINT (Ctrl-C) and 143 after SIGTERM, with one line saying what happened to ``--out``.
 
     Raises
     ------
@@ -83,10 +84,18 @@ def main(argv: list[str] | None = None) -> int:
     if run is None:
         parser.error(f"unknown command {args.command!r}")
         return 2
+    out = getattr(args, "out", None)
+    had_results = out is not None and Path(out).is_dir() and any(Path(out).iterdir())
+    previous = signal.signal(signal.SIGTERM, _terminated)
     try:
-        if args.command != "message":
-            _check_out_folder(getattr(args, "out", None))
+        _check_out(args)
         return run(args, command_line(argv))
+    except (KeyboardInterrupt, Terminated) as err:
+        status = 143 if isinstance(err, Terminated) else 130
+        where = "" if out is None else (f"; the previous results in {out} are untouched" if had_results
+                                        else f"; nothing was written to {out}")
+        print(f"roadcollab {args.command}: interrupted{where}", file=sys.stderr)
+        return status
     except ValueError as err:  # ParameterError / FileFormatError / MessageError: a clear message, no traceback
         print(f"roadcollab {args.command}: error: {_one_line(str(err))}", file=sys.stderr)
         return 2
@@ -94,22 +103,32 @@ def main(argv: list[str] | None = None) -> int:
         where = f"{err.filename}: " if getattr(err, "filename", None) else ""
         print(f"roadcollab {args.command}: error: {where}{_one_line(err.strerror or str(err))}", file=sys.stderr)
         return 2
+    finally:
+        signal.signal(signal.SIGTERM, previous)
 
 
-def _check_out_folder(out) -> None:
-    """Refuse an unusable ``--out`` folder before the command imports its study (a second or more):
-    an existing non-folder, or a nearest existing ancestor that is not a writable folder. The
-    command's staged output checks again when it creates its folder."""
+class Terminated(BaseException):
+    """SIGTERM received: unwinds like ``KeyboardInterrupt`` (staging folders removed, workers stopped)."""
+
+
+def _terminated(signum, frame) -> None:
+    raise Terminated()
+
+
+def _check_out(args: argparse.Namespace) -> None:
+    """Refuse an unusable or unsafe ``--out`` before the command imports its study (a second or more);
+    the command's staged output checks again when it creates its folder
+    (:mod:`roadcollab.reporting.output_folder`)."""
+    from ..reporting.output_folder import check_output_file, check_output_folder
+    from ._common import input_paths
+
+    out = getattr(args, "out", None)
     if out is None:
         return
-    out = Path(out)
-    if out.exists() and not out.is_dir():
-        raise ValueError(f"--out {out}: expected a folder, got an existing file")
-    parent = out.absolute().parent
-    while not parent.exists():
-        parent = parent.parent
-    if not parent.is_dir() or not os.access(parent, os.W_OK | os.X_OK):
-        raise ValueError(f"--out {out}: cannot write there ({parent} is not a writable folder)")
+    if args.command == "message":
+        check_output_file(out, is_ours=lambda p: True)  # the command checks the file's content itself
+    else:
+        check_output_folder(out, args.command, input_paths(args))
 
 
 def _one_line(text: str, width: int = 2000) -> str:

@@ -3,9 +3,8 @@
 from __future__ import annotations
 
 import argparse
-from pathlib import Path
 
-from ._common import add_seed_option, command_parser
+from ._common import out_path, add_seed_option, command_parser
 
 __all__ = ["NAME", "add_parser", "run"]
 
@@ -35,7 +34,7 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
                        does="Encodes one valid message of the chosen privacy mechanism, as a vehicle would send it.",
                        writes="the encoded message to --out (replaced only when complete).",
                        example="roadcollab message example --mechanism hardened --out msg.bin")
-    q.add_argument("--out", type=Path, required=True, help="output file")
+    q.add_argument("--out", type=out_path, required=True, help="output file (new, or an earlier example)")
     q.add_argument("--mechanism", choices=list(MECHANISM_CODES), default="paper",
                    help="none/paper: an exchange message (T, S, e, wf); hardened/fused: an inversion message (z); "
                         "secure_aggregation: a masked input, the round-2 message a vehicle sends the aggregator "
@@ -60,11 +59,19 @@ def run(args: argparse.Namespace, command_line: str) -> int:
     int
         Exit status 0.
     """
-    from ..reporting.records import staged_file
+    from ..reporting.output_folder import staged_file
     from ..wire.protocol import decode, write_example
 
-    with staged_file(args.out) as tmp:
+    with staged_file(args.out, is_ours=_is_message) as tmp:
         n = write_example(tmp, mechanism=args.mechanism, seed=args.seed)
     msg = decode(args.out.read_bytes())
     print(f"wrote {n} bytes to {args.out}: {type(msg).__name__} (mechanism {msg.mechanism!r})")
     return 0
+
+
+def _is_message(path) -> bool:
+    """Does ``path`` start like a roadcollab message (so an earlier ``message example`` wrote it)?"""
+    from ..wire.layout import MAGIC
+
+    with open(path, "rb") as fh:
+        return fh.read(len(MAGIC)) == MAGIC

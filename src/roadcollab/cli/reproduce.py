@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 
 from ._arguments import GAMMA, NOISE, UNCERTAINTY, count, help_range, iso_class
-from ._common import (command_parser, add_dask_options, add_road_options, add_study_options, check_dask_options,
+from ._common import (input_paths, command_parser, add_dask_options, add_road_options, add_study_options, check_dask_options,
                       config_from_args, dask_options, plural, print_table, run_with_progress)
 
 _MEASURED_RUNS = count("number of runs", 0, 10_000)
@@ -111,7 +111,7 @@ def run(args: argparse.Namespace, command_line: str) -> int:
     from ..reporting.reproduction_report import headline_table, write_reproduction
 
     check_dask_options(args)
-    with staged_output(args.out) as out:
+    with staged_output(args.out, NAME, input_paths(args)) as out:
         cfg = config_from_args(args)
         cache = PipelineCache()
         result, elapsed = run_with_progress(cfg.n_runs, NAME, lambda cb: run_reproduction(

@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 
 from ._arguments import GAMMA, NOISE, UNCERTAINTY, add_check, count, help_range, ranged_list
-from ._common import (MAX_VEHICLES, command_parser, add_dask_options, add_out_option, add_seed_option,
+from ._common import (input_paths, MAX_VEHICLES, command_parser, add_dask_options, add_out_option, add_seed_option,
                       check_dask_options, dask_options, plural, print_table, run_with_progress)
 
 _RUNS = count("number of runs", 1, 1000)
@@ -104,7 +104,7 @@ def run(args: argparse.Namespace, command_line: str) -> int:
 
     cfg = _config(args)
     check_dask_options(args)
-    with staged_output(args.out) as out:
+    with staged_output(args.out, NAME, input_paths(args)) as out:
         result, elapsed = run_with_progress(len(cfg.points()) * cfg.n_runs, NAME,
                                             lambda cb: run_sweep(cfg, args.seed, progress=cb, **dask_options(args)))
         findings = write_sweep(result, out, command=command_line, elapsed=elapsed)

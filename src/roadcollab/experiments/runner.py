@@ -20,6 +20,10 @@ from __future__ import annotations
 
 import contextlib
 import multiprocessing
+import os
+import signal
+import threading
+import time
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from dataclasses import dataclass
 from typing import Callable, Sequence
@@ -64,9 +68,42 @@ def pool_context() -> multiprocessing.context.BaseContext:
     return multiprocessing.get_context("fork" if "fork" in methods else "spawn")
 
 
-def _init_worker(task: Callable, extra: tuple) -> None:
-    """Pool initializer: keep the task and the shared object for every chunk of this worker."""
+#: How often a pool worker checks that its parent is alive, s.
+PARENT_POLL_S = 0.2
+
+
+def _watch_parent(parent: int) -> None:
+    """Exit this worker as soon as its parent is gone (a SIGKILLed parent cannot stop its workers)."""
+    while True:
+        time.sleep(PARENT_POLL_S)
+        if os.getppid() != parent:
+            os._exit(1)
+
+
+def _init_worker(task: Callable, extra: tuple, parent: int) -> None:
+    """Pool initializer: keep the task and the shared object for every chunk of this worker.
+
+    A worker leaves interrupts to its parent: Ctrl-C reaches the whole process group, and a worker's
+    own ``KeyboardInterrupt`` would print a traceback per worker; the parent stops the workers itself
+    (:func:`_stop_workers`). SIGTERM gets its default action back (a forked worker inherits the
+    parent's handler). A thread exits the worker when the parent dies.
+    """
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)
+    threading.Thread(target=_watch_parent, args=(parent,), daemon=True, name="roadcollab-parent-watch").start()
     _WORKER["task"], _WORKER["extra"] = task, extra
+
+
+def _stop_workers(pool: ProcessPoolExecutor) -> None:
+    """Kill the pool's worker processes now (``shutdown`` would wait for their running chunks)."""
+    procs = list((getattr(pool, "_processes", None) or {}).values())  # private, but the only handle
+    for p in procs:
+        with contextlib.suppress(OSError, ValueError):
+            p.kill()
+    pool.shutdown(wait=False, cancel_futures=True)
+    for p in procs:
+        with contextlib.suppress(OSError, ValueError, AssertionError):
+            p.join(timeout=2.0)
 
 
 def _run_chunk(indices: list) -> list:
@@ -78,8 +115,9 @@ def _pool_map(task: Callable, extra: tuple, chunks: list[range], workers: int, p
     """Evaluate the chunks on a local process pool; results per chunk, in chunk order."""
     results: list = [None] * len(chunks)
     done = 0
-    with ProcessPoolExecutor(max_workers=min(workers, len(chunks)), mp_context=pool_context(),
-                             initializer=_init_worker, initargs=(task, extra)) as pool:
+    pool = ProcessPoolExecutor(max_workers=min(workers, len(chunks)), mp_context=pool_context(),
+                               initializer=_init_worker, initargs=(task, extra, os.getpid()))
+    try:
         pending = {pool.submit(_run_chunk, list(c)): k for k, c in enumerate(chunks)}
         while pending:
             finished, _ = wait(pending, return_when=FIRST_COMPLETED)
@@ -89,6 +127,10 @@ def _pool_map(task: Callable, extra: tuple, chunks: list[range], workers: int, p
                 done += len(chunks[k])
                 if progress is not None:
                     progress(done)
+    except BaseException:  # an error, Ctrl-C or SIGTERM: no worker may outlive the run
+        _stop_workers(pool)
+        raise
+    pool.shutdown(wait=True)
     return results
 
 

@@ -8,22 +8,18 @@ are dicts with the column list their result type computes, written by :func:`wri
 
 from __future__ import annotations
 
-import contextlib
 import csv
 import dataclasses
 import json
 import math
-import os
 import platform
-import shutil
 import sys
-import tempfile
 from pathlib import Path
 
 import numpy as np
 
 from .. import __version__
-from ..errors import ParameterError
+from .output_folder import staged_file, staged_output
 
 __all__ = ["write_rows", "row_columns", "write_csv", "write_config", "strict_json", "markdown_table", "fmt",
            "output_dir", "staged_output", "staged_file", "run_header"]
@@ -238,110 +234,6 @@ def output_dir(out) -> Path:
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     return out
-
-
-def _umask() -> int:
-    """The process umask (read by setting and restoring it)."""
-    mask = os.umask(0o022)
-    os.umask(mask)
-    return mask
-
-
-def _sibling(out: Path, kind: str) -> Path:
-    """A new hidden folder beside ``out`` (same file system, so a rename moves it), ParameterError if impossible."""
-    try:
-        out.parent.mkdir(parents=True, exist_ok=True)
-        tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.{kind}-", dir=out.parent))
-        tmp.chmod(0o777 & ~_umask())  # mkdtemp makes 0700; the results get the usual permissions
-        return tmp
-    except OSError as err:
-        raise ParameterError(f"--out {out}: cannot write there: {err.strerror or err}") from None
-
-
-@contextlib.contextmanager
-def staged_output(out):
-    """Write a run's outputs into a temporary sibling folder and move it to ``out`` only at the end.
-
-    The sibling is created on entry, so an unusable ``out`` fails before any compute; a run that
-    fails or is killed leaves ``out`` (the previous results) untouched (a killed run leaves a hidden
-    ``.NAME.partial-*`` folder beside it). On success the previous ``out`` is renamed aside, the new
-    folder renamed into place and the old one deleted: two renames on one file system.
-
-    Parameters
-    ----------
-    out : str or Path
-        The final output folder; if it exists it must be a folder (it is replaced as a whole).
-
-    Yields
-    ------
-    Path
-        The folder to write into.
-
-    Raises
-    ------
-    ParameterError
-        ``out`` exists and is not a folder, or its parent cannot be created or written.
-    """
-    out = Path(out)
-    if out.exists() and not out.is_dir():
-        raise ParameterError(f"--out {out}: expected a folder, got an existing file")
-    tmp = _sibling(out, "partial")
-    try:
-        yield tmp
-    except BaseException:
-        shutil.rmtree(tmp, ignore_errors=True)
-        raise
-    old = _sibling(out, "old") if out.exists() else None
-    try:
-        if old is not None:
-            os.replace(out, old / out.name)
-        os.replace(tmp, out)
-    except OSError as err:
-        raise ParameterError(f"--out {out}: cannot move the results into place: {err.strerror or err} "
-                             f"(they are in {tmp})") from None
-    if old is not None:
-        shutil.rmtree(old, ignore_errors=True)
-
-
-@contextlib.contextmanager
-def staged_file(path):
-    """Write one file under a temporary sibling name and rename it to ``path`` at the end.
-
-    The parent folder is created and checked on entry (before any compute); a failed run leaves
-    ``path`` untouched.
-
-    Parameters
-    ----------
-    path : str or Path
-        The final file; if it exists it must be a regular file (it is replaced).
-
-    Yields
-    ------
-    Path
-        The temporary file to write.
-
-    Raises
-    ------
-    ParameterError
-        ``path`` is a folder, or its parent cannot be created or written.
-    """
-    path = Path(path)
-    if path.is_dir():
-        raise ParameterError(f"--out {path}: expected a file, got an existing folder")
-    try:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        fd, name = tempfile.mkstemp(prefix=f".{path.name}.partial-", dir=path.parent)
-        os.close(fd)
-        os.chmod(name, 0o666 & ~_umask())
-    except OSError as err:
-        raise ParameterError(f"--out {path}: cannot write there: {err.strerror or err}") from None
-    tmp = Path(name)
-    try:
-        yield tmp
-        os.replace(tmp, path)
-    except BaseException:
-        tmp.unlink(missing_ok=True)
-        raise
 
 
 def run_header(title: str, command: str, elapsed: float) -> list[str]:
