@@ -16,13 +16,15 @@ import sys
 from pathlib import Path
 
 from .. import __version__
-from . import anomalies, attack, bench, calibrate, estimate, iri, message, reproduce, sweep
+from . import anomalies, attack, bench, calibrate, enroll, estimate, export, fleet, iri, message, reproduce, serve, \
+    status, sweep, vehicle
 from ._common import command_line
 
 __all__ = ["main", "build_parser"]
 
 # In the order of ``roadcollab --help``.
-COMMANDS = (reproduce, attack, anomalies, calibrate, sweep, bench, estimate, iri, message)
+COMMANDS = (reproduce, attack, anomalies, calibrate, sweep, bench, estimate, iri, message, enroll, serve, vehicle, fleet,
+            export, status)
 _RUN = {module.NAME: module.run for module in COMMANDS}
 _DESCRIPTION = """Privacy-preserving collaborative road estimation by networked vehicles (Gao, Li and Wang).
 

@@ -1,0 +1,74 @@
+"""The service's and a vehicle's loops over a transport (MQTT in practice; any :class:`Transport`).
+
+Both loops are bounded: the service runs until ``stop`` is set (SIGINT/SIGTERM), a vehicle until all
+its segments are acknowledged or ``timeout`` seconds pass. A vehicle sends again what is not yet
+acknowledged every ``resend_s`` seconds without progress and after every reconnection, so a message
+lost with a killed service or broker is sent again; the service applies each once.
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+from typing import Callable
+
+from .agent import VehicleAgent
+from .service import Service
+
+__all__ = ["run_service", "run_vehicle"]
+
+
+def run_service(service: Service, client, stop: threading.Event, republish: threading.Event, *,
+                log: Callable[[str], None] | None = None, idle_s: float = 0.2) -> int:
+    """Serve until ``stop`` is set; the number of messages handled.
+
+    Parameters
+    ----------
+    service : Service
+    client : Transport
+        Already subscribed to the vehicle topics.
+    stop, republish : threading.Event
+        ``republish`` is set by the client after every (re)connection: the retained messages are sent
+        again then.
+    """
+    handled = 0
+    while not stop.is_set():
+        if republish.is_set():
+            republish.clear()
+            for p in service.on_connect():
+                client.publish(p.topic, p.payload, p.retain)
+        m = client.receive(idle_s)
+        if m is None:
+            continue
+        handled += 1
+        for p in service.handle(*m):
+            client.publish(p.topic, p.payload, p.retain)
+    return handled
+
+
+def run_vehicle(agent: VehicleAgent, client, *, timeout: float, resend_s: float = 3.0,
+                reconnected: threading.Event | None = None) -> bool:
+    """Run the vehicle's protocol to its last acknowledgement; True if done within ``timeout`` s."""
+    for f in agent.subscriptions:
+        client.subscribe(f)
+    for p in agent.start():
+        client.publish(p.topic, p.payload, p.retain)
+    end = time.monotonic() + timeout
+    last = time.monotonic()
+    while not agent.done and time.monotonic() < end:
+        if reconnected is not None and reconnected.is_set():
+            reconnected.clear()
+            last = 0.0
+        if time.monotonic() - last > resend_s:
+            for p in agent.resend():
+                client.publish(p.topic, p.payload, p.retain)
+            last = time.monotonic()
+        m = client.receive(0.1)
+        if m is None:
+            continue
+        before = (agent.started, len(agent.outcomes))
+        for p in agent.on_message(*m):
+            client.publish(p.topic, p.payload, p.retain)
+        if (agent.started, len(agent.outcomes)) != before:
+            last = time.monotonic()
+    return agent.done
