@@ -2,12 +2,13 @@
 
 The same arrays as :class:`~roadcollab.experiments.fleet_estimation.FleetEstimates` (unaligned): the
 grid spans every vehicle's covered stretch (``distance_grid`` of all drives), the vehicles are in the
-order the service first saw them, and ``fused`` is the service's running sums
+order of their ids (drive ``k`` is vehicle ``vk``), and ``fused`` is the service's running sums
 (:class:`~roadcollab.network.engine.SegmentSums`), i.e. the average of every inversion at each point.
 """
 
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass
 
 import numpy as np
@@ -27,14 +28,14 @@ class NetworkResults:
     Attributes
     ----------
     vehicles : list of (str, dict)
-        ``(vehicle id, its hello)`` in first-seen order.
+        ``(vehicle id, its hello)`` in the order of their ids (``v1, v2, ..., v10``).
     position : (n,) ndarray
         m.
     spacing : float
         m.
     elevation : dict
         ``{estimator: (V, n, 2) ndarray}`` for ``single``, ``inversion``, ``collaborative`` and the running
-        ``fused`` (vehicles 1..k in first-seen order), m, NaN where not covered.
+        ``fused`` (vehicles 1..k in id order), m, NaN where not covered.
     fused : (n, 2) ndarray
         The service's fused elevation, m (NaN where no vehicle passed).
     coverage : (n,) ndarray
@@ -52,6 +53,11 @@ class NetworkResults:
     received_s: dict
 
 
+def _natural(vid: str) -> tuple:
+    """``v2`` before ``v10``: enroll numbers the vehicles and ``fleet`` gives drive ``k`` to ``vk``."""
+    return tuple(int(t) if t.isdigit() else t for t in re.split(r"(\d+)", vid))
+
+
 def results_from_store(store: ServiceStore) -> NetworkResults:
     """Assemble :class:`NetworkResults` from a store.
 
@@ -64,7 +70,7 @@ def results_from_store(store: ServiceStore) -> NetworkResults:
     rows = store.contributions()
     if not rows:
         raise ParameterError(f"--store {store.path}: no contribution has been applied yet")
-    vehicles = store.vehicles()
+    vehicles = sorted(store.vehicles(), key=lambda vh: _natural(vh[0]))
     order = {v: k for k, (v, _) in enumerate(vehicles)}
     contribs = [(v, decode_contribution(d, plan, s), t) for v, s, d, t in rows]
     i_lo = min(c.i0 for _, c, _ in contribs)

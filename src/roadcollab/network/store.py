@@ -15,6 +15,7 @@ import hashlib
 import json
 import sqlite3
 import time
+from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
@@ -61,17 +62,21 @@ class ServiceStore:
         if self.path != ":memory:" and Path(self.path).exists() and not Path(self.path).is_file():
             raise ParameterError(f"--store {path}: expected a file, got a folder")
         try:
-            self.db = sqlite3.connect(self.path, timeout=30.0)
+            # Autocommit mode with explicit BEGIN IMMEDIATE: a message's reads and writes are one
+            # transaction holding the write lock, so two services on one file never interleave.
+            self.db = sqlite3.connect(self.path, timeout=30.0, isolation_level=None)
             self.db.execute("PRAGMA journal_mode=WAL")
-            with self.db:
-                self.db.executescript(_SCHEMA)
+            with self._tx():
+                for stmt in _SCHEMA.split(";"):
+                    if stmt.strip():
+                        self.db.execute(stmt)
             row = self.db.execute("SELECT value FROM meta WHERE key = 'plan'").fetchone()
         except sqlite3.DatabaseError as err:
             raise ParameterError(f"--store {path}: not a roadcollab service store ({err})") from None
         if row is None:
             if plan is None:
                 raise ParameterError(f"--store {path}: an empty store (run 'roadcollab serve' on it first)")
-            with self.db:
+            with self._tx():
                 self.db.execute("INSERT INTO meta VALUES ('plan', ?)", (json.dumps(plan.to_dict(), sort_keys=True),))
             self.plan = plan
         else:
@@ -80,13 +85,24 @@ class ServiceStore:
                 raise ParameterError(f"--store {path}: holds the results of another fleet plan ({self.plan}); "
                                      f"use a new store for {plan}")
 
+    @contextmanager
+    def _tx(self):
+        """One write transaction (BEGIN IMMEDIATE ... COMMIT; ROLLBACK on any error)."""
+        self.db.execute("BEGIN IMMEDIATE")
+        try:
+            yield
+        except BaseException:
+            self.db.execute("ROLLBACK")
+            raise
+        self.db.execute("COMMIT")
+
     def close(self) -> None:
         self.db.close()
 
     # -- vehicles --------------------------------------------------------------------------------
     def add_vehicle(self, vid: str, hello: dict) -> int:
         """Record a vehicle's hello (first one wins); its first-seen order number."""
-        with self.db:
+        with self._tx():
             row = self.db.execute("SELECT order_no FROM vehicles WHERE vid = ?", (vid,)).fetchone()
             if row is not None:
                 return int(row[0])
@@ -107,7 +123,7 @@ class ServiceStore:
         """Apply one contribution once: ``"accepted"``, ``"duplicate"`` (the same bytes again) or
         ``"conflict"`` (another contribution of this vehicle on this segment is already applied)."""
         digest = hashlib.sha256(data).hexdigest()
-        with self.db:
+        with self._tx():
             row = self.db.execute("SELECT digest FROM contributions WHERE segment = ? AND vid = ?",
                                   (c.segment, vid)).fetchone()
             if row is not None:
@@ -162,7 +178,7 @@ class ServiceStore:
 
     # -- events ----------------------------------------------------------------------------------
     def log(self, kind: str, reason: str, *, vid: str | None = None, topic: str | None = None) -> None:
-        with self.db:
+        with self._tx():
             self.db.execute("INSERT INTO events (t, kind, vid, topic, reason) VALUES (?, ?, ?, ?, ?)",
                             (time.time(), kind, vid, topic, reason))
 

@@ -1,7 +1,8 @@
 """Outputs of ``roadcollab export``: the files ``roadcollab estimate`` writes, from the service's store.
 
 ``final_estimate.csv`` and ``road_estimates.csv`` have the columns of
-:mod:`roadcollab.reporting.fleet_report` (vehicle ``k`` = the ``k``-th vehicle the service saw);
+:mod:`roadcollab.reporting.fleet_report` (vehicle ``k`` = the ``k``-th vehicle id, ``vk`` for the
+``k``-th drive of ``roadcollab fleet``);
 ``iri.csv`` and ``anomalies.csv`` come from the service's fused elevation by the same functions as
 ``estimate``; ``config.json`` and ``report.md`` describe the store.
 """
@@ -88,7 +89,7 @@ def write_network_results(r: NetworkResults, out, *, command: str, segment_lengt
     lines = ["# roadcollab export: the road from the roadside service's store", "", f"Command: `{command}`  ",
              f"{V} vehicle(s) over {length:.1f} m of road.", ""]
     lines += ["**Notes.**", ""] + [f"- {n}" for n in notes] + [""] if notes else []
-    lines += ["## Vehicles (in the order the service saw them)", "", markdown_table(rows, list(rows[0])), "",
+    lines += ["## Vehicles", "", markdown_table(rows, list(rows[0])), "",
               "## Anomalies in the fused elevation (`anomalies.csv`)", "",
               markdown_table(anomalies, ["position_m", "side", "kind", "depth_m", "confidence"])
               if anomalies else "None.", ""]
