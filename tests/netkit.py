@@ -6,6 +6,7 @@ Every process started here listens on 127.0.0.1 only and is stopped by the fixtu
 
 from __future__ import annotations
 
+import atexit
 import csv
 import os
 import shutil
@@ -13,6 +14,7 @@ import signal
 import socket
 import subprocess
 import sys
+import tempfile
 import time
 from pathlib import Path
 
@@ -102,10 +104,25 @@ def start_amqtt(fleet: Path, port: int, log: Path) -> subprocess.Popen:
     return p
 
 
+_MOSQ_DIRS: dict = {}
+
+
+def _mosquitto_dir(data: Path) -> Path:
+    """A data folder Mosquitto can reach: as root it drops to the ``mosquitto`` user, which cannot enter
+    pytest's 0700 temporary folders, so it gets a folder of its own directly under /tmp (one per
+    ``data``, kept across a restart, removed at exit)."""
+    if os.geteuid() != 0:
+        return data
+    if data not in _MOSQ_DIRS:
+        _MOSQ_DIRS[data] = Path(tempfile.mkdtemp(prefix="rc-mosq-"))
+        atexit.register(shutil.rmtree, _MOSQ_DIRS[data], True)
+    return _MOSQ_DIRS[data]
+
+
 def start_mosquitto(fleet: Path, port: int, data: Path, log: Path) -> subprocess.Popen:
     from roadcollab.network.brokers import mosquitto_config
 
-    conf = mosquitto_config(fleet, "127.0.0.1", port, data)
+    conf = mosquitto_config(fleet, "127.0.0.1", port, _mosquitto_dir(data))
     p = start(MOSQUITTO, "-c", conf, log=log)
     wait_port(port, proc=p)
     return p

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+from pathlib import Path
 
 from ._common import command_parser, positive_float
 
@@ -49,7 +50,6 @@ def run(args: argparse.Namespace, command_line: str) -> int:
     int
         0.
     """
-    from pathlib import Path
 
     from ..errors import ParameterError
     from ..network.results import results_from_store

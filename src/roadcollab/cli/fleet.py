@@ -3,6 +3,9 @@
 from __future__ import annotations
 
 import argparse
+import subprocess
+import sys
+from pathlib import Path
 
 from ._common import command_parser, positive_float
 
@@ -50,9 +53,6 @@ def run(args: argparse.Namespace, command_line: str) -> int:
     int
         0 if every vehicle exited 0, else 3.
     """
-    import subprocess
-    import sys
-    from pathlib import Path
 
     from ..errors import ParameterError
     from ..network.mqtt_client import parse_broker_url

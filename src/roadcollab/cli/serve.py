@@ -6,6 +6,7 @@ import argparse
 import os
 import signal
 import threading
+from pathlib import Path
 
 from ._common import command_parser
 
@@ -59,7 +60,6 @@ def run(args: argparse.Namespace, command_line: str) -> int:
     int
         0 after a clean stop.
     """
-    from pathlib import Path
 
     from ..network.brokers import EmbeddedBroker, parse_listen
     from ..network.fleetdir import load_login, load_plan, load_trust

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+from pathlib import Path
 
 from ._common import command_parser
 
@@ -42,7 +43,6 @@ def run(args: argparse.Namespace, command_line: str) -> int:
     int
         0.
     """
-    from pathlib import Path
 
     from ..errors import ParameterError
     from ..network.store import ServiceStore

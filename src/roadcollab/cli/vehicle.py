@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import argparse
+import threading
+from pathlib import Path
 
 from ._common import add_limit_options, command_parser, file_limits, positive_float
 
@@ -52,8 +54,6 @@ def run(args: argparse.Namespace, command_line: str) -> int:
     int
         0 when done, 3 on timeout.
     """
-    import threading
-    from pathlib import Path
 
     from ..errors import ParameterError
     from ..io.drives import load_drive

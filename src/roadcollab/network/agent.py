@@ -74,7 +74,13 @@ class VehicleAgent:
         return decode_contribution(open_from(envelope, self.trust, topic, sender), self.engine.plan, s)
 
     def on_message(self, topic: str, payload: bytes) -> list[Publish]:
-        """React to a message from the service; what to publish. Malformed replies are dropped."""
+        """React to a message from the service; what to publish. Malformed replies are dropped.
+
+        Parameters
+        ----------
+        topic : str
+        payload : bytes
+        """
         if topic != self.topics.ack(self.vid):
             return []
         try:

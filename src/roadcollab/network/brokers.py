@@ -13,6 +13,8 @@ from __future__ import annotations
 import argparse
 import asyncio
 import json
+import os
+import pwd
 import signal
 import sys
 import threading
@@ -24,7 +26,15 @@ __all__ = ["amqtt_config", "EmbeddedBroker", "mosquitto_config", "parse_listen"]
 
 
 def parse_listen(text: str, option: str = "--listen") -> tuple[str, int]:
-    """``HOST:PORT`` as ``(host, port)``; one clear line if malformed."""
+    """``HOST:PORT`` as ``(host, port)``; one clear line if malformed.
+
+    Parameters
+    ----------
+    text : str
+        ``HOST:PORT``.
+    option : str
+        The option named in the message.
+    """
     host, _, port = str(text).rpartition(":")
     if not host or not port.isdigit() or not 0 < int(port) < 65536:
         raise ParameterError(f"{option} {text}: expected HOST:PORT with a port in 1..65535 (e.g. 127.0.0.1:1883)")
@@ -32,7 +42,15 @@ def parse_listen(text: str, option: str = "--listen") -> tuple[str, int]:
 
 
 def amqtt_config(fleet: Path, host: str, port: int) -> dict:
-    """The embedded broker's configuration: password file, publish and subscribe ACLs."""
+    """The embedded broker's configuration: password file, publish and subscribe ACLs.
+
+    Parameters
+    ----------
+    fleet : Path
+        The fleet folder.
+    host, port : str, int
+        Where the broker listens.
+    """
     fleet = Path(fleet)
     rules = json.loads((fleet / "broker" / "acl.json").read_text())
     return {
@@ -79,7 +97,13 @@ class EmbeddedBroker:
         self._loop.run_forever()
 
     def start(self, timeout: float = 20.0) -> "EmbeddedBroker":
-        """Start listening; ParameterError naming the address if it cannot."""
+        """Start listening; ParameterError naming the address if it cannot.
+
+        Parameters
+        ----------
+        timeout : float
+            Seconds to wait for the listener.
+        """
         self._thread.start()
         if not self._started.wait(timeout) or self._error is not None:
             raise ParameterError(f"--listen {self.host}:{self.port}: the embedded broker did not start "
@@ -99,15 +123,38 @@ class EmbeddedBroker:
 
 
 def mosquitto_config(fleet: Path, host: str, port: int, data_dir: Path) -> Path:
-    """Write ``data_dir/mosquitto.conf`` for the fleet (persistence in ``data_dir``); its path."""
+    """Write ``data_dir/mosquitto.conf`` for the fleet (persistence in ``data_dir``); its path.
+
+    Parameters
+    ----------
+    fleet : Path
+        The fleet folder.
+    host, port : str, int
+        Where Mosquitto listens.
+    data_dir : Path
+        Its persistence folder (created), which also gets the config.
+    """
     fleet, data_dir = Path(fleet).absolute(), Path(data_dir).absolute()
     data_dir.mkdir(parents=True, exist_ok=True)
+    # Mosquitto started as root drops to the ``mosquitto`` user: it gets copies of the password file
+    # and ACL (0600) it can read, in a data folder it can write.
+    for name in ("mosquitto_passwd", "mosquitto_acl"):
+        dst = data_dir / name
+        dst.write_bytes((fleet / "broker" / name).read_bytes())
+        dst.chmod(0o600)
+    if os.geteuid() == 0:
+        try:
+            pw = pwd.getpwnam("mosquitto")
+        except KeyError:
+            pw = None
+        if pw is not None:
+            for p in (data_dir, data_dir / "mosquitto_passwd", data_dir / "mosquitto_acl"):
+                os.chown(p, pw.pw_uid, pw.pw_gid)
     conf = data_dir / "mosquitto.conf"
     conf.write_text("\n".join([
-        f"listener {port} {host}", "allow_anonymous false",
-        f"password_file {fleet / 'broker' / 'mosquitto_passwd'}", f"acl_file {fleet / 'broker' / 'mosquitto_acl'}",
-        "persistence true", f"persistence_location {data_dir}/", "autosave_interval 1",
-        "max_queued_messages 100000", "message_size_limit 0", "log_dest stderr", "log_type error",
+        f"listener {port} {host}", "allow_anonymous false", f"password_file {data_dir / 'mosquitto_passwd'}",
+        f"acl_file {data_dir / 'mosquitto_acl'}", "persistence true", f"persistence_location {data_dir}/",
+        "autosave_interval 1", "max_queued_messages 100000", "log_dest stderr", "log_type error",
         "log_type warning", ""]))
     return conf
 

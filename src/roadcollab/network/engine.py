@@ -84,7 +84,15 @@ class SegmentSums:
         return cls(segment, np.zeros((m, 2)), np.zeros(m, dtype=np.int64))
 
     def add(self, plan: RoadPlan, c: Contribution) -> "SegmentSums":
-        """The sums with one more inversion (a new object)."""
+        """The sums with one more inversion (a new object).
+
+        Parameters
+        ----------
+        plan : RoadPlan
+            The fleet's plan.
+        c : Contribution
+            On this segment.
+        """
         a = c.i0 - plan.segment_range(self.segment)[0]
         total, count = self.total.copy(), self.count.copy()
         total[a:a + c.n] += c.inversion

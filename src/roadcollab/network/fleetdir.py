@@ -65,7 +65,14 @@ def _argon2_hash(password: str) -> str:
 
 
 def acl_rules(fleet_id: str, vehicles: list[str]) -> dict:
-    """``{"publish": {user: [filters]}, "subscribe": {user: [filters]}}`` of the fleet (module docstring)."""
+    """``{"publish": {user: [filters]}, "subscribe": {user: [filters]}}`` of the fleet (module docstring).
+
+    Parameters
+    ----------
+    fleet_id : str
+    vehicles : list of str
+        Vehicle ids.
+    """
     root = f"rc/{fleet_id}"
     pub = {SERVICE_USER: [f"{root}/ack/#", f"{root}/seg/#"]}
     sub = {SERVICE_USER: [f"{root}/#", f"$share/{fleet_id}/{root}/#"]}
@@ -140,7 +147,13 @@ def enroll(folder, n_vehicles: int, plan: RoadPlan) -> list[str]:
 
 
 def load_plan(folder) -> RoadPlan:
-    """The [plan] of ``folder/fleet.toml``."""
+    """The [plan] of ``folder/fleet.toml``.
+
+    Parameters
+    ----------
+    folder : str or Path
+        The fleet folder.
+    """
     path = Path(folder) / "fleet.toml"
     if not path.is_file():
         raise ParameterError(f"--fleet {folder}: no fleet.toml (create the fleet with 'roadcollab enroll')")
@@ -148,11 +161,28 @@ def load_plan(folder) -> RoadPlan:
 
 
 def load_trust(folder) -> FleetTrust:
+    """The fleet's trust anchor ``folder/authority/trust.toml``.
+
+    Parameters
+    ----------
+    folder : str or Path
+        The fleet folder.
+
+    Returns
+    -------
+    FleetTrust
+    """
     return FleetTrust.load(Path(folder) / "authority" / "trust.toml")
 
 
 def load_login(path) -> Login:
-    """``username`` and ``password`` of a ``broker.toml``."""
+    """``username`` and ``password`` of a ``broker.toml``.
+
+    Parameters
+    ----------
+    path : str or Path
+        A ``broker.toml``.
+    """
     data = _read_toml(path)
     try:
         return Login(check_id("username", data["username"]), str(data["password"]))

@@ -74,6 +74,11 @@ class Topics:
     def parse_vehicle(self, topic: str) -> tuple[str, str, int | None]:
         """``(vid, kind, segment)`` of a vehicle topic (kind ``hello`` or ``seg``).
 
+        Parameters
+        ----------
+        topic : str
+            A received topic.
+
         Raises
         ------
         MessageError
@@ -91,13 +96,27 @@ class Topics:
 
 
 def encode_contribution(c: Contribution) -> bytes:
-    """The wire form of a contribution (module docstring)."""
+    """The wire form of a contribution (module docstring).
+
+    Parameters
+    ----------
+    c : Contribution
+    """
     arrays = b"".join(np.ascontiguousarray(getattr(c, k), dtype="<f8").tobytes() for k in ESTIMATES)
     return CONTRIB_MAGIC + _HEAD.pack(c.segment, c.i0, c.n) + arrays
 
 
 def decode_contribution(data: bytes, plan: RoadPlan, segment: int) -> Contribution:
     """A contribution from its wire form, checked against the plan and the topic's segment.
+
+    Parameters
+    ----------
+    data : bytes
+        Wire form.
+    plan : RoadPlan
+        The fleet's plan.
+    segment : int
+        The topic's segment.
 
     Raises
     ------
@@ -126,12 +145,32 @@ def decode_contribution(data: bytes, plan: RoadPlan, segment: int) -> Contributi
 
 
 def seal(identity: VehicleIdentity, topic: str, payload: bytes) -> bytes:
-    """``payload`` signed by the vehicle, bound to ``topic``."""
+    """``payload`` signed by the vehicle, bound to ``topic``.
+
+    Parameters
+    ----------
+    identity : VehicleIdentity
+        The sender.
+    topic : str
+        Bound into the signature.
+    payload : bytes
+    """
     return seal_envelope(identity, payload, context=topic.encode())
 
 
 def open_from(data: bytes, trust: FleetTrust, topic: str, vid: str) -> bytes:
     """The payload of an envelope published on ``topic`` by vehicle ``vid``.
+
+    Parameters
+    ----------
+    data : bytes
+        The envelope.
+    trust : FleetTrust
+        Trust anchor.
+    topic : str
+        Where it was published.
+    vid : str
+        The topic's vehicle id.
 
     Raises
     ------
@@ -146,13 +185,25 @@ def open_from(data: bytes, trust: FleetTrust, topic: str, vid: str) -> bytes:
 
 
 def encode_waiting(vid: str, envelope: bytes) -> bytes:
-    """A retained waiting message: the sender's id and its envelope as it signed it."""
+    """A retained waiting message: the sender's id and its envelope as it signed it.
+
+    Parameters
+    ----------
+    vid : str
+        Sender.
+    envelope : bytes
+        As it signed it.
+    """
     v = vid.encode()
     return struct.pack("<B", len(v)) + v + bytes(envelope)
 
 
 def decode_waiting(data: bytes) -> tuple[str, bytes]:
     """``(vid, envelope)`` of a waiting message.
+
+    Parameters
+    ----------
+    data : bytes
 
     Raises
     ------

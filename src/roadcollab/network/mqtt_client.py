@@ -23,7 +23,13 @@ __all__ = ["parse_broker_url", "MqttClient"]
 
 
 def parse_broker_url(url: str) -> tuple[str, int]:
-    """``mqtt://HOST:PORT`` as ``(host, port)`` (port 1883 if not given)."""
+    """``mqtt://HOST:PORT`` as ``(host, port)`` (port 1883 if not given).
+
+    Parameters
+    ----------
+    url : str
+        ``mqtt://HOST:PORT``.
+    """
     try:
         u = urlsplit(str(url))
         port = u.port or 1883
@@ -89,7 +95,13 @@ class MqttClient:
         self.inbox.put((msg.topic, bytes(msg.payload)))
 
     def connect(self, timeout: float = 30.0) -> "MqttClient":
-        """Connect (retrying with backoff until ``timeout``); ParameterError if refused or unreachable."""
+        """Connect (retrying with backoff until ``timeout``); ParameterError if refused or unreachable.
+
+        Parameters
+        ----------
+        timeout : float
+            Seconds.
+        """
         self._c.connect_async(self.host, self.port, keepalive=10)
         self._c.loop_start()
         end = time.monotonic() + timeout

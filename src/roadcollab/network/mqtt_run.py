@@ -24,6 +24,10 @@ def run_service(service: Service, client, stop: threading.Event, republish: thre
 
     Parameters
     ----------
+    log : callable, optional
+        One line per event.
+    idle_s : float
+        Receive timeout, s (how often ``stop`` is checked).
     service : Service
     client : Transport
         Already subscribed to the vehicle topics.
@@ -48,7 +52,19 @@ def run_service(service: Service, client, stop: threading.Event, republish: thre
 
 def run_vehicle(agent: VehicleAgent, client, *, timeout: float, resend_s: float = 3.0,
                 reconnected: threading.Event | None = None) -> bool:
-    """Run the vehicle's protocol to its last acknowledgement; True if done within ``timeout`` s."""
+    """Run the vehicle's protocol to its last acknowledgement; True if done within ``timeout`` s.
+
+    Parameters
+    ----------
+    agent : VehicleAgent
+    client : Transport
+    timeout : float
+        s.
+    resend_s : float
+        Resend what is unacknowledged after this long without progress, s.
+    reconnected : threading.Event, optional
+        Set by the client on every reconnection (resend at once).
+    """
     for f in agent.subscriptions:
         client.subscribe(f)
     for p in agent.start():

@@ -68,17 +68,35 @@ class RoadPlan:
         return int(round(self.segment_length / self.spacing))
 
     def segment_range(self, s: int) -> tuple[int, int]:
-        """Grid indices ``[i0, i1)`` of segment ``s``."""
+        """Grid indices ``[i0, i1)`` of segment ``s``.
+
+        Parameters
+        ----------
+        s : int
+            Segment index.
+        """
         m = self.points_per_segment
         return s * m, (s + 1) * m
 
     def segments_of(self, i_first: int, i_last: int) -> list[int]:
-        """Segments touched by grid points ``i_first..i_last`` (inclusive)."""
+        """Segments touched by grid points ``i_first..i_last`` (inclusive).
+
+        Parameters
+        ----------
+        i_first, i_last : int
+            First and last grid index.
+        """
         m = self.points_per_segment
         return list(range(i_first // m, i_last // m + 1))
 
     def positions(self, i0: int, i1: int) -> np.ndarray:
-        """Grid positions of indices ``i0..i1-1``, m (``spacing * arange``, as distance_grid)."""
+        """Grid positions of indices ``i0..i1-1``, m (``spacing * arange``, as distance_grid).
+
+        Parameters
+        ----------
+        i0, i1 : int
+            Grid index range ``[i0, i1)``.
+        """
         return self.spacing * np.arange(i0, i1)
 
     def to_dict(self) -> dict:
@@ -87,7 +105,15 @@ class RoadPlan:
 
     @classmethod
     def from_dict(cls, data: dict, where: str) -> "RoadPlan":
-        """The plan from a table read from ``where`` (unknown or mistyped keys refused, naming ``where``)."""
+        """The plan from a table read from ``where`` (unknown or mistyped keys refused, naming ``where``).
+
+        Parameters
+        ----------
+        data : dict
+            The table.
+        where : str
+            Its file, for the message.
+        """
         if not isinstance(data, dict):
             raise ParameterError(f"{where}: expected a [plan] table")
         known = set(cls.__dataclass_fields__)

@@ -61,6 +61,10 @@ def _natural(vid: str) -> tuple:
 def results_from_store(store: ServiceStore) -> NetworkResults:
     """Assemble :class:`NetworkResults` from a store.
 
+    Parameters
+    ----------
+    store : ServiceStore
+
     Raises
     ------
     ParameterError

@@ -32,6 +32,13 @@ class Publish:
 def encode_hello_ack(done: list[int], waiting: dict[int, tuple[str, bytes]]) -> bytes:
     """The reply to a hello: the segments already applied and, per segment, the message waiting for it.
 
+    Parameters
+    ----------
+    done : list of int
+        Segments of this vehicle already applied.
+    waiting : dict
+        ``{segment: (sender, envelope)}``.
+
     Wire form: ``u32 len header | header JSON | envelopes``, the header listing
     ``[segment, sender, offset, length]`` of each envelope in the blob that follows.
     """
@@ -46,6 +53,10 @@ def encode_hello_ack(done: list[int], waiting: dict[int, tuple[str, bytes]]) -> 
 
 def decode_hello_ack(data: bytes) -> tuple[list[int], dict[int, tuple[str, bytes]]]:
     """``(done, {segment: (sender, envelope)})`` of :func:`encode_hello_ack`.
+
+    Parameters
+    ----------
+    data : bytes
 
     Raises
     ------

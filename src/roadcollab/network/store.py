@@ -101,7 +101,15 @@ class ServiceStore:
 
     # -- vehicles --------------------------------------------------------------------------------
     def add_vehicle(self, vid: str, hello: dict) -> int:
-        """Record a vehicle's hello (first one wins); its first-seen order number."""
+        """Record a vehicle's hello (first one wins); its first-seen order number.
+
+        Parameters
+        ----------
+        vid : str
+            Vehicle id.
+        hello : dict
+            Its hello.
+        """
         with self._tx():
             row = self.db.execute("SELECT order_no FROM vehicles WHERE vid = ?", (vid,)).fetchone()
             if row is not None:
@@ -121,7 +129,19 @@ class ServiceStore:
     # -- contributions ---------------------------------------------------------------------------
     def add_contribution(self, vid: str, c: Contribution, data: bytes, envelope: bytes) -> str:
         """Apply one contribution once: ``"accepted"``, ``"duplicate"`` (the same bytes again) or
-        ``"conflict"`` (another contribution of this vehicle on this segment is already applied)."""
+        ``"conflict"`` (another contribution of this vehicle on this segment is already applied).
+
+        Parameters
+        ----------
+        vid : str
+            Sender.
+        c : Contribution
+            Decoded.
+        data : bytes
+            Its wire form (digest).
+        envelope : bytes
+            The signed envelope as received (forwarded as the waiting message).
+        """
         digest = hashlib.sha256(data).hexdigest()
         with self._tx():
             row = self.db.execute("SELECT digest FROM contributions WHERE segment = ? AND vid = ?",
@@ -157,7 +177,15 @@ class ServiceStore:
 
     def predecessor(self, vid: str, segment: int) -> tuple[str, bytes] | None:
         """The message waiting for ``vid`` on ``segment``: the last contribution of another vehicle
-        before ``vid``'s own (or the last one if ``vid`` has none), as ``(sender, envelope)``."""
+        before ``vid``'s own (or the last one if ``vid`` has none), as ``(sender, envelope)``.
+
+        Parameters
+        ----------
+        vid : str
+            The asking vehicle.
+        segment : int
+            Segment index.
+        """
         own = self.db.execute("SELECT seq FROM contributions WHERE segment = ? AND vid = ?",
                               (segment, vid)).fetchone()
         limit = own[0] if own is not None else 2 ** 62

@@ -25,7 +25,13 @@ class Transport(Protocol):
 
 
 def topic_matches(topic_filter: str, topic: str) -> bool:
-    """MQTT topic-filter matching (``+`` one level, ``#`` the rest)."""
+    """MQTT topic-filter matching (``+`` one level, ``#`` the rest).
+
+    Parameters
+    ----------
+    topic_filter : str
+    topic : str
+    """
     f, t = topic_filter.split("/"), topic.split("/")
     for i, part in enumerate(f):
         if part == "#":
