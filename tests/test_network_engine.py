@@ -50,6 +50,15 @@ def test_in_memory_run_equals_estimate_fleet(drives, plan):
     assert broker.bytes_published > 0
 
 
+def test_estimate_fleet_in_memory_is_estimate_fleet(drives):
+    from roadcollab.network.memory import estimate_fleet_in_memory
+
+    est, mem = estimate_fleet(drives[:2]), estimate_fleet_in_memory(drives[:2])
+    assert np.array_equal(mem.position, est.position) and mem.band_low_per_m == est.band_low_per_m
+    for k in est.elevation:
+        assert np.array_equal(mem.elevation[k], est.elevation[k], equal_nan=True), k
+
+
 def test_plan_band_edge_is_estimates():
     assert RoadPlan(min_speed=12.0).band_low_per_m == 0.5 / 12.0
     with pytest.raises(ParameterError, match="segment_length must be a whole number"):

@@ -121,7 +121,8 @@ class VehicleEngine:
     Raises
     ------
     ParameterError
-        The drive covers fewer than 16 grid points, or the design rejects it.
+        The design rejects the drive (a drive over fewer than 16 grid points has no segments: its
+        band-limited estimates are blank, as in estimate_fleet).
     """
 
     def __init__(self, drive: Drive, plan: RoadPlan, *, index: int = 0) -> None:
@@ -134,8 +135,8 @@ class VehicleEngine:
         # drive's points are the same whichever other drives share the grid.
         self.i_first = int(np.ceil(drive.positions[0] / dx - 1e-9))
         self.i_last = int(np.floor(drive.positions[-1] / dx + 1e-9))
-        if self.i_last - self.i_first < 16:
-            raise ParameterError(f"{drive.csv_path}: the drive covers fewer than 16 grid steps of {dx:g} m")
+        if self.i_last < self.i_first:                   # shorter than one grid step: no segment
+            self.i_last = self.i_first
         self.x = plan.positions(self.i_first, self.i_last + 1)
         self.single = self._band(self._to_grid(self.rec.w_single))
         self.inversion = self._band(self._to_grid(self.rec.w_inversion))

@@ -8,16 +8,22 @@ The same :class:`~roadcollab.network.service.Service` and
 
 from __future__ import annotations
 
+import numpy as np
+
 from ..errors import ParameterError
+from ..experiments.config import ExperimentConfig
+from ..experiments.distance_maps import distance_grid
+from ..experiments.fleet_estimation import FleetEstimates
 from ..wire.identity import FleetAuthority, VehicleIdentity
 from .agent import VehicleAgent
 from .engine import VehicleEngine
 from .plan import RoadPlan
+from .results import results_from_store
 from .service import Service
 from .store import ServiceStore
 from .transport import MemoryBroker
 
-__all__ = ["run_in_memory"]
+__all__ = ["run_in_memory", "estimate_fleet_in_memory"]
 
 
 def _pump(service: Service, svc, agent: VehicleAgent, car, limit: int) -> None:
@@ -76,3 +82,44 @@ def run_in_memory(drives, plan: RoadPlan, *, store: ServiceStore | None = None, 
         if not agent.done:
             raise ParameterError(f"vehicle v{j + 1}: segments left unacknowledged {sorted(agent.pending)}")
     return store, broker
+
+
+def estimate_fleet_in_memory(drives, *, spacing: float = 0.05, gamma: float | None = None,
+                             band_low_hz: float | None = None) -> FleetEstimates:
+    """:func:`~roadcollab.experiments.fleet_estimation.estimate_fleet` (unaligned, no fleet prior) through
+    the service and the vehicles over the in-memory transport: what ``roadcollab estimate`` runs.
+
+    The plan takes the band edge from the drives' slowest speed, as ``estimate_fleet`` does, and 100 m
+    segments (rounded to whole grid steps); ``tests/test_network_engine.py`` checks that the result is
+    ``estimate_fleet``'s bit for bit.
+
+    Parameters
+    ----------
+    drives : list of Drive
+        In driving order.
+    spacing : float
+        Distance grid step, m.
+    gamma, band_low_hz : float, optional
+        Observer parameter and band edge (Hz); default the ExperimentConfig defaults.
+
+    Returns
+    -------
+    FleetEstimates
+        ``aligned=False``, zero offsets.
+    """
+    if not drives:
+        raise ParameterError("drives must be a non-empty list of Drive (see load_drives)")
+    base = ExperimentConfig()
+    gamma = base.gamma if gamma is None else gamma
+    band_low_hz = base.band_low_hz if band_low_hz is None else band_low_hz
+    # The same grid and its checks as estimate_fleet (e.g. drives covering fewer than 16 grid steps).
+    distance_grid([d.positions[0] for d in drives], [d.positions[-1] for d in drives], spacing)
+    vmin = min(float(d.speeds().min()) for d in drives)
+    plan = RoadPlan(fleet_id="estimate", spacing=spacing, segment_length=spacing * max(16, round(100.0 / spacing)),
+                    min_speed=vmin, band_low_hz=band_low_hz, gamma=gamma)
+    store, _ = run_in_memory(drives, plan)
+    r = results_from_store(store)
+    V = len(drives)
+    return FleetEstimates(drives=list(drives), position=r.position, spacing=float(spacing), elevation=r.elevation,
+                          offsets=np.zeros(V), offset_peaks=np.full(V, np.nan), band_low_per_m=plan.band_low_per_m,
+                          band_low_hz=float(band_low_hz), gamma=float(gamma), aligned=False)
