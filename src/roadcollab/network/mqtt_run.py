@@ -2,7 +2,7 @@
 
 Both loops are bounded: the service runs until ``stop`` is set (SIGINT/SIGTERM), a vehicle until all
 its segments are acknowledged or ``timeout`` seconds pass. A vehicle sends again what is not yet
-acknowledged every ``resend_s`` seconds without progress and after every reconnection, so a message
+acknowledged after ``resend_s`` seconds without progress (backing off to 60 s) and after every reconnection, so a message
 lost with a killed service or broker is sent again; the service applies each once.
 """
 
@@ -61,7 +61,8 @@ def run_vehicle(agent: VehicleAgent, client, *, timeout: float, resend_s: float 
     timeout : float
         s.
     resend_s : float
-        Resend what is unacknowledged after this long without progress, s.
+        Resend what is unacknowledged after this long without progress, s; doubled after every resend
+        without progress (at most 60 s), reset by progress and by a reconnection.
     reconnected : threading.Event, optional
         Set by the client on every reconnection (resend at once).
     """
@@ -70,15 +71,17 @@ def run_vehicle(agent: VehicleAgent, client, *, timeout: float, resend_s: float 
     for p in agent.start():
         client.publish(p.topic, p.payload, p.retain)
     end = time.monotonic() + timeout
-    last = time.monotonic()
+    last, wait = time.monotonic(), resend_s
     while not agent.done and time.monotonic() < end:
         if reconnected is not None and reconnected.is_set():
             reconnected.clear()
-            last = 0.0
-        if time.monotonic() - last > resend_s:
+            last, wait = 0.0, resend_s
+        if time.monotonic() - last > wait:
             for p in agent.resend():
                 client.publish(p.topic, p.payload, p.retain)
-            last = time.monotonic()
+            # Back off while the service makes no progress on this vehicle: a busy service must not be
+            # buried under copies (each is applied once, but each costs it a verification).
+            last, wait = time.monotonic(), min(2 * wait, 60.0)
         m = client.receive(0.1)
         if m is None:
             continue
@@ -86,5 +89,5 @@ def run_vehicle(agent: VehicleAgent, client, *, timeout: float, resend_s: float 
         for p in agent.on_message(*m):
             client.publish(p.topic, p.payload, p.retain)
         if (agent.started, len(agent.outcomes)) != before:
-            last = time.monotonic()
+            last, wait = time.monotonic(), resend_s
     return agent.done
