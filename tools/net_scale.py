@@ -68,7 +68,7 @@ def _worker(fleet: str, url: str, jobs: list, drives: list, out: str) -> None:
         folder = Path(fleet) / "vehicles" / vid
         agent = VehicleAgent(engines[k], VehicleIdentity.load(folder), FleetTrust.load(folder / "trust.toml"))
         c = Timed(MqttClient(url, load_login(folder / "broker.toml"), f"scale-{vid}").connect(timeout=120))
-        ok = run_vehicle(agent, c, timeout=600, resend_s=3.0)
+        ok = run_vehicle(agent, c, timeout=600)
         c.close()
         results[vid] = {"ok": ok, "published": c.t, "bytes_out": c.c.bytes_out, "bytes_in": c.c.bytes_in,
                         "segments": len(agent.segments)}
