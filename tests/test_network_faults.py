@@ -82,8 +82,9 @@ def test_broker_killed_and_restarted_mid_run(world, kind, tmp_path):
         assert fleet.wait(300) == 0, (tmp_path / "fleet.log").read_text()
     finally:
         stop(fleet)
-        assert stop(serve) == 0
-        stop(broker)
+        code = stop(serve)
+        stop(broker)                                    # stopped even when serve's exit code is wrong
+    assert code == 0
     _equal(root, tmp_path / "s.sqlite", tmp_path / "out")
 
 
@@ -105,8 +106,9 @@ def test_serve_sigkilled_and_restarted_on_its_store(world, kind, tmp_path):
         assert fleet.wait(300) == 0, (tmp_path / "fleet.log").read_text()
     finally:
         stop(fleet)
-        assert stop(serve) == 0
-        stop(broker)
+        code = stop(serve)
+        stop(broker)                                    # stopped even when serve's exit code is wrong
+    assert code == 0
     _equal(root, store, tmp_path / "out")
 
 
