@@ -21,15 +21,17 @@ ALLOWED = {
     "store": {"lti", "models", "io", "geo"},
     "experiments": {"lti", "models", "estimation", "detection", "wire", "privacy", "collaboration", "io", "geo",
                     "store"},
+    "network": {"lti", "models", "estimation", "detection", "wire", "privacy", "collaboration", "io", "geo", "store",
+                "experiments"},
     "reporting": {"lti", "models", "estimation", "detection", "wire", "privacy", "collaboration", "io", "experiments",
-                  "geo", "store"},
+                  "geo", "store", "network"},
     "cli": {"lti", "models", "estimation", "detection", "wire", "privacy", "collaboration", "io", "experiments",
-            "reporting", "geo", "store"},
+            "reporting", "geo", "store", "network"},
 }
 BASE = {"errors", "_validation", "__version__"}
 #: Imports allowed inside functions: optional or heavy third-party modules only.
 LAZY_OK = {"control", "slycot", "dask", "matplotlib", "phe", "cryptography", "rich", "tomllib", "tomli", "gmpy2",
-           "psycopg"}
+           "psycopg", "paho", "amqtt", "pwdlib"}
 #: Heavy submodules of a core dependency that may be imported inside functions (SciPy's ``signal`` and
 #: ``stats`` packages take about 1 s to import; the kernels that use them import them when first called).
 LAZY_OK_SUBMODULES = {"scipy.signal", "scipy.stats"}

@@ -22,6 +22,7 @@ COMMANDS = {
     "estimate": ["estimate", "--drive", "{drive}"],
     "simulate-drives": ["simulate-drives"],
     "map": ["map", "--drive", "{drive}", "--store", "{store}"],
+    "export": ["export", "--store", "{store}"],
 }
 
 

@@ -63,7 +63,12 @@ def _distance_grid(drives, out, *, command: str, segment_length: float, align: b
     from ..experiments.fleet_estimation import drive_stretches, estimate_fleet, find_fleet_anomalies, fused_iri
     from ..reporting.fleet_report import write_fleet_estimates
 
-    est = estimate_fleet(drives, spacing=spacing, align=align, max_offset=max_offset)
+    if align:
+        est = estimate_fleet(drives, spacing=spacing, align=align, max_offset=max_offset)
+    else:  # the networked run's per-segment engine, over the in-memory transport (equal to estimate_fleet)
+        from ..network.memory import estimate_fleet_in_memory
+
+        est = estimate_fleet_in_memory(drives, spacing=spacing)
     notes = list(notes)
     stretches = drive_stretches(drives, segment_length, est.offsets)
     if len(stretches) > 1:

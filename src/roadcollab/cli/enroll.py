@@ -1,0 +1,71 @@
+"""``roadcollab enroll --fleet DIR --vehicles N``: a fleet's authority, vehicle identities and broker logins."""
+
+from __future__ import annotations
+
+import argparse
+
+from ._arguments import count, help_range, ranged
+from ._common import GRID_STEP, MAX_VEHICLES, SEGMENT_LENGTH, command_parser
+
+_VEHICLES = count("number of vehicles", 1, MAX_VEHICLES)
+_MIN_SPEED = ranged("slowest speed", 0.5, 60, "m/s")
+
+__all__ = ["NAME", "add_parser", "run"]
+
+NAME = "enroll"
+
+
+def add_parser(subparsers) -> argparse.ArgumentParser:
+    """Add the ``enroll`` subcommand.
+
+    Parameters
+    ----------
+    subparsers : argparse._SubParsersAction
+
+    Returns
+    -------
+    argparse.ArgumentParser
+    """
+    p = command_parser(
+        subparsers, NAME, summary="create a fleet: authority key, vehicle identities, broker logins and ACL",
+        does="Creates a fleet folder: an Ed25519 fleet authority, one identity (key + certificate) per vehicle in "
+             "vehicles/v1..vN with its broker.toml (MQTT username and password), the service's login, and the "
+             "broker's password files and topic ACL for the embedded broker and for Mosquitto. Never replaces "
+             "an existing fleet.",
+        writes="--fleet DIR: fleet.toml, authority/, vehicles/vK/, service/broker.toml, broker/.",
+        example="roadcollab enroll --fleet fleet --vehicles 4 --min-speed 12")
+    p.add_argument("--fleet", required=True, metavar="DIR", help="the fleet folder (created)")
+    p.add_argument("--vehicles", required=True, type=_VEHICLES, metavar="N", help=f"number of vehicles ({help_range(_VEHICLES)})")
+    p.add_argument("--fleet-id", default="fleet", metavar="ID", help="fleet name, topic prefix rc/ID (default fleet)")
+    p.add_argument("--min-speed", type=_MIN_SPEED, default=10.0, metavar="M/S",
+                   help="slowest speed the fleet admits, m/s: fixes the wavenumber band edge 0.5 Hz / M/S "
+                        f"(estimate takes it from the slowest drive; default 10; {help_range(_MIN_SPEED)})")
+    p.add_argument("--segment-length", type=SEGMENT_LENGTH, default=100.0, metavar="M",
+                   help=f"segment length (default 100; {help_range(SEGMENT_LENGTH)})")
+    p.add_argument("--grid-step", type=GRID_STEP, default=0.05, metavar="M",
+                   help=f"step of the distance grid (default 0.05, as estimate; {help_range(GRID_STEP)})")
+    return p
+
+
+def run(args: argparse.Namespace, command_line: str) -> int:
+    """Enroll the fleet and print one line.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+    command_line : str
+
+    Returns
+    -------
+    int
+        0.
+    """
+    from ..network.fleetdir import enroll
+    from ..network.plan import RoadPlan
+    from ..wire.identity import check_id
+
+    plan = RoadPlan(fleet_id=check_id("--fleet-id", args.fleet_id), spacing=args.grid_step,
+                    segment_length=args.segment_length, min_speed=args.min_speed)
+    ids = enroll(args.fleet, args.vehicles, plan)
+    print(f"enrolled fleet {plan.fleet_id!r} with {len(ids)} vehicles ({ids[0]}..{ids[-1]}) in {args.fleet}")
+    return 0

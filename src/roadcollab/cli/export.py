@@ -1,0 +1,75 @@
+"""``roadcollab export --store FILE --out DIR``: the files ``estimate`` writes, from the service's store."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from ._arguments import help_range
+from ._common import SEGMENT_LENGTH, command_parser, input_paths, out_path
+
+__all__ = ["NAME", "add_parser", "run"]
+
+NAME = "export"
+
+
+def add_parser(subparsers) -> argparse.ArgumentParser:
+    """Add the ``export`` subcommand.
+
+    Parameters
+    ----------
+    subparsers : argparse._SubParsersAction
+
+    Returns
+    -------
+    argparse.ArgumentParser
+    """
+    p = command_parser(
+        subparsers, NAME, summary="write a service store's results as 'estimate' writes them",
+        does="Reads the service's store (also while 'serve' runs) and writes the fused estimate, every "
+             "vehicle's estimates, the IRI per segment and the anomalies of the fused elevation.",
+        writes="into --out (replaced as a whole at the end): final_estimate.csv, road_estimates.csv, iri.csv, "
+               "anomalies.csv, config.json, report.md.",
+        example="roadcollab export --store road.sqlite --out results/road")
+    p.add_argument("--store", required=True, metavar="FILE", help="the service's SQLite file")
+    p.add_argument("--out", type=out_path, required=True, metavar="DIR",
+                   help="output folder: absent, empty or a previous export result")
+    p.add_argument("--segment-length", type=SEGMENT_LENGTH, default=100.0, metavar="M",
+                   help=f"IRI segment length of the fused elevation (default 100; {help_range(SEGMENT_LENGTH)})")
+    return p
+
+
+def run(args: argparse.Namespace, command_line: str) -> int:
+    """Export the store.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+    command_line : str
+
+    Returns
+    -------
+    int
+        0.
+    """
+
+    from ..errors import ParameterError
+    from ..network.results import results_from_store
+    from ..network.store import ServiceStore
+    from ..reporting.network_report import write_network_results
+    from ..reporting.records import staged_output
+
+    if not Path(args.store).is_file():
+        raise ParameterError(f"--store {args.store}: not found (expected the file 'roadcollab serve' writes)")
+    store = ServiceStore(args.store)
+    try:
+        r = results_from_store(store)
+        with staged_output(args.out, NAME, input_paths(args)) as out:
+            summary = write_network_results(r, out, command=command_line, segment_length=args.segment_length,
+                                            plan=store.plan.to_dict())
+    finally:
+        store.close()
+    for note in summary["notes"]:
+        print(f"note: {note}")
+    print(f"exported {summary['n_vehicles']} vehicles over {summary['length_m']:.1f} m; wrote {args.out}/report.md")
+    return 0

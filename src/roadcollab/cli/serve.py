@@ -1,0 +1,101 @@
+"""``roadcollab serve --fleet DIR --store FILE [--listen HOST:PORT | --broker URL]``: the roadside service."""
+
+from __future__ import annotations
+
+import argparse
+import os
+import signal
+import threading
+from pathlib import Path
+
+from ._common import command_parser
+
+__all__ = ["NAME", "add_parser", "run"]
+
+NAME = "serve"
+
+
+def add_parser(subparsers) -> argparse.ArgumentParser:
+    """Add the ``serve`` subcommand.
+
+    Parameters
+    ----------
+    subparsers : argparse._SubParsersAction
+
+    Returns
+    -------
+    argparse.ArgumentParser
+    """
+    p = command_parser(
+        subparsers, NAME, summary="the roadside service (starts the embedded MQTT broker unless --broker)",
+        does="Starts the embedded MQTT broker (amqtt) on --listen unless --broker names one, receives the "
+             "vehicles' signed contributions, orders the vehicles on each segment, keeps the fused estimate per "
+             "segment and the message waiting there, and refuses (with a reason in the store) whatever does not "
+             "verify. Runs until SIGINT/SIGTERM; restarted on the same store it continues.",
+        writes="--store FILE (SQLite; each message's effect one transaction); one line per event on stdout.",
+        example="roadcollab serve --fleet fleet --store road.sqlite --listen 127.0.0.1:1883")
+    p.add_argument("--fleet", required=True, metavar="DIR", help="the fleet folder from 'roadcollab enroll'")
+    p.add_argument("--store", required=True, metavar="FILE", help="the service's SQLite file (created if missing)")
+    g = p.add_mutually_exclusive_group()
+    g.add_argument("--listen", default="127.0.0.1:1883", metavar="HOST:PORT",
+                   help="where the embedded broker listens (default 127.0.0.1:1883)")
+    g.add_argument("--broker", metavar="URL", help="use this broker instead (mqtt://HOST:PORT), e.g. Mosquitto")
+    p.add_argument("--shared", action="store_true",
+                   help="subscribe through the shared subscription $share/FLEET/... (several serve instances "
+                        "against one broker split the messages)")
+    p.add_argument("--quiet", action="store_true", help="print only the start and stop lines")
+    return p
+
+
+def run(args: argparse.Namespace, command_line: str) -> int:
+    """Serve until SIGINT/SIGTERM.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+    command_line : str
+
+    Returns
+    -------
+    int
+        0 after a clean stop.
+    """
+
+    from ..network.brokers import EmbeddedBroker, parse_listen
+    from ..network.fleetdir import load_login, load_plan, load_trust
+    from ..network.mqtt_client import MqttClient
+    from ..network.mqtt_run import run_service
+    from ..network.service import Service
+    from ..network.store import ServiceStore
+
+    plan, trust = load_plan(args.fleet), load_trust(args.fleet)
+    login = load_login(Path(args.fleet) / "service" / "broker.toml")
+    store = ServiceStore(args.store, plan)
+    log = (lambda line: None) if args.quiet else (lambda line: print(line, flush=True))
+    service = Service(store, trust, log=log)
+    broker = None
+    if args.broker is None:
+        host, port = parse_listen(args.listen)
+        broker = EmbeddedBroker(Path(args.fleet), host, port).start()
+        url = f"mqtt://{host}:{port}"
+    else:
+        url = args.broker
+    stop, republish = threading.Event(), threading.Event()
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(sig, lambda *_: stop.set())
+    client = MqttClient(url, login, f"rc-service-{plan.fleet_id}" + (f"-{os.getpid()}" if args.shared else ""), on_connect=republish.set)
+    filt = service.topics.from_vehicles
+    client.subscribe(f"$share/{plan.fleet_id}/{filt}" if args.shared else filt)
+    try:
+        client.connect()
+        st = store.status()
+        print(f"serving fleet {plan.fleet_id!r} on {url}: store {args.store} holds {st['contributions']} "
+              f"contributions from {st['vehicles']} vehicles", flush=True)
+        handled = run_service(service, client, stop, republish, log=log)
+    finally:
+        client.close()
+        if broker is not None:
+            broker.stop()
+        store.close()
+    print(f"stopped: {handled} messages handled this run, store {args.store} closed", flush=True)
+    return 0

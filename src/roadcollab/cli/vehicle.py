@@ -1,0 +1,100 @@
+"""``roadcollab vehicle --fleet DIR --id vK --drive FILE --broker URL``: one vehicle on the network."""
+
+from __future__ import annotations
+
+import argparse
+import threading
+from pathlib import Path
+
+from ._arguments import help_range, ranged
+from ._common import add_limit_options, command_parser, file_limits
+
+_TIMEOUT = ranged("timeout", 0.1, 86_400, "s")
+
+__all__ = ["NAME", "add_parser", "run"]
+
+NAME = "vehicle"
+
+
+def add_parser(subparsers) -> argparse.ArgumentParser:
+    """Add the ``vehicle`` subcommand.
+
+    Parameters
+    ----------
+    subparsers : argparse._SubParsersAction
+
+    Returns
+    -------
+    argparse.ArgumentParser
+    """
+    p = command_parser(
+        subparsers, NAME, summary="one vehicle: its drive's segments through the service",
+        does="Reads the drive, inverts it, cuts it into the fleet's segments; for each takes the message "
+             "waiting there, checks it, runs Algorithm 1, and publishes its signed contribution. Exits 0 when "
+             "the service has acknowledged every segment, 3 if --timeout passes first.",
+        writes="nothing (messages to the broker; one line on stdout).",
+        example="roadcollab vehicle --fleet fleet --id v1 --drive d1.csv --broker mqtt://127.0.0.1:1883")
+    p.add_argument("--fleet", required=True, metavar="DIR", help="the fleet folder")
+    p.add_argument("--id", required=True, metavar="VID", help="the vehicle id (a folder in DIR/vehicles)")
+    p.add_argument("--drive", required=True, metavar="FILE", help="the drive CSV (parameters file beside it)")
+    p.add_argument("--broker", required=True, metavar="URL", help="mqtt://HOST:PORT")
+    p.add_argument("--timeout", type=_TIMEOUT, default=300.0, metavar="S",
+                   help=f"give up after S seconds (default 300; {help_range(_TIMEOUT)})")
+    add_limit_options(p, "the drive CSV")
+    return p
+
+
+def run(args: argparse.Namespace, command_line: str) -> int:
+    """Run one vehicle to its last acknowledgement.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+    command_line : str
+
+    Returns
+    -------
+    int
+        0 when done, 3 on timeout.
+    """
+
+    from ..errors import ParameterError
+    from ..io.drive_clean import clean_drive
+    from ..io.drives import load_drive
+    from ..network.agent import VehicleAgent
+    from ..network.engine import VehicleEngine
+    from ..network.fleetdir import load_login, load_plan
+    from ..network.mqtt_client import MqttClient, parse_broker_url
+    from ..network.mqtt_run import run_vehicle
+    from ..wire.identity import FleetTrust, VehicleIdentity, check_id
+
+    parse_broker_url(args.broker)
+    folder = Path(args.fleet) / "vehicles" / check_id("--id", args.id)
+    if not folder.is_dir():
+        raise ParameterError(f"--id {args.id}: no vehicle folder {folder} (enrolled ids are vehicles/v1..vN)")
+    plan = load_plan(args.fleet)
+    identity, trust = VehicleIdentity.load(folder), FleetTrust.load(folder / "trust.toml")
+    login = load_login(folder / "broker.toml")
+    # Cleaned exactly as ``estimate`` cleans it (slow offsets, isolated spikes): the network changes no estimate.
+    drive, cleaning = clean_drive(load_drive(args.drive, limits=file_limits(args)))
+    if cleaning.n_spikes:
+        print(f"{args.id}: {cleaning.n_spikes} isolated spikes repaired", flush=True)
+    agent = VehicleAgent(VehicleEngine(drive, plan, index=int(args.id[1:]) - 1 if args.id[1:].isdigit() else 0),
+                         identity, trust)
+    reconnected = threading.Event()
+    client = MqttClient(args.broker, login, f"rc-{plan.fleet_id}-{args.id}", on_connect=reconnected.set)
+    try:
+        client.connect(timeout=args.timeout)
+        reconnected.clear()
+        ok = run_vehicle(agent, client, timeout=args.timeout, reconnected=reconnected)
+    finally:
+        client.close()
+    refused = sorted(s for s, o in agent.outcomes.items() if o == "conflict")
+    note = f"; dropped {len(agent.dropped)} waiting messages that did not verify" if agent.dropped else ""
+    if not ok:
+        print(f"{args.id}: timeout after {args.timeout:g} s with segments {sorted(agent.pending)} unacknowledged"
+              f"{note}", flush=True)
+        return 3
+    print(f"{args.id}: {len(agent.segments)} segments done ({client.bytes_out} bytes sent"
+          f"{', conflicts on ' + str(refused) if refused else ''}){note}", flush=True)
+    return 0

@@ -1,0 +1,123 @@
+"""A vehicle's protocol: a state machine from the service's replies to the messages it publishes.
+
+``hello`` (its segments) -> the service replies with the messages waiting for it and the segments it
+already applied (a restarted vehicle skips those) -> the vehicle checks every waiting message (the
+guard: a valid signature of a fleet vehicle on that segment's topic, a well-formed contribution on
+that segment; anything else is dropped and Algorithm 1 runs without it there) -> runs the engine ->
+publishes one contribution per segment -> done when every segment is acknowledged. Unacknowledged
+messages are sent again by :meth:`VehicleAgent.resend` (the service applies each once).
+"""
+
+from __future__ import annotations
+
+from ..errors import MessageError, ParameterError
+from ..wire.identity import FleetTrust, VehicleIdentity
+from .engine import VehicleEngine
+from .messages import Topics, decode_contribution, decode_json, encode_contribution, encode_json, \
+    open_from, seal
+from .service import Publish, decode_hello_ack
+
+__all__ = ["VehicleAgent"]
+
+
+class VehicleAgent:
+    """One vehicle on the network.
+
+    Parameters
+    ----------
+    engine : VehicleEngine
+        Its drive, inverted.
+    identity : VehicleIdentity
+        Its key and certificate.
+    trust : FleetTrust
+        The fleet's trust anchor (to check the waiting messages).
+    """
+
+    def __init__(self, engine: VehicleEngine, identity: VehicleIdentity, trust: FleetTrust) -> None:
+        self.engine, self.identity, self.trust = engine, identity, trust
+        self.vid = identity.vehicle_id
+        self.topics = Topics(engine.plan.fleet_id)
+        self.segments = engine.segments
+        self.pending: dict[int, Publish] = {}
+        self.outcomes: dict[int, str] = {}
+        self.dropped: list[str] = []
+        self.started = False
+
+    @property
+    def subscriptions(self) -> list[str]:
+        """Topics to subscribe to before :meth:`start`."""
+        return [self.topics.ack(self.vid)]
+
+    @property
+    def done(self) -> bool:
+        """Every segment has an outcome from the service."""
+        return self.started and not self.pending and set(self.outcomes) >= set(self.segments)
+
+    def hello(self) -> Publish:
+        d = self.engine.drive
+        body = encode_json({"segments": self.segments, "speed_mps": float(d.speed), "csv": d.csv_path.name,
+                            "n_samples": int(d.n_samples), "start_m": float(d.positions[0]),
+                            "end_m": float(d.positions[-1])})
+        topic = self.topics.hello(self.vid)
+        return Publish(topic, seal(self.identity, topic, body))
+
+    def start(self) -> list[Publish]:
+        """The first message (the hello)."""
+        return [self.hello()]
+
+    def resend(self) -> list[Publish]:
+        """What is not acknowledged yet: the hello before the reply, else the pending contributions."""
+        return [self.hello()] if not self.started else list(self.pending.values())
+
+    def _check_waiting(self, s: int, sender: str, envelope: bytes):
+        topic = self.topics.segment(sender, s)
+        return decode_contribution(open_from(envelope, self.trust, topic, sender), self.engine.plan, s)
+
+    def on_message(self, topic: str, payload: bytes) -> list[Publish]:
+        """React to a message from the service; what to publish. Malformed replies are dropped.
+
+        Parameters
+        ----------
+        topic : str
+        payload : bytes
+        """
+        if topic != self.topics.ack(self.vid):
+            return []
+        try:
+            if bytes(payload[:1]) == b"{":
+                return self._segment_ack(decode_json(payload, "ack"))
+            if self.started:
+                return []                                 # a second reply to a resent hello
+            done, waiting = decode_hello_ack(payload)
+        except (MessageError, ParameterError) as err:
+            self.dropped.append(str(err))
+            return []
+        checked = {}
+        for s, (sender, env) in waiting.items():
+            if s not in self.segments:
+                continue
+            try:
+                checked[s] = self._check_waiting(s, sender, env)
+            except (MessageError, ParameterError) as err:   # the guard: never learn from what does not verify
+                self.dropped.append(f"segment {s}: {err}")
+        self.started = True
+        for s in done:
+            self.outcomes[s] = "accepted"
+        out = []
+        for c in self.engine.contributions(checked):
+            if c.segment in self.outcomes:
+                continue
+            t = self.topics.segment(self.vid, c.segment)
+            self.pending[c.segment] = Publish(t, seal(self.identity, t, encode_contribution(c)))
+            out.append(self.pending[c.segment])
+        for s in self.segments:                              # covered by fewer than one finite point
+            if s not in self.pending and s not in self.outcomes:
+                self.outcomes[s] = "empty"
+        return out
+
+    def _segment_ack(self, ack: dict) -> list[Publish]:
+        s = ack.get("segment")
+        if isinstance(s, int) and s in self.pending and ack.get("outcome") in ("accepted", "duplicate", "conflict"):
+            self.outcomes[s] = ack["outcome"]
+            del self.pending[s]
+        return []

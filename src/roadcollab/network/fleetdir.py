@@ -1,0 +1,193 @@
+"""A fleet folder: the authority, one identity and broker login per vehicle, the broker's users and ACLs.
+
+Layout written by :func:`enroll` (``roadcollab enroll``)::
+
+    DIR/fleet.toml                    [plan] of the fleet (RoadPlan)
+    DIR/authority/authority.key       Ed25519 authority key (0600) and trust.toml (the trust anchor)
+    DIR/vehicles/vK/                  identity.key (0600), certificate.bin, trust.toml, broker.toml
+    DIR/service/broker.toml           the service's broker login
+    DIR/broker/amqtt_passwd           user:argon2 hash (the embedded broker)
+    DIR/broker/mosquitto_passwd       user:$7$ PBKDF2-SHA512 hash (Mosquitto's own format)
+    DIR/broker/mosquitto_acl          Mosquitto ACL
+    DIR/broker/acl.json               the same rules for the embedded broker
+
+``broker.toml`` holds ``username`` and ``password`` (mode 0600), so any MQTT client can act as that
+vehicle. ACL: vehicle ``vK`` may publish only under ``rc/F/v/vK/`` and read only ``rc/F/ack/vK`` and the
+waiting messages; the service reads every vehicle topic and writes acks and waiting messages.
+"""
+
+from __future__ import annotations
+
+import base64
+import hashlib
+import json
+import os
+import secrets
+from dataclasses import dataclass
+from pathlib import Path
+
+from ..errors import FileFormatError, ParameterError
+from ..wire.identity import FleetAuthority, FleetTrust, VehicleIdentity, _read_toml, check_id
+from .plan import RoadPlan
+
+__all__ = ["Login", "enroll", "load_plan", "load_login", "load_trust", "acl_rules", "SERVICE_USER"]
+
+SERVICE_USER = "service"
+
+
+@dataclass(frozen=True)
+class Login:
+    """An MQTT login: ``username``, ``password``."""
+
+    username: str
+    password: str
+
+
+def _write_secret(path: Path, text: str) -> None:
+    fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600)
+    with os.fdopen(fd, "w") as fh:
+        fh.write(text)
+
+
+def _mosquitto_hash(password: str) -> str:
+    """Mosquitto 2's password-file hash ``$7$101$salt$hash`` (PBKDF2-HMAC-SHA512, 101 rounds, 12-byte salt)."""
+    salt = secrets.token_bytes(12)
+    dk = hashlib.pbkdf2_hmac("sha512", password.encode(), salt, 101, 64)
+    return f"$7$101${base64.b64encode(salt).decode()}${base64.b64encode(dk).decode()}"
+
+
+def _argon2_hash(password: str) -> str:
+    from pwdlib.hashers.argon2 import Argon2Hasher   # amqtt's own hasher (a dependency of amqtt)
+
+    # Light parameters (8 MiB, one pass): a login is a random 24-byte token, not a human password, and
+    # the broker verifies one hash per connection (the defaults take 0.6 s each on this machine).
+    return Argon2Hasher(time_cost=1, memory_cost=8192, parallelism=1).hash(password)
+
+
+def acl_rules(fleet_id: str, vehicles: list[str]) -> dict:
+    """``{"publish": {user: [filters]}, "subscribe": {user: [filters]}}`` of the fleet (module docstring).
+
+    Parameters
+    ----------
+    fleet_id : str
+    vehicles : list of str
+        Vehicle ids.
+    """
+    root = f"rc/{fleet_id}"
+    pub = {SERVICE_USER: [f"{root}/ack/#", f"{root}/seg/#"]}
+    sub = {SERVICE_USER: [f"{root}/#", f"$share/{fleet_id}/{root}/#"]}
+    for v in vehicles:
+        pub[v] = [f"{root}/v/{v}/#"]
+        sub[v] = [f"{root}/ack/{v}", f"{root}/seg/+/waiting"]
+    return {"publish": pub, "subscribe": sub}
+
+
+def _mosquitto_acl(rules: dict) -> str:
+    lines = []
+    for user in rules["publish"]:
+        lines.append(f"user {user}")
+        lines += [f"topic write {t}" for t in rules["publish"][user]]
+        lines += [f"topic read {t}" for t in rules["subscribe"][user] if not t.startswith("$share")]
+        lines.append("")
+    return "\n".join(lines)
+
+
+def enroll(folder, n_vehicles: int, plan: RoadPlan) -> list[str]:
+    """Create a fleet folder (module docstring) with vehicles ``v1..vN``.
+
+    Parameters
+    ----------
+    folder : str or Path
+        Must not hold a fleet yet (nothing is ever replaced).
+    n_vehicles : int
+        1..10000.
+    plan : RoadPlan
+
+    Returns
+    -------
+    list of str
+        The vehicle ids.
+
+    Raises
+    ------
+    ParameterError
+        A folder that already holds a fleet, or a bad count.
+    """
+    folder = Path(folder)
+    if isinstance(n_vehicles, bool) or not isinstance(n_vehicles, int) or not 1 <= n_vehicles <= 10000:
+        raise ParameterError(f"--vehicles must be an integer in 1..10000, got {n_vehicles!r}")
+    if (folder / "fleet.toml").exists() or (folder / "authority").exists():
+        raise ParameterError(f"--fleet {folder}: already holds a fleet (enroll never replaces one)")
+    if folder.exists() and not folder.is_dir():
+        raise ParameterError(f"--fleet {folder}: expected a folder, got a file")
+    if folder.is_dir() and any(folder.iterdir()):  # never write among files that are not ours
+        raise ParameterError(f"--fleet {folder}: the folder is not empty; enroll creates a fleet in a new or empty "
+                             "folder")
+    folder.mkdir(parents=True, exist_ok=True)
+    auth = FleetAuthority.generate(plan.fleet_id)
+    auth.save(folder / "authority")
+    lines = "\n".join(f"{k} = {json.dumps(v)}" for k, v in plan.to_dict().items())
+    (folder / "fleet.toml").write_text(f"[plan]\n{lines}\n")
+    ids = [f"v{k}" for k in range(1, n_vehicles + 1)]
+    logins = {SERVICE_USER: secrets.token_urlsafe(24)}
+    (folder / "service").mkdir()
+    for v in ids:
+        logins[v] = secrets.token_urlsafe(24)
+        d = folder / "vehicles" / v
+        VehicleIdentity.enroll(auth, v).save(d)
+        auth.trust().save(d / "trust.toml")
+    for user, pw in logins.items():
+        d = folder / ("service" if user == SERVICE_USER else f"vehicles/{user}")
+        _write_secret(d / "broker.toml", f'username = "{user}"\npassword = "{pw}"\n')
+    b = folder / "broker"
+    b.mkdir()
+    _write_secret(b / "amqtt_passwd", "".join(f"{u}:{_argon2_hash(p)}\n" for u, p in logins.items()))
+    _write_secret(b / "mosquitto_passwd", "".join(f"{u}:{_mosquitto_hash(p)}\n" for u, p in logins.items()))
+    rules = acl_rules(plan.fleet_id, ids)
+    (b / "acl.json").write_text(json.dumps(rules, indent=1))
+    (b / "mosquitto_acl").write_text(_mosquitto_acl(rules))
+    return ids
+
+
+def load_plan(folder) -> RoadPlan:
+    """The [plan] of ``folder/fleet.toml``.
+
+    Parameters
+    ----------
+    folder : str or Path
+        The fleet folder.
+    """
+    path = Path(folder) / "fleet.toml"
+    if not path.is_file():
+        raise ParameterError(f"--fleet {folder}: no fleet.toml (create the fleet with 'roadcollab enroll')")
+    return RoadPlan.from_dict(_read_toml(path).get("plan"), str(path))
+
+
+def load_trust(folder) -> FleetTrust:
+    """The fleet's trust anchor ``folder/authority/trust.toml``.
+
+    Parameters
+    ----------
+    folder : str or Path
+        The fleet folder.
+
+    Returns
+    -------
+    FleetTrust
+    """
+    return FleetTrust.load(Path(folder) / "authority" / "trust.toml")
+
+
+def load_login(path) -> Login:
+    """``username`` and ``password`` of a ``broker.toml``.
+
+    Parameters
+    ----------
+    path : str or Path
+        A ``broker.toml``.
+    """
+    data = _read_toml(path)
+    try:
+        return Login(check_id("username", data["username"]), str(data["password"]))
+    except (KeyError, ParameterError) as err:
+        raise FileFormatError(f"{path}: expected username and password ({err})") from None

@@ -1,0 +1,67 @@
+"""The network commands in-process: enroll, status, export (the MQTT runs are in test_network_mqtt.py)."""
+
+import stat
+
+import pytest
+
+from netkit import assert_same_table, write_drives
+from roadcollab.cli.main import main
+from roadcollab.io.drives import load_drives
+from roadcollab.network.fleetdir import load_login, load_plan
+from roadcollab.network.memory import run_in_memory
+from roadcollab.network.store import ServiceStore
+
+
+def test_enroll_writes_a_fleet_and_never_replaces_one(tmp_path, capsys):
+    fleet = tmp_path / "fleet"
+    assert main(["enroll", "--fleet", str(fleet), "--vehicles", "3", "--min-speed", "12"]) == 0
+    assert "3 vehicles (v1..v3)" in capsys.readouterr().out
+    assert load_plan(fleet).band_low_per_m == 0.5 / 12
+    login = load_login(fleet / "vehicles" / "v2" / "broker.toml")
+    assert login.username == "v2" and len(login.password) >= 24
+    for f in ("vehicles/v2/broker.toml", "vehicles/v2/identity.key", "broker/mosquitto_passwd", "broker/amqtt_passwd"):
+        assert stat.S_IMODE((fleet / f).stat().st_mode) == 0o600, f
+    acl = (fleet / "broker" / "mosquitto_acl").read_text()
+    assert "user v2\ntopic write rc/fleet/v/v2/#\ntopic read rc/fleet/ack/v2\n" in acl
+    key = (fleet / "authority" / "authority.key").read_bytes()
+    assert main(["enroll", "--fleet", str(fleet), "--vehicles", "3"]) == 2
+    assert "already holds a fleet" in capsys.readouterr().err
+    assert (fleet / "authority" / "authority.key").read_bytes() == key
+
+
+@pytest.mark.parametrize("args, msg", [
+    (["--vehicles", "0"], "argument --vehicles: expected a number of vehicles from 1 to 1,000, got 0"),
+    (["--vehicles", "2", "--fleet-id", "a/b"], "--fleet-id must be 1-64 characters"),
+    (["--vehicles", "2", "--segment-length", "0.5"], "argument --segment-length: expected a segment length from 1"),
+    (["--vehicles", "2", "--segment-length", "1.01"], "segment_length must be a whole number"),
+])
+def test_enroll_bad_input_is_one_line(tmp_path, capsys, args, msg):
+    try:
+        code = main(["enroll", "--fleet", str(tmp_path / "f"), *args])
+    except SystemExit as exc:  # refused while parsing
+        code = exc.code
+    assert code == 2
+    err = capsys.readouterr().err
+    assert msg in err and err.count("\n") == 1
+
+
+def test_status_and_export_of_a_store(tmp_path, capsys):
+    paths, _ = write_drives(tmp_path / "drives", speeds=(12.0, 15.0))
+    from roadcollab.io.drive_clean import clean_drive
+    from roadcollab.network.plan import RoadPlan
+
+    drives = [clean_drive(d)[0] for d in load_drives(paths)]   # as `vehicle` and `estimate` clean them
+
+    plan = RoadPlan(fleet_id="t", min_speed=min(float(d.speeds().min()) for d in drives))
+    run_in_memory(drives, plan, store=ServiceStore(tmp_path / "s.sqlite", plan))
+    assert main(["status", "--store", str(tmp_path / "s.sqlite")]) == 0
+    assert "2 vehicles seen, 6 segments with a fused estimate, 12 contributions" in capsys.readouterr().out
+    assert main(["export", "--store", str(tmp_path / "s.sqlite"), "--out", str(tmp_path / "net")]) == 0
+    assert main(["estimate", "--drive", paths[0], "--drive", paths[1], "--out", str(tmp_path / "est")]) == 0
+    for f in ("final_estimate.csv", "road_estimates.csv", "iri.csv"):
+        assert_same_table(tmp_path / "est" / f, tmp_path / "net" / f, rtol=0.0)
+    assert (tmp_path / "est" / "anomalies.csv").read_text() == (tmp_path / "net" / "anomalies.csv").read_text()
+    (tmp_path / "junk.sqlite").write_bytes(b"not a database" * 100)
+    assert main(["status", "--store", str(tmp_path / "junk.sqlite")]) == 2
+    assert "not a roadcollab service store" in capsys.readouterr().err
+    assert (tmp_path / "junk.sqlite").read_bytes() == b"not a database" * 100
