@@ -147,10 +147,14 @@ def read_csv(path: Path) -> tuple[list[str], np.ndarray]:
     return rows[0], np.array([[float(v) if v != "" else np.nan for v in r] for r in rows[1:]])
 
 
-def assert_same_table(a: Path, b: Path, rtol: float = 1e-9) -> float:
-    """Same header, same blanks, and every number within ``rtol`` of its column's largest magnitude."""
+def assert_same_table(a: Path, b: Path, rtol: float = 1e-9, skip: tuple = ()) -> float:
+    """Same header, same blanks, and every number within ``rtol`` of its column's largest magnitude
+    (columns whose name starts with one of ``skip`` left out)."""
     ha, va = read_csv(a)
     hb, vb = read_csv(b)
+    keep_a = [i for i, h in enumerate(ha) if not h.startswith(tuple(skip))]
+    keep_b = [i for i, h in enumerate(hb) if not h.startswith(tuple(skip))]
+    ha, va, hb, vb = [ha[i] for i in keep_a], va[:, keep_a], [hb[i] for i in keep_b], vb[:, keep_b]
     assert ha == hb, f"{a.name}: columns differ: {ha} vs {hb}"
     assert va.shape == vb.shape, f"{a.name}: {va.shape} vs {vb.shape}"
     assert np.array_equal(np.isnan(va), np.isnan(vb)), f"{a.name}: blank cells differ"

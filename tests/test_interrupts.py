@@ -17,6 +17,12 @@ from roadcollab.reporting.output_folder import MANIFEST
 RUN = ["reproduce", "--runs", "400", "--vehicles", "3"]
 
 
+def _as_from_a_terminal() -> None:
+    """Give the child the SIGINT disposition of a command typed in a terminal: a test runner started in the
+    background (as CI may be) has SIGINT ignored, and Python keeps an ignored SIGINT ignored."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
 def _previous_result(out: Path) -> dict:
     """A previous reproduce result as a run leaves it (manifest + files)."""
     out.mkdir()
@@ -29,7 +35,8 @@ def _start(out: Path, extra=(), timeout: float = 180.0) -> tuple[subprocess.Pope
     """Start a run and wait until it computes (its staging folder exists and, with workers, they run)."""
     env = dict(os.environ, COLUMNS="100")
     proc = subprocess.Popen([sys.executable, "-m", "roadcollab.cli.main", *RUN, *extra, "--out", str(out)],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env,
+                            preexec_fn=_as_from_a_terminal)
     want = 2 if "--workers" in extra else 0
     deadline = time.monotonic() + timeout
     while time.monotonic() < deadline:

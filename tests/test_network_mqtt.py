@@ -54,9 +54,9 @@ def _fleet(root, drives, url, *extra, timeout=240):
               "--timeout", 120, *extra, timeout=timeout)
 
 
-def _export_equal(root, store, out):
+def _export_equal(root, store, out, skip=()):
     rc("export", "--store", store, "--out", out)
-    return assert_same_table(root / "estimate" / "final_estimate.csv", out / "final_estimate.csv")
+    return assert_same_table(root / "estimate" / "final_estimate.csv", out / "final_estimate.csv", skip=skip)
 
 
 def test_estimate_equals_serve_with_its_embedded_broker(world, tmp_path):
@@ -75,7 +75,9 @@ def test_estimate_equals_serve_with_its_embedded_broker(world, tmp_path):
 
 @pytest.mark.parametrize("broker", BROKERS, indirect=True)
 def test_estimate_equals_serve_and_concurrent_vehicles(world, broker, tmp_path):
-    """All four vehicles at once through an external broker: the fused estimate (an average) is the same."""
+    """All four vehicles at once through an external broker: the fused estimate (an average) is the same. The
+    last vehicle's collaborative column depends on which message was waiting when it passed (the relay's
+    order), so it is not compared here; the sequential test above compares it."""
     root, drives = world
     url, _, _ = broker
     serve = start_serve(root / "fleet", tmp_path / "s.sqlite", tmp_path / "serve.log", broker=url)
@@ -83,7 +85,7 @@ def test_estimate_equals_serve_and_concurrent_vehicles(world, broker, tmp_path):
         _fleet(root, drives, url, "--concurrent")
     finally:
         assert stop(serve) == 0
-    assert _export_equal(root, tmp_path / "s.sqlite", tmp_path / "out") <= 1e-9
+    assert _export_equal(root, tmp_path / "s.sqlite", tmp_path / "out", skip=("elevation_collaborative",)) <= 1e-9
     st = ServiceStore(tmp_path / "s.sqlite").status()
     assert st["contributions"] == 24 and st["refused"] == {}
 
