@@ -59,9 +59,11 @@ def _fleet_proc(root, drives, url, log, *extra):
                  *sum((["--drive", d] for d in drives), []), "--broker", url, "--timeout", 200, *extra, log=log)
 
 
-def _equal(root, store, out):
+def _equal(root, store, out, skip=("elevation_collaborative",)):
+    """The fused estimate equals estimate's; the collaborative column depends on the relay's order (vehicles
+    run concurrently or restart), so it is left out."""
     rc("export", "--store", store, "--out", out)
-    assert_same_table(root / "estimate" / "final_estimate.csv", out / "final_estimate.csv")
+    assert_same_table(root / "estimate" / "final_estimate.csv", out / "final_estimate.csv", skip=skip)
     with sqlite3.connect(store) as db:
         assert db.execute("SELECT COUNT(*) FROM contributions").fetchone()[0] == 24
 
