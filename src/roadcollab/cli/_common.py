@@ -8,12 +8,17 @@ import shlex
 import textwrap
 import time
 from pathlib import Path
-from typing import Callable, Sequence
+from typing import TYPE_CHECKING, Callable, Sequence
 
 import re
 
 from ..errors import ParameterError
 from ..io.limits import DEFAULT_MAX_FILE_MB, DEFAULT_MAX_ROWS, FileLimits
+
+if TYPE_CHECKING:     # annotations only: the subcommands import these lazily (start-up time)
+    from rich.progress import Progress
+
+    from ..experiments.config import ExperimentConfig
 
 __all__ = ["positive_int", "nonneg_int", "positive_float", "paillier_bits", "add_out_option", "add_dask_options",
            "add_road_options", "add_limit_options", "file_limits", "dask_options", "check_dask_options",

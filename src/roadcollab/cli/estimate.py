@@ -12,6 +12,7 @@ import time
 from dataclasses import asdict
 
 from ..errors import ParameterError
+from ..io.limits import FileLimits
 from ._common import add_limit_options, command_parser, file_limits, positive_float
 
 __all__ = ["NAME", "add_estimate_arguments", "estimate_command", "add_parser", "run"]
@@ -112,7 +113,6 @@ def estimate_command(drive_paths: list[str], out_dir, *, command: str, limits: F
         (:class:`~roadcollab.errors.FileFormatError`); ``out_dir`` is untouched then.
     """
     from ..io.drives import common_time_grid, load_drives
-    from ..io.limits import FileLimits
     from ..reporting.records import staged_output
 
     t0 = time.perf_counter()

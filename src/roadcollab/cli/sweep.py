@@ -3,10 +3,14 @@
 from __future__ import annotations
 
 import argparse
+from typing import TYPE_CHECKING
 
 from ..errors import ParameterError
 from ._common import (command_parser, add_dask_options, add_out_option, check_dask_options, dask_options, nonneg_int, positive_int,
                       print_table, run_with_progress)
+
+if TYPE_CHECKING:     # annotation only: imported lazily in _config
+    from ..experiments.sweep_config import SweepConfig
 
 __all__ = ["NAME", "add_parser", "run"]
 

@@ -376,7 +376,7 @@ def poisoning_rows(config: ExperimentConfig | None = None, *, seed: int = 0, n_r
         road, ys, Ys = record_run(pipe, run_stream(ss, "road"), run_stream(ss, "noise"), config.sensor_noise_std)
         truth = grid.band_limited(grid.rfft(road.velocity), n)[sl]
 
-        def score(X, road=road):
+        def score(X, road=road, truth=truth):
             """MSE on the scored stretch and anomaly detections of a spectrum (none if not a road)."""
             w = grid.band_limited(X, n)
             with np.errstate(all="ignore"):
