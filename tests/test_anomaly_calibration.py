@@ -24,8 +24,14 @@ TINY = ["--seeds", "1000", "--runs-per-seed", "2", "--vehicles", "3", "--snr-thr
 CONDITIONS = ("default", "all_20mm", "all_30mm")
 
 
+def _read_csv(path):
+    """Rows of a CSV as dicts, the file closed again (no ResourceWarning)."""
+    with open(path, newline="") as fh:
+        return list(csv.DictReader(fh))
+
+
 def read_rows(out):
-    return list(csv.DictReader((out / "calibration.csv").open()))
+    return _read_csv(out / "calibration.csv")
 
 
 @pytest.fixture(scope="module")
