@@ -20,6 +20,7 @@ def _read_csv(path):
         return list(csv.DictReader(fh))
 
 
+@pytest.mark.slow     # end-to-end: a whole study or a worker pool (make test-slow)
 def test_reproduce_writes_all_outputs(tmp_path):
     out = tmp_path / "rep"
     assert main(["reproduce", "--runs", "2", "--vehicles", "3", "--seed", "4", "--measured-runs", "2",
@@ -83,6 +84,7 @@ def test_estimate_bad_drive_is_a_clear_error(tmp_path, capsys):
     assert "drive1.csv" in err and "roadcollab estimate: error:" in err
 
 
+@pytest.mark.slow     # end-to-end: a whole study or a worker pool (make test-slow)
 def test_anomalies_writes_detection_csv(tmp_path):
     out = tmp_path / "an"
     assert main(["anomalies", "--runs", "1", "--vehicles", "3", "--no-sweeps", "--out", str(out)]) == 0

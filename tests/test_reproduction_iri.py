@@ -47,6 +47,7 @@ def test_iri_is_positively_homogeneous_so_ratios_are_the_scale_factors():
         assert r.ratio_raw_std < 1e-9
 
 
+@pytest.mark.slow     # end-to-end: a whole study or a worker pool (make test-slow)
 def test_measured_runs_compare_estimated_with_true_iri():
     cfg = rc.ExperimentConfig(n_vehicles=2, n_runs=1, road_profile="packaged")
     res = run_reproduction(cfg, 0, iri_segment_length=50.0)

@@ -36,6 +36,7 @@ def tiny(tmp_path_factory):
     return out
 
 
+@pytest.mark.slow     # end-to-end: a whole study or a worker pool (make test-slow)
 def test_cli_writes_csv_figure_config_and_report(tiny):
     columns, rows = _read_csv(tiny / "sweep.csv")
     assert columns[:len(FIRST_COLUMNS)] == FIRST_COLUMNS
@@ -57,6 +58,7 @@ def test_cli_writes_csv_figure_config_and_report(tiny):
     assert "![MSE vs gamma](sweep.png)" in report
 
 
+@pytest.mark.slow     # end-to-end: a whole study or a worker pool (make test-slow)
 def test_oracle_per_bin_is_below_own_inversion_and_weak_observer_is_worse(tiny):
     _, rows = _read_csv(tiny / "sweep.csv")
     for r in rows:
@@ -65,6 +67,7 @@ def test_oracle_per_bin_is_below_own_inversion_and_weak_observer_is_worse(tiny):
     assert weak > 5 * strong
 
 
+@pytest.mark.slow     # end-to-end: a whole study or a worker pool (make test-slow)
 def test_report_states_the_measured_ratio(tiny):
     _, rows = _read_csv(tiny / "sweep.csv")
     strong = rows[-1]
@@ -72,6 +75,7 @@ def test_report_states_the_measured_ratio(tiny):
     assert f"Algorithm 1 / observer = {ratio:.3g}" in (tiny / "report.md").read_text()
 
 
+@pytest.mark.slow     # end-to-end: a whole study or a worker pool (make test-slow)
 def test_same_seed_reproduces_the_csv_and_another_seed_differs(tiny):
     _, rows = _read_csv(tiny / "sweep.csv")
     again = run_sweep(TINY_CONFIG, 3).to_rows()
@@ -89,6 +93,7 @@ def test_common_random_numbers_across_gammas():
     assert not np.allclose(res.mse["observer_only"][0], res.mse["observer_only"][1])
 
 
+@pytest.mark.slow     # end-to-end: a whole study or a worker pool (make test-slow)
 def test_dask_matches_serial():
     cfg = SweepConfig(gammas=(8,), sensor_noise_stds=(0.05,), parameter_uncertainties=(0.1,), n_vehicles=2, n_runs=3,
                       experiment=ExperimentConfig(segment_length=90.0))
