@@ -30,7 +30,7 @@ test-slow: $(STAMP)
 	$(BIN)/python -m pytest -m slow
 
 test-all: $(STAMP)
-	$(BIN)/python -m pytest
+	$(BIN)/python -m pytest -m "slow or not slow"
 
 # ruff (check only; the rule set and its reasons are in pyproject.toml) and mypy (strict on lti/ and wire/).
 lint: $(STAMP)
