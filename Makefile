@@ -21,7 +21,7 @@ study: $(STAMP)
 	$(BIN)/roadcollab attack --out results/attack
 	$(BIN)/roadcollab anomalies --out results/anomalies
 
-# The default suite skips the end-to-end tests marked @pytest.mark.slow (473 s measured on the shared, loaded machine;
+# The default suite skips the end-to-end tests marked @pytest.mark.slow (473 s measured on the shared, loaded machine before the two replica attacks were also marked;
 # the target is under 3 minutes on an idle 2-core one);
 # test-slow runs only those, test-all everything (what .ci/run does).
 test: $(STAMP)
