@@ -24,8 +24,14 @@ TINY = ["--seeds", "1000", "--runs-per-seed", "2", "--vehicles", "3", "--snr-thr
 CONDITIONS = ("default", "all_20mm", "all_30mm")
 
 
+def _read_csv(path):
+    """Rows of a CSV as dicts, the file closed again (no ResourceWarning)."""
+    with open(path, newline="") as fh:
+        return list(csv.DictReader(fh))
+
+
 def read_rows(out):
-    return list(csv.DictReader((out / "calibration.csv").open()))
+    return _read_csv(out / "calibration.csv")
 
 
 @pytest.fixture(scope="module")
@@ -35,6 +41,7 @@ def tiny(tmp_path_factory):
     return out
 
 
+@pytest.mark.slow     # end-to-end: a whole study or a worker pool (make test-slow)
 def test_csv_has_one_row_per_grid_point_and_every_column(tiny):
     rows = read_rows(tiny)
     expected = ["snr_threshold", "min_depth_m", "objective", "gap_to_best", "gap_se"] + [
@@ -48,12 +55,14 @@ def test_csv_has_one_row_per_grid_point_and_every_column(tiny):
         assert r["gap_se"] == "nan"   # one seed: no spread over seeds
 
 
+@pytest.mark.slow     # end-to-end: a whole study or a worker pool (make test-slow)
 def test_objective_is_mean_f1_of_collaborative_and_fused_over_conditions(tiny):
     for r in read_rows(tiny):
         f1 = [float(r[f"f1_{c}_{e}"]) for c in CONDITIONS for e in ("collaborative", "fused")]
         assert float(r["objective"]) == pytest.approx(np.mean(f1), rel=1e-12)
 
 
+@pytest.mark.slow     # end-to-end: a whole study or a worker pool (make test-slow)
 def test_reported_best_point_is_the_argmax_of_the_objective(tiny):
     rows = read_rows(tiny)
     objective = [float(r["objective"]) for r in rows]
@@ -66,6 +75,7 @@ def test_reported_best_point_is_the_argmax_of_the_objective(tiny):
         assert float(r["gap_to_best"]) == pytest.approx(max(objective) - obj, abs=1e-15)
 
 
+@pytest.mark.slow     # end-to-end: a whole study or a worker pool (make test-slow)
 def test_config_json_records_seeds_configuration_and_version(tiny):
     cfg = json.loads((tiny / "config.json").read_text())
     assert cfg["seeds"] == [1000] and cfg["config"]["seeds"] == [1000]
@@ -74,6 +84,7 @@ def test_config_json_records_seeds_configuration_and_version(tiny):
     assert cfg["roadcollab_version"] and "calibrate-anomalies" in cfg["command"]
 
 
+@pytest.mark.slow     # end-to-end: a whole study or a worker pool (make test-slow)
 def test_scores_equal_the_anomaly_study_on_the_same_seed_and_runs(tiny):
     """Training seed s with R runs is the anomaly study with root seed s and n_runs = R: its default
     condition and its 2 cm / 3 cm depth sweep must give exactly the calibration's scores."""
@@ -91,6 +102,7 @@ def test_scores_equal_the_anomaly_study_on_the_same_seed_and_runs(tiny):
                 assert float(row[f"{m}_{c}_{r.estimator}"]) == pytest.approx(getattr(r, m), rel=1e-12), (c, m)
 
 
+@pytest.mark.slow     # end-to-end: a whole study or a worker pool (make test-slow)
 def test_same_arguments_give_identical_files(tiny, tmp_path):
     again = tmp_path / "again"
     assert main(["calibrate-anomalies", "--out", str(again), *TINY]) == 0

@@ -14,6 +14,13 @@ from roadcollab.cli.main import main
 README = Path(__file__).resolve().parents[1] / "README.md"
 
 
+def _read_csv(path):
+    """Rows of a CSV as dicts, the file closed again (no ResourceWarning)."""
+    with open(path, newline="") as fh:
+        return list(csv.DictReader(fh))
+
+
+@pytest.mark.slow     # end-to-end: a whole study or a worker pool (make test-slow)
 def test_reproduce_writes_all_outputs(tmp_path):
     out = tmp_path / "rep"
     assert main(["reproduce", "--runs", "2", "--vehicles", "3", "--seed", "4", "--measured-runs", "2",
@@ -22,10 +29,10 @@ def test_reproduce_writes_all_outputs(tmp_path):
                  "fig5_vehicle1.csv", "fig_fusion.png", "fleet.csv", "config.json", "report.md",
                  "mse_measured.csv", "fig_measured_mse.png", "iri_measured.csv", "fig_fusion.csv"):
         assert (out / name).stat().st_size > 0, name
-    iri_rows = list(csv.DictReader((out / "iri_measured.csv").open()))
+    iri_rows = _read_csv(out / "iri_measured.csv")
     assert list(iri_rows[0]) == row_columns(IriRow) and len(iri_rows) == 2 * 2 * 6  # runs x tracks x 50 m segments
     assert "estimated against true IRI" in (out / "report.md").read_text()
-    rows = list(csv.DictReader((out / "mse.csv").open()))
+    rows = _read_csv(out / "mse.csv")
     assert [r["vehicle"] for r in rows] == ["1", "2", "3"]
     for col in ("vehicle", "mse_mean", "mse_std", "mse_no_privacy_mean", "observer_only_mse_mean",
                 "max_rel_diff_privacy", "fused_mse_mean", "centralized_mse_mean"):
@@ -79,10 +86,11 @@ def test_estimate_bad_drive_is_a_clear_error(tmp_path, capsys):
     assert "drive1.csv" in err and "roadcollab estimate: error:" in err
 
 
+@pytest.mark.slow     # end-to-end: a whole study or a worker pool (make test-slow)
 def test_anomalies_writes_detection_csv(tmp_path):
     out = tmp_path / "an"
     assert main(["anomalies", "--runs", "1", "--vehicles", "3", "--no-sweeps", "--out", str(out)]) == 0
-    rows = list(csv.DictReader((out / "detection.csv").open()))
+    rows = _read_csv(out / "detection.csv")
     assert [r["estimator"] for r in rows] == ["observer_only", "collaborative", "fused"]
     for col in ("precision", "recall", "f1", "median_position_error_m"):
         assert 0.0 <= float(rows[1][col]) <= 1.0 or col == "median_position_error_m"

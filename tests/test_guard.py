@@ -70,7 +70,7 @@ def test_every_honest_message_of_the_default_fleet_decodes_and_passes_the_guard(
     steps = Relay(pipe.estimators, Exchange(mechanism, cfg.obfuscation), rng=3, guard=guards).run(ys, spectra=Ys)
     plain = Relay(pipe.estimators, Exchange(mechanism, cfg.obfuscation), rng=3, unguarded=True).run(ys, spectra=Ys)
     assert steps[0].guard is None and all(s.guard is None for s in plain)
-    for s, p in zip(steps, plain):
+    for s in steps:
         assert decode(encode(s.message)).mechanism == s.message.mechanism
     refused = [s.guard for s in steps[1:] if s.guard.refused]
     assert not refused, refused[0].reasons

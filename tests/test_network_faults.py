@@ -7,7 +7,6 @@ counted twice (the ``coverage`` column counts the inversions applied at every po
 
 import signal
 import sqlite3
-import subprocess
 import time
 
 import pytest

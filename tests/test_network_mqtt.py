@@ -143,7 +143,7 @@ def test_hostile_messages_change_nothing(world, broker, tmp_path):
             for s in range(8):
                 for t in (f"rc/t/v/v1/seg/{s}", "rc/t/v/v1/hello", f"rc/t/v/v1/seg/{s}/x", "rc/t/v/v1"):
                     v1.publish(t, rng.bytes(int(rng.integers(0, 4000))))
-            for vid, s, env in rows:
+            for _vid, s, env in rows:
                 v1.publish(f"rc/t/v/v1/seg/{s}", bytes(env))     # every stored message replayed as v1's
             time.sleep(5.0)
         finally:

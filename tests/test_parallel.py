@@ -12,12 +12,14 @@ from roadcollab.experiments.runner import local_dask_cluster, map_runs
 CFG = ExperimentConfig(n_vehicles=3, n_runs=4, segment_length=90.0)
 
 
+@pytest.mark.slow     # end-to-end: a whole study or a worker pool (make test-slow)
 def test_process_pool_matches_serial_bit_for_bit():
     serial = run_reproduction(CFG, 7).table()
     pool = run_reproduction(CFG, 7, workers=2).table()
     assert serial == pool
 
 
+@pytest.mark.slow     # end-to-end: a whole study or a worker pool (make test-slow)
 def test_local_dask_cluster_matches_serial_bit_for_bit():
     cfg = dataclasses.replace(CFG, n_runs=3)
     serial = run_reproduction(cfg, 7).table()
@@ -77,6 +79,7 @@ def test_bad_parallel_arguments():
         map_runs(lambda idx: list(idx), 2, workers=0)
 
 
+@pytest.mark.slow     # end-to-end: a whole study or a worker pool (make test-slow)
 def test_attack_study_on_dask_matches_serial():
     from roadcollab.experiments.security_study import AttackStudyConfig, run_attack_study
 
@@ -108,6 +111,7 @@ def test_seed_plan_streams_are_stateless_and_match_spawn():
         run_stream(plan.run(0), "weather")
 
 
+@pytest.mark.slow     # end-to-end: a whole study or a worker pool (make test-slow)
 def test_fleet_scale_run_matches_serial_on_pool_and_dask():
     from roadcollab.experiments.scale import run_scale, run_segments
 

@@ -40,7 +40,7 @@ def test_fig11_accepts_dicts_and_objects_and_writes_zero_and_inf(tmp_path, kind,
 
 
 def test_fusion_figure_and_estimates_with_residuals_draw(tmp_path):
-    rows = [FusionRow(name, v, 1e-3 / v, 5e-4 / v, 2e-3 / v, 4) for name in ("observer_only", "fused", "oracle_bound")
+    rows = [FusionRow(name, v, 1e-3 / v, 5e-4 / v, 2e-3 / v, 4) for name in ("observer_only", "fused", "oracle_per_bin")
             for v in (1, 2, 3)]
     assert plotting.plot_fusion(rows, tmp_path / "fusion.png").stat().st_size > 0
     t = np.arange(600) / 200.0

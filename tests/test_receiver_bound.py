@@ -110,7 +110,7 @@ def test_honest_cost_of_the_bounded_combination(pipe):
         truth = pipe.grid.band_limited(pipe.grid.rfft(road.velocity), pipe.grid.n_samples)[CFG.scored]
         msg = e1.hardened_message(e1.estimate(None, Y=Ys[0]))
 
-        def mse(W):
+        def mse(W, truth=truth):
             return float(np.mean((pipe.grid.band_limited(W, pipe.grid.n_samples)[CFG.scored] - truth) ** 2))
         Wf, _ = guard.feedforward(msg, Ys[1])
         assert mse(e2.estimate(None, Wf=Wf, Y=Ys[1]).W_hat) <= mse(e2.estimate(None, msg, Y=Ys[1], unguarded=True).W_hat)

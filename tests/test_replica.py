@@ -53,6 +53,7 @@ def test_replica_recovers_noiseless_hardened_poles(study):
         assert np.max(pole_errors(poles, targets[j])) < 1e-3
 
 
+@pytest.mark.slow     # end-to-end replica attack over several segments (make test-slow)
 def test_replica_linked_recovers_noisy_poles(study):
     cfg, pipe, targets = study
     rng = np.random.default_rng(12)
@@ -65,6 +66,7 @@ def test_replica_linked_recovers_noisy_poles(study):
     assert np.max(pole_errors(poles, targets[1])) < 1e-2
 
 
+@pytest.mark.slow     # end-to-end replica attack over several segments (make test-slow)
 def test_replica_on_pure_noise_is_finite(study):
     cfg, pipe, _ = study
     rng = np.random.default_rng(13)

@@ -20,7 +20,6 @@ from roadcollab.privacy.secagg_messages import AggregationRefused, SecAggSpec, s
 from roadcollab.privacy.secagg_run import run_secure_aggregation
 from roadcollab.privacy.secagg_store import SessionLedger
 from roadcollab.privacy.secure_aggregation import MaskedInput, Reveal, unmask
-from roadcollab.wire.identity import VehicleIdentity
 from roadcollab.wire.secagg_signed import sign_advert
 
 N = 10
@@ -190,7 +189,7 @@ def test_a_tampered_sealed_share_is_refused_by_its_recipient():
     session = session_id(6, 0)
     signed = {i: v.advertise(session) for i, v in fleet.vehicles.items()}
     out = {i: v.share_keys(signed) for i, v in fleet.vehicles.items()}
-    for i, v in fleet.vehicles.items():
+    for v in fleet.vehicles.values():
         v.mask_input(np.zeros((4, 2)), (6, 0))
     views = {i: v.sign_survivors(range(1, N + 1)) for i, v in fleet.vehicles.items()}
     coms = {i: o[1] for i, o in out.items()}

@@ -79,6 +79,7 @@ def test_linkability_oracles():
     assert 0.35 < out["auc"] < 0.65
 
 
+@pytest.mark.slow     # end-to-end: a whole study or a worker pool (make test-slow)
 def test_study_smoke():
     cfg = AttackStudyConfig(experiment=ExperimentConfig(n_vehicles=4, n_runs=1, segment_length=120.0), n_runs=2,
                             paillier_bits=512, paillier_sample=4, physical_fit_runs=1, dp_epsilons=(1.0,),

@@ -20,7 +20,7 @@ def test_zoh_is_exact_for_piecewise_linear_elevation():
     ys = []
     for k in range(w.shape[0]):
         ys.append(MODEL.C @ x + MODEL.D @ w[k])
-        sol = scipy.integrate.solve_ivp(lambda t, s: MODEL.A @ s + MODEL.B @ w[k], (0, dt), x,
+        sol = scipy.integrate.solve_ivp(lambda t, s, wk=w[k]: MODEL.A @ s + MODEL.B @ wk, (0, dt), x,
                                         rtol=1e-12, atol=1e-14, method="DOP853")
         x = sol.y[:, -1]
     y = simulate_response(discretize_plant(MODEL, dt), w)

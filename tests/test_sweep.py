@@ -17,7 +17,7 @@ from roadcollab.experiments.sweep_result import SweepResult
 from roadcollab.reporting.sweep_report import write_sweep
 
 FIRST_COLUMNS = ["gamma", "sensor_noise_std", "parameter_uncertainty", "vehicle1_observer_mse", "algorithm1_mse",
-                 "own_inversion_mse", "fused_mse", "oracle_bound_mse"]
+                 "own_inversion_mse", "fused_mse", "oracle_per_bin_mse"]
 TINY = ["--vehicles", "3", "--runs", "2", "--gammas", "1,128", "--noise", "0.05", "--uncertainty", "0.1"]
 TINY_CONFIG = SweepConfig(gammas=(1, 128), sensor_noise_stds=(0.05,), parameter_uncertainties=(0.1,), n_vehicles=3,
                           n_runs=2)
@@ -36,6 +36,7 @@ def tiny(tmp_path_factory):
     return out
 
 
+@pytest.mark.slow     # end-to-end: a whole study or a worker pool (make test-slow)
 def test_cli_writes_csv_figure_config_and_report(tiny):
     columns, rows = _read_csv(tiny / "sweep.csv")
     assert columns[:len(FIRST_COLUMNS)] == FIRST_COLUMNS
@@ -57,14 +58,16 @@ def test_cli_writes_csv_figure_config_and_report(tiny):
     assert "![MSE vs gamma](sweep.png)" in report
 
 
-def test_oracle_bound_is_below_own_inversion_and_weak_observer_is_worse(tiny):
+@pytest.mark.slow     # end-to-end: a whole study or a worker pool (make test-slow)
+def test_oracle_per_bin_is_below_own_inversion_and_weak_observer_is_worse(tiny):
     _, rows = _read_csv(tiny / "sweep.csv")
     for r in rows:
-        assert float(r["oracle_bound_mse"]) < float(r["own_inversion_mse"])
+        assert float(r["oracle_per_bin_mse"]) < float(r["own_inversion_mse"])
     weak, strong = (float(r["vehicle1_observer_mse"]) for r in rows)  # gamma 1, gamma 128
     assert weak > 5 * strong
 
 
+@pytest.mark.slow     # end-to-end: a whole study or a worker pool (make test-slow)
 def test_report_states_the_measured_ratio(tiny):
     _, rows = _read_csv(tiny / "sweep.csv")
     strong = rows[-1]
@@ -72,6 +75,7 @@ def test_report_states_the_measured_ratio(tiny):
     assert f"Algorithm 1 / observer = {ratio:.3g}" in (tiny / "report.md").read_text()
 
 
+@pytest.mark.slow     # end-to-end: a whole study or a worker pool (make test-slow)
 def test_same_seed_reproduces_the_csv_and_another_seed_differs(tiny):
     _, rows = _read_csv(tiny / "sweep.csv")
     again = run_sweep(TINY_CONFIG, 3).to_rows()
@@ -84,11 +88,12 @@ def test_common_random_numbers_across_gammas():
     # Estimators that do not use the observer see the same road, noise and fleet at every gamma.
     res = run_sweep(SweepConfig(gammas=(2, 64), sensor_noise_stds=(0.1,), parameter_uncertainties=(0.05,),
                                 n_vehicles=2, n_runs=2, experiment=ExperimentConfig(segment_length=90.0)), 5)
-    for name in ("own_inversion", "fused", "centralized", "oracle_bound"):
+    for name in ("own_inversion", "fused", "centralized", "oracle_per_bin"):
         np.testing.assert_allclose(res.mse[name][0], res.mse[name][1], rtol=1e-12, err_msg=name)
     assert not np.allclose(res.mse["observer_only"][0], res.mse["observer_only"][1])
 
 
+@pytest.mark.slow     # end-to-end: a whole study or a worker pool (make test-slow)
 def test_dask_matches_serial():
     cfg = SweepConfig(gammas=(8,), sensor_noise_stds=(0.05,), parameter_uncertainties=(0.1,), n_vehicles=2, n_runs=3,
                       experiment=ExperimentConfig(segment_length=90.0))
@@ -111,7 +116,7 @@ def _hand_result(alg1_strong: float) -> SweepResult:
     mse["algorithm1"][0, :, 1:] = [[0.5, 1.5], [1.0, 1.0]]  # per-run means 1, 1
     mse["algorithm1"][1, :, 1:] = alg1_strong
     mse["own_inversion"][:] = 2.0
-    mse["oracle_bound"][:, :, 2] = 0.1
+    mse["oracle_per_bin"][:, :, 2] = 0.1
     mse["fused"][:, :, 2] = 0.3
     return SweepResult(config=cfg, seed=0, mse=mse)
 
@@ -122,7 +127,7 @@ def test_table_and_findings_by_hand(tmp_path):
     assert (weak.vehicle1_observer_mse, weak.algorithm1_mse, weak.algorithm1_gain) == (8.0, 1.0, 8.0)
     # gain SE: residuals a - 8 b = [-2, 2] -> sqrt(8 / 2) / 1 = 2; algorithm1 per-run means [1, 1] -> SE 0.
     assert weak.algorithm1_gain_se == 2.0 and weak.algorithm1_mse_se == 0.0
-    assert (weak.own_inversion_mse, weak.oracle_bound_mse, weak.fused_mse) == (2.0, 0.1, 0.3)
+    assert (weak.own_inversion_mse, weak.oracle_per_bin_mse, weak.fused_mse) == (2.0, 0.1, 0.3)
     assert strong.algorithm1_gain == pytest.approx(1 / 0.9)
     (f,) = res.findings()
     assert f.smallest_gamma_within == 100.0 and f.gammas_algorithm1_wins == (1.0,)

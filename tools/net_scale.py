@@ -151,9 +151,9 @@ def main(argv=None) -> int:
     finally:
         if not args.keep:
             shutil.rmtree(root, ignore_errors=True)
-    print(f"| agents | done | vehicle-segments | vehicle-segments/s at the service | latency median (s) | "
-          f"latency p95 (s) | bytes/vehicle-segment (both ways) | bytes/vehicle-segment sent | MB per agent | "
-          f"wall (s) |\n|---|---|---|---|---|---|---|---|---|---|")
+    print("| agents | done | vehicle-segments | vehicle-segments/s at the service | latency median (s) | "
+          "latency p95 (s) | bytes/vehicle-segment (both ways) | bytes/vehicle-segment sent | MB per agent | "
+          "wall (s) |\n|---|---|---|---|---|---|---|---|---|---|")
     for r in rows:
         print(f"| {r['vehicles']} | {r['done']} | {r['vehicle_segments']} | {r['vs_per_s']:.1f} | "
               f"{r['latency_median_s']:.3f} | {r['latency_p95_s']:.3f} | {r['bytes_per_vs']:.0f} | "

@@ -8,7 +8,7 @@ import shlex
 import textwrap
 import time
 from pathlib import Path
-from typing import Callable, Sequence
+from typing import TYPE_CHECKING, Callable, Sequence
 
 import re
 
@@ -17,6 +17,11 @@ from ..io.limits import DEFAULT_MAX_FILE_MB, DEFAULT_MAX_ROWS, FileLimits, check
 from ._arguments import MAX_FILE_MB, MAX_ROWS, SEED, SPEED, WORKERS, add_check, count, help_range, plural, ranged
 from ._outputs import input_paths, out_path
 from ._table import print_table
+
+if TYPE_CHECKING:     # annotations only: the subcommands import these lazily (start-up time)
+    from rich.progress import Progress
+
+    from ..experiments.config import ExperimentConfig
 
 __all__ = ["input_paths", "out_path", "positive_int", "nonneg_int", "positive_float", "paillier_bits", "add_out_option", "add_dask_options",
            "add_road_options", "add_limit_options", "add_seed_option", "file_limits", "dask_options",

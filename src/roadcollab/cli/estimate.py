@@ -11,10 +11,15 @@ import argparse
 import time
 from dataclasses import asdict
 
+from typing import TYPE_CHECKING
+
 from ..errors import ParameterError
 from ._arguments import add_check, help_range
 from ._common import (out_path, GRID_STEP, MAX_OFFSET, SEGMENT_LENGTH, add_limit_options, check_file_options,
                       check_segment_length, command_parser, file_limits, plural)
+
+if TYPE_CHECKING:
+    from ..io.limits import FileLimits
 
 __all__ = ["NAME", "add_estimate_arguments", "estimate_command", "add_parser", "run"]
 
@@ -135,7 +140,6 @@ def estimate_command(drive_paths: list[str], out_dir, *, command: str, limits: F
         (:class:`~roadcollab.errors.FileFormatError`); ``out_dir`` is untouched then.
     """
     from ..io.drives import common_time_grid, load_drives
-    from ..io.limits import FileLimits
     from ..io.drive_clean import clean_drive, cleaning_note
     from ..reporting.records import staged_output
 

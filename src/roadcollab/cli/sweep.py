@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+from typing import TYPE_CHECKING
 
 from ._arguments import GAMMA, NOISE, UNCERTAINTY, add_check, count, help_range, ranged_list
 from ._common import (input_paths, MAX_VEHICLES, command_parser, add_dask_options, add_out_option, add_seed_option,
@@ -29,6 +30,9 @@ def _check(args: argparse.Namespace) -> str | None:
         return (f"arguments --gammas, --noise, --uncertainty, --runs: {sizes[0]} x {sizes[1]} x {sizes[2]} grid "
                 f"points x {plural(args.runs, 'run')} = {total:,} runs, more than the {_MOST_RUN_POINTS:,} accepted")
     return None
+
+if TYPE_CHECKING:     # annotation only: imported lazily in _config
+    from ..experiments.sweep_config import SweepConfig
 
 __all__ = ["NAME", "add_parser", "run"]
 

@@ -4,17 +4,17 @@ Vehicle ``j`` (a :class:`~roadcollab.collaboration.algorithm1.CollaborativeEstim
 own record and the message of vehicle ``j-1`` (Algorithm 1), then builds the message it sends
 on. How that message looks is the *exchange mechanism*:
 
-============== ==================================================================================
-``none``       Algorithm 1 in the clear: ``(T_j, S_j, e_j, w^f_j)``.
-``paper``      Algorithm 2: the same, covered by a fresh ``Psi^S1``, ``Psi^S2`` per message.
-``paper_vehicle`` Algorithm 2 with one ``Psi`` draw per vehicle, reused for every message.
-``hardened``   Only ``z_j = W_reg P_hat_j^-1 y_j`` (no dynamics); the same estimates.
-``fused``      The running fleet average of the ``z_i`` of vehicles ``1..j``; the estimate is
-               that average.
-``fused_posterior`` The same with each vehicle inverting its posterior-mean plant
-               ``E[P_i | theta_hat_i]`` under the (public) fleet distribution.
-``dp``         ``hardened`` with the Gaussian mechanism on every sample of ``z``.
-============== ==================================================================================
+==================== ==================================================================================
+``none``             Algorithm 1 in the clear: ``(T_j, S_j, e_j, w^f_j)``.
+``paper``            Algorithm 2: the same, covered by a fresh ``Psi^S1``, ``Psi^S2`` per message.
+``paper_vehicle``    Algorithm 2 with one ``Psi`` draw per vehicle, reused for every message.
+``hardened``         Only ``z_j = W_reg P_hat_j^-1 y_j`` (no dynamics); the same estimates.
+``fused``            The running fleet average of the ``z_i`` of vehicles ``1..j``; the estimate is
+                     that average.
+``fused_posterior``  The same with each vehicle inverting its posterior-mean plant
+                     ``E[P_i | theta_hat_i]`` under the (public) fleet distribution.
+``dp``               ``hardened`` with the Gaussian mechanism on every sample of ``z``.
+==================== ==================================================================================
 
 Every command (the reproduction, the applications, recorded drives, the security study and
 the benchmark) relays through :class:`Relay`, so a fix here reaches all of them and recorded

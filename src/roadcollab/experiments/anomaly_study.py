@@ -169,7 +169,7 @@ def run_anomaly_study(config: AnomalyStudyConfig, seed: int, *, progress: Callab
                 for j in pooled:
                     by_noise[k, name].add(nm[name, j])
         for k, dm in rec["depth"].items():
-            for (name, j), m in dm.items():
+            for (name, _j), m in dm.items():
                 by_depth[k, name].add(m)
     map_example = runs[0]["map"]
 

@@ -104,7 +104,7 @@ class CityTruth:
         list of dict
         """
         out = []
-        for road, m, side, depth, length in self.potholes:
+        for road, m, side, depth, _length in self.potholes:
             line = self.network.roads[road].line
             pt = line.interpolate(m)
             lon, lat = self.network.projection.to_lonlat(pt.x, pt.y)

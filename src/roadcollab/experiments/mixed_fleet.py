@@ -25,7 +25,7 @@ from ..io.profiles import measured_road
 from ..models.profile import RoadProfile
 from ..models.simulation import add_sensor_noise, discretize_plant, simulate_response
 from ..models.vehicle import FleetSpec, Vehicle, sample_fleet
-from .distance_maps import band_limit_stretch, covered
+from .distance_maps import band_limit_stretch
 from .fleet_estimation import FLEET_ESTIMATORS, FleetEstimates, estimate_fleet
 
 __all__ = ["MIXED_SPEEDS", "SCORE_WAVELENGTHS", "MixedFleetResult", "simulate_drive", "score_fleet",

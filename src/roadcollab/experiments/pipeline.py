@@ -90,8 +90,9 @@ class FleetPipeline:
         return LinearMMSE(self.grid, S, moments, [self.config.sensor_noise_std] * len(self.fleet))
 
     @functools.cached_property
-    def oracle_bound(self) -> LinearMMSE:
-        """Linear MMSE from every record with the true models (the bound)."""
+    def oracle_per_bin(self) -> LinearMMSE:
+        """Per-bin linear MMSE from every record with the true models (the reference of ``bound_check``;
+        per bin of the padded grid, not a bound on the windowed error: see :mod:`~roadcollab.collaboration.fusion`)."""
         S = self.road_moment
         moments = [plant_moments(e.true_plant.frequency_response(self.grid.omega_dt[self.grid.active]), S)
                    for e in self.estimators]
@@ -117,7 +118,7 @@ class FleetPipeline:
         FleetPipeline
             ``self``.
         """
-        _ = self.centralized, self.oracle_bound
+        _ = self.centralized, self.oracle_per_bin
         return self
 
     def road(self, rng: np.random.Generator, spec: RoadSpec | None = None) -> TimeRoad:

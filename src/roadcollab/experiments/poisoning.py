@@ -4,27 +4,27 @@ For one receiver (vehicle ``receiver`` of the fleet, 0-based) and several runs, 
 of the vehicle before it is replaced by a hostile construction that still has the right types,
 shapes and limits (issue 9, section 1):
 
-=================== ==========================================================================
-``honest``          the message as sent (the baseline: the guard must not refuse it)
-``scale_z_10/1e3``  ``z`` scaled (``e`` and ``w^f`` scaled for an exchange message)
-``scale_e_10/1e3``  ``e`` alone scaled (exchange only)
-``tone``            an in-band 2 Hz tone of three times ``z``'s RMS added to ``z``
-``zero_z``          ``z = 0`` (the road erased)
-``near_singular_T`` the sender's ``T`` with its second output scaled by 1e-9 (exchange only)
-``static_T``        ``T = 1e-3 I``, order 0 (exchange only)
-``static_T_tiny``   ``T = 1e-300 I``: ``z`` overflows (exchange only)
-``jordan_trap``     ``T.A`` a 64x64 Jordan block, eigenvalue 0.99, corner 1e-16 (true radius 1.55;
-                    exchange only): must be refused at decode
-``extreme``         every 50th sample of ``e`` (or ``z``) set to 1e300
-``fake_pothole``    ``(I - D P_hat)^-1 W p`` added to ``z``: a 5 cm x 0.5 m pothole signature ``p`` in
-                    the middle of the segment, with the fleet's nominal model (the attacker's
-                    knowledge), so that the receiver's estimate shows it at full depth
+======================= ============================================================================
+``honest``              the message as sent (the baseline: the guard must not refuse it)
+``scale_z_10/1e3``      ``z`` scaled (``e`` and ``w^f`` scaled for an exchange message)
+``scale_e_10/1e3``      ``e`` alone scaled (exchange only)
+``tone``                an in-band 2 Hz tone of three times ``z``'s RMS added to ``z``
+``zero_z``              ``z = 0`` (the road erased)
+``near_singular_T``     the sender's ``T`` with its second output scaled by 1e-9 (exchange only)
+``static_T``            ``T = 1e-3 I``, order 0 (exchange only)
+``static_T_tiny``       ``T = 1e-300 I``: ``z`` overflows (exchange only)
+``jordan_trap``         ``T.A`` a 64x64 Jordan block, eigenvalue 0.99, corner 1e-16 (true radius 1.55;
+                        exchange only): must be refused at decode
+``extreme``             every 50th sample of ``e`` (or ``z``) set to 1e300
+``fake_pothole``        ``(I - D P_hat)^-1 W p`` added to ``z``: a 5 cm x 0.5 m pothole signature ``p`` in
+                        the middle of the segment, with the fleet's nominal model (the attacker's
+                        knowledge), so that the receiver's estimate shows it at full depth
 ``fake_pothole_direct`` ``W p`` added to ``z`` (small enough to pass as plausible)
-``subtle``          band-limited noise added to ``z``, scaled per guard band to 0.8 x the guard's
-                    threshold of that band's expected honest discrepancy: the largest change the
-                    guard lets through unnoticed (built with the receiver's own guard statistics,
-                    i.e. an attacker who knows them exactly)
-=================== ==========================================================================
+``subtle``              band-limited noise added to ``z``, scaled per guard band to 0.8 x the guard's
+                        threshold of that band's expected honest discrepancy: the largest change the
+                        guard lets through unnoticed (built with the receiver's own guard statistics,
+                        i.e. an attacker who knows them exactly)
+======================= ============================================================================
 
 Each row gives the receiver's MSE over its own observer-only MSE (target <= 2) with the guard and
 without it, whether the hostile message was refused at decode (``MessageError`` on construction

@@ -34,16 +34,16 @@ from ..privacy.obfuscation import theorem1_errors
 from .config import ExperimentConfig
 from .pipeline import FleetPipeline, PipelineCache, fleet_and_run_seeds, record_run
 from .reproduction_iri import RunIri, iri_rows, run_iri
-from .reproduction_rows import BoundRow, FleetRow, FusionRow, IriRow, MseRow, RunTraces
+from .reproduction_rows import WINDOWED_CONTROL, BoundRow, FleetRow, FusionRow, IriRow, MseRow, RunTraces
 from .seeds import SeedPlan, as_seed_sequence, run_stream
 from .runner import map_runs
 
-__all__ = ["ESTIMATORS", "RunResult", "ReproductionResult", "run_reproduction", "simulate_run"]
+__all__ = ["ESTIMATORS", "WINDOWED_CONTROL", "RunResult", "ReproductionResult", "run_reproduction", "simulate_run"]
 
 
 #: Estimators scored by the reproduction, in the order of ``mse.csv`` and Fig. 4.
 ESTIMATORS = ("observer_only", "own_inversion", "own_posterior_inversion", "algorithm1", "algorithm1_private", "fused",
-              "fused_posterior", "centralized", "oracle_bound")
+              "fused_posterior", "centralized", "oracle_per_bin")
 
 
 @dataclass(frozen=True, eq=False)
@@ -53,8 +53,8 @@ class RunResult:
     Attributes
     ----------
     mse : dict of str to (n_vehicles,) ndarray
-        MSE of every estimator in :data:`ESTIMATORS`, (m/s)^2. ``fused``, ``centralized`` and
-        ``oracle_bound`` at vehicle ``j`` use the records of vehicles ``1..j``.
+        MSE of every estimator in :data:`ESTIMATORS` and of :data:`WINDOWED_CONTROL`, (m/s)^2. ``fused``,
+        ``centralized`` and ``oracle_per_bin`` at vehicle ``j`` use the records of vehicles ``1..j``.
     max_rel_diff : (n_vehicles,) ndarray
         ``max |w_hat_private - w_hat| / max |w_hat|`` over the record (Theorem 1, estimates).
     max_rel_diff_hardened : (n_vehicles,) ndarray
@@ -92,7 +92,7 @@ def _estimate_spectra(pipe: FleetPipeline, j: int, Ys: list, plain, priv, fused,
     return {"observer_only": r.W_obs, "own_inversion": est.invert(Ys[j]),
             "own_posterior_inversion": est.invert(Ys[j], posterior=True), "algorithm1": r.W_hat,
             "algorithm1_private": priv.result.W_hat, "fused": fused.estimate_spectrum,
-            "fused_posterior": fused_post.estimate_spectrum, "centralized": central[j], "oracle_bound": oracle[j]}
+            "fused_posterior": fused_post.estimate_spectrum, "centralized": central[j], "oracle_per_bin": oracle[j]}
 
 
 def simulate_run(pipe: FleetPipeline, rng, *, keep_traces: int = 0, privacy: bool = True,
@@ -135,13 +135,15 @@ def simulate_run(pipe: FleetPipeline, rng, *, keep_traces: int = 0, privacy: boo
         ys, spectra=Ys) if privacy else plain
     V = cfg.n_vehicles
     out = {k: np.zeros(V) for k in ESTIMATORS}
+    windowed = out[WINDOWED_CONTROL] = np.zeros(V)
     rel, rel_h, t1e, t1w, t1e_b, t1w_b = (np.zeros(V) for _ in range(6))
-    central, oracle = pipe.centralized.estimate_prefixes(Ys), pipe.oracle_bound.estimate_prefixes(Ys)
-    for j, est in enumerate(ests):
+    central, oracle = pipe.centralized.estimate_prefixes(Ys), pipe.oracle_per_bin.estimate_prefixes(Ys)
+    for j in range(len(ests)):
         r = plain[j].result
         spectra = _estimate_spectra(pipe, j, Ys, plain[j], priv[j], fused[j], fused_post[j], central, oracle)
         for name, X in spectra.items():
             out[name][j] = mse(X)
+        windowed[j] = mse(grid.rfft(grid.irfft(oracle[j], n)))     # zero in the padding, like the truth
         scale = max(float(np.max(np.abs(r.estimate))), 1e-300)
         rel[j] = float(np.max(np.abs(priv[j].result.estimate - r.estimate))) / scale
         rel_h[j] = float(np.max(np.abs(hard[j].result.estimate - r.estimate))) / scale
@@ -214,7 +216,7 @@ class ReproductionResult:
         worst = [self._stack(name).max(axis=0) for name in ("max_rel_diff", "theorem1_e", "theorem1_wf",
                                                             "theorem1_e_band", "theorem1_wf_band")]
         others = ("own_inversion", "own_posterior_inversion", "fused", "fused_posterior", "centralized",
-                  "oracle_bound")
+                  "oracle_per_bin")
         rows = []
         for j in range(self.config.n_vehicles):
             col = {name: m[:, j] for name, m in mse.items()}
@@ -271,19 +273,24 @@ class ReproductionResult:
         return [FleetRow.of(v) for v in self.fleet]
 
     def bound_check(self) -> list[BoundRow]:
-        """Is the oracle bound beaten? Paired per-run differences against ``oracle_bound``.
+        """Is the per-bin oracle beaten? Paired per-run differences against ``oracle_per_bin``.
+
+        ``oracle_per_bin`` is the best linear estimator per bin of the padded grid
+        (:mod:`~roadcollab.collaboration.fusion`); every estimator of :data:`ESTIMATORS` is per-bin, so
+        none should beat it. The last rows are the control :data:`WINDOWED_CONTROL`, which is not per-bin and
+        is expected to beat it by a little (negative ``z``): the check has the power to see such a gap.
 
         Returns
         -------
         list of BoundRow
-            Per estimator and vehicle: ``mean_excess`` (mean of ``mse - oracle``, (m/s)^2),
-            its standard error, and ``z = mean_excess / stderr``. An estimator beats the bound
+            Per estimator (then the control) and vehicle: ``mean_excess`` (mean of ``mse - oracle``, (m/s)^2),
+            its standard error, and ``z = mean_excess / stderr``. An estimator beats the per-bin oracle
             (beyond Monte Carlo error) where ``z < -3``.
         """
-        oracle = self.mse("oracle_bound")
+        oracle = self.mse("oracle_per_bin")
         R = len(self.runs)
         rows = []
-        for name in ESTIMATORS[:-1]:
+        for name in (*ESTIMATORS[:-1], WINDOWED_CONTROL):
             d = self.mse(name) - oracle
             for j in range(self.config.n_vehicles):
                 se = d[:, j].std(ddof=1) / np.sqrt(R) if R > 1 else 0.0

@@ -20,11 +20,9 @@ import numpy as np
 
 from ..errors import MessageError
 from ..privacy._secagg_kernels import decode_sum, derive, prg_ring, shamir_combine
-from ..privacy.secagg_active import SecAggVehicle
 from ..privacy.secagg_active_run import Relay, SecAggFleet, run_active_session
 from ..privacy.secagg_messages import SecAggSpec, session_id
 from ..privacy.secagg_run import run_secure_aggregation
-from ..privacy.secagg_store import SessionLedger
 from ..privacy.secure_aggregation import (_open_share, _pair_mask, advertise_keys, mask_input, reveal_shares,
                                           share_keys)
 from ..wire.identity import FleetAuthority, VehicleIdentity

@@ -18,7 +18,7 @@ __all__ = ["SWEPT_ESTIMATORS", "SweepConfig"]
 #: Estimators whose per-vehicle MSE the sweep keeps (``algorithm1_private`` equals
 #: ``algorithm1`` with privacy off, so it is not kept).
 SWEPT_ESTIMATORS = ("observer_only", "own_inversion", "own_posterior_inversion", "algorithm1", "fused",
-                    "fused_posterior", "centralized", "oracle_bound")
+                    "fused_posterior", "centralized", "oracle_per_bin")
 
 #: The largest relative parameter uncertainty a fleet accepts (FleetSpec's limit).
 _MAX_UNCERTAINTY = 0.3

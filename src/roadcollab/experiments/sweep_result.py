@@ -33,7 +33,7 @@ class SweepRow:
         Each vehicle's offline inversion of its own record, averaged over all vehicles.
     fused_mse : float
         Fleet average of the inversions ``z`` at vehicle ``V``.
-    oracle_bound_mse : float
+    oracle_per_bin_mse : float
         Linear MMSE from all ``V`` records with the true models (the bound).
     observer_only_mse : float
         Own observer, averaged over all vehicles.
@@ -64,7 +64,7 @@ class SweepRow:
     algorithm1_mse: float
     own_inversion_mse: float
     fused_mse: float
-    oracle_bound_mse: float
+    oracle_per_bin_mse: float
     observer_only_mse: float
     centralized_mse: float
     algorithm1_gain: float
@@ -88,7 +88,7 @@ class SweepResult:
         Root seed.
     mse : dict of str to (n_points, n_runs, n_vehicles) ndarray
         MSE of every estimator of :data:`SWEPT_ESTIMATORS`, (m/s)^2; points in the order of
-        :meth:`SweepConfig.points`. ``fused``, ``centralized`` and ``oracle_bound`` at vehicle
+        :meth:`SweepConfig.points`. ``fused``, ``centralized`` and ``oracle_per_bin`` at vehicle
         index ``j`` use the records of vehicles ``1..j+1``.
 
     Raises
@@ -131,7 +131,7 @@ class SweepResult:
                 vehicle1_observer_mse=float(a.mean()), algorithm1_mse=float(b.mean()),
                 own_inversion_mse=float(m["own_inversion"][p].mean()),
                 fused_mse=float(m["fused"][p, :, V - 1].mean()),
-                oracle_bound_mse=float(m["oracle_bound"][p, :, V - 1].mean()),
+                oracle_per_bin_mse=float(m["oracle_per_bin"][p, :, V - 1].mean()),
                 observer_only_mse=float(m["observer_only"][p].mean()),
                 centralized_mse=float(m["centralized"][p, :, V - 1].mean()),
                 algorithm1_gain=gain, algorithm1_gain_se=gain_se, algorithm1_mse_se=mean_stderr(b),

@@ -10,7 +10,7 @@ from .realisation import StateSpaceData, continuous_poles
 __all__ = ["arx_fit", "arx_poles", "arx_state_space"]
 
 
-def arx_fit(u: np.ndarray, y: np.ndarray, na: int, nb: int, decimate: int = 1):
+def arx_fit(u: np.ndarray, y: np.ndarray, na: int, nb: int, decimate: int = 1) -> tuple[np.ndarray, np.ndarray]:
     """Least-squares MIMO ARX with a common scalar denominator.
 
     ``y_c[k] + sum_i a_i y_c[k-i] = sum_{m, i=0..nb} b_{c,m,i} u_m[k-i]`` for both outputs,
@@ -85,7 +85,7 @@ def arx_poles(u: np.ndarray, y: np.ndarray, dt: float, order: int, decimate: int
     return continuous_poles(np.roots(np.concatenate([[1.0], a])), dt * decimate)
 
 
-def arx_state_space(u, y, dt, order, decimate):
+def arx_state_space(u: np.ndarray, y: np.ndarray, dt: float, order: int, decimate: int) -> StateSpaceData:
     """Observable-form realisation (one block per output) of the fitted ARX model.
 
     Parameters

@@ -176,7 +176,7 @@ def block_response(bs: BlockSchur, D, z: np.ndarray) -> np.ndarray:
     pos = {int(i): c for c, i in enumerate(idx)}
     pairs = [(i0, i0 + 1) for i0, i1 in small if i1 - i0 == 2]
     # Rows of G: g_i for every eigenvalue of a small block, then one resolvent entry per path.
-    left, right, rows = list(idx), list(idx), []
+    left, right = list(idx), list(idx)
     G = np.empty((idx.size + len(pairs) + sum((i1 - i0) ** 2 for i0, i1 in small if i1 - i0 > 2), z.size), complex)
     np.reciprocal(z[None, :] - lam[:, None], out=G[:idx.size])
     if pairs:     # 2x2 blocks, all at once: N_01 = g_0 R_01 g_1

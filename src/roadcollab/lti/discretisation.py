@@ -3,12 +3,14 @@
 from __future__ import annotations
 
 import numpy as np
+import numpy.typing as npt
 import scipy.linalg
 
 __all__ = ["zoh_discretize", "bilinear_discretize"]
 
 
-def zoh_discretize(A, B, C, D, dt: float):
+def zoh_discretize(A: npt.ArrayLike, B: np.ndarray, C: npt.ArrayLike, D: npt.ArrayLike, dt: float
+                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Zero-order-hold discretisation of a continuous state-space system.
 
     Returns ``(Ad, Bd, C, D)`` with ``Ad = e^{A dt}``, ``Bd = int_0^dt e^{A s} ds B``, computed
@@ -41,7 +43,8 @@ def zoh_discretize(A, B, C, D, dt: float):
     return E[:n, :n], E[:n, n:], np.array(C, dtype=float), np.array(D, dtype=float)
 
 
-def bilinear_discretize(A, B, C, D, dt: float):
+def bilinear_discretize(A: npt.ArrayLike, B: npt.ArrayLike, C: npt.ArrayLike, D: npt.ArrayLike, dt: float
+                        ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Bilinear (Tustin) discretisation ``s = (2/dt) (z - 1)/(z + 1)``, no prewarping.
 
     The same map as ``scipy.signal.cont2discrete(method='bilinear')``, written with small dense

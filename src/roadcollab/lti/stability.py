@@ -23,8 +23,10 @@ from __future__ import annotations
 
 import math
 import warnings
+from typing import Callable
 
 import numpy as np
+import numpy.typing as npt
 import scipy.linalg
 
 __all__ = ["LYAPUNOV_RTOL", "spectral_radius_and_gain"]
@@ -80,7 +82,9 @@ def _schur_gain(A: np.ndarray, schur: tuple[np.ndarray, np.ndarray]) -> float:
         return math.inf
 
 
-def spectral_radius_and_gain(A, *, schur=None, eig=None) -> tuple[float, float]:
+def spectral_radius_and_gain(A: npt.ArrayLike, *,
+                             schur: tuple[np.ndarray, np.ndarray] | Callable[[], tuple[np.ndarray, np.ndarray]] | None = None,
+                             eig: tuple[np.ndarray, np.ndarray] | None = None) -> tuple[float, float]:
     """Computed spectral radius of ``A`` and a certified bound on ``sup_k ||A^k||_2``.
 
     Parameters

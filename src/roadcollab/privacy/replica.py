@@ -189,7 +189,6 @@ def replica_fit(segments, grid: SegmentGrid, nominal: HalfCarParameters, *, max_
     norm = np.sqrt(np.mean([np.mean(np.abs(Z) ** 2) for Z in Zs])) or 1.0
     x0 = np.concatenate([_log_ratios(nominal), _log_ratios(nominal)])
     om = grid.omega_dt[act]
-    Wr = grid.reg_weight[act][:, None]
     P0 = discretize_plant(_ratio_model(x0[:5]), grid.dt).frequency_response(om)
     ynorm = np.sqrt(np.mean([np.mean(np.abs(matvec(P0, Z)) ** 2) for Z in Zs])) or 1.0
 

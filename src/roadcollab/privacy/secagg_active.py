@@ -44,7 +44,7 @@ from ..wire.identity import FleetTrust, VehicleIdentity
 from ..wire.secagg_signed import (ShareCommitments, open_advert, open_commitments, open_view, secret_hash,
                                   share_hash, sign_advert, sign_commitments, sign_view)
 from ._secagg_kernels import KEY_NBYTES, decode_sum, derive, prg_ring, shamir_combine, shamir_split, x25519_keypair
-from .secagg_messages import AggregateResult, AggregationRefused, KeyAdvert, MaskedInput, Reveal, SecAggSpec
+from .secagg_messages import AggregateResult, AggregationRefused, MaskedInput, Reveal, SecAggSpec
 from .secagg_store import SessionLedger, view_digest
 from .secure_aggregation import _collect, _open_share, _pair_mask, advertise_keys, mask_input, share_keys
 

@@ -56,7 +56,7 @@ def plot_mse(rows: list, path) -> Path:
                               ("fused_mse_mean", "fused (average of z, vehicles 1..j)", "^-"),
                               ("fused_posterior_mse_mean", "fused, posterior inversions (1..j)", "<-"),
                               ("centralized_mse_mean", "centralized linear MMSE (1..j)", "v-."),
-                              ("oracle_bound_mse_mean", "oracle bound (true models, 1..j)", "k:")):
+                              ("oracle_per_bin_mse_mean", "per-bin oracle (true models, 1..j)", "k:")):
         ax.plot(v, [getattr(r, key) for r in rows], style, label=label)
     _mse_axes(ax, v)
     legend_outside(ax, fontsize=7)
@@ -70,7 +70,7 @@ _FUSION_LINES = (("observer_only", "observer only (own, online)", "s--"),
                  ("fused", "fused (average of z)", "^-"),
                  ("fused_posterior", "fused (posterior inversions)", "<-"),
                  ("centralized", "centralized linear MMSE", "v-."),
-                 ("oracle_bound", "oracle bound", "k:"))
+                 ("oracle_per_bin", "per-bin oracle", "k:"))
 
 
 def plot_fusion(rows: list, path, *, title: str | None = None) -> Path:

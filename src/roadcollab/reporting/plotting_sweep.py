@@ -27,7 +27,7 @@ def _draw_panel(ax, panel: list, n_vehicles: int) -> list:
     handles += ax.plot(g, [r.own_inversion_mse for r in panel], "v:", color="tab:green",
                        label="own offline inversion")
     handles += ax.plot(g, [r.fused_mse for r in panel], "^-", color="tab:orange", label=f"fused, vehicle {V}")
-    handles += ax.plot(g, [r.oracle_bound_mse for r in panel], "k-.", label=f"oracle bound, vehicle {V}")
+    handles += ax.plot(g, [r.oracle_per_bin_mse for r in panel], "k-.", label=f"per-bin oracle, vehicle {V}")
     return handles
 
 
@@ -48,7 +48,7 @@ def plot_sweep(rows: Sequence, path) -> Path:
 
     Lines: vehicle 1's own observer and Algorithm 1 (vehicles 2..V; both with +-1 standard
     error bars over runs), each vehicle's own offline inversion, the fused estimate and the
-    oracle bound at vehicle V.
+    per-bin oracle at vehicle V.
 
     Parameters
     ----------

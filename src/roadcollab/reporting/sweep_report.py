@@ -123,7 +123,7 @@ _TABLE_COLUMNS = [("gamma", "gamma"), ("sensor_noise_std", "noise (m/s^2)"),
                   ("observer_only_mse", "own observer (all)"), ("own_inversion_mse", "own inversion"),
                   ("own_posterior_inversion_mse", "own posterior inv."), ("fused_mse", "fused (vehicle {V})"),
                   ("fused_posterior_mse", "fused posterior (vehicle {V})"),
-                  ("centralized_mse", "centralized (vehicle {V})"), ("oracle_bound_mse", "oracle bound (vehicle {V})")]
+                  ("centralized_mse", "centralized (vehicle {V})"), ("oracle_per_bin_mse", "per-bin oracle (vehicle {V})")]
 
 
 def _intro_lines(result: SweepResult, n_rows: int, command: str, elapsed: float) -> list[str]:
@@ -189,8 +189,8 @@ def _definition_lines(n_vehicles: int, n_runs: int) -> list[str]:
         f"- `algorithm1_mse`: Algorithm 1, averaged over vehicles 2..{V}.",
         f"- `own_inversion_mse`: each vehicle's offline inversion of its own record, averaged over all {V} vehicles "
         "(it does not depend on gamma).",
-        f"- `fused_mse`, `centralized_mse`, `oracle_bound_mse`: at vehicle {V}, from the records of vehicles 1..{V}; "
-        "the oracle bound is the linear MMSE with the true models.",
+        f"- `fused_mse`, `centralized_mse`, `oracle_per_bin_mse`: at vehicle {V}, from the records of vehicles 1..{V}; "
+        "the per-bin oracle is the linear MMSE with the true models per bin of the padded grid.",
         "- `algorithm1_gain` = `vehicle1_observer_mse / algorithm1_mse` (> 1: Algorithm 1 better).",
         "- Standard errors are over runs, which are independent (new fleet and road each): `algorithm1_mse_se` of the "
         f"per-run means over vehicles 2..{V}; `algorithm1_gain_se` by the delta method on the paired per-run values "

@@ -28,7 +28,7 @@ def _random_stable_system(order: int, dt: float, rng: np.random.Generator) -> St
                           rng.standard_normal((CHANNELS, CHANNELS)), dt)
 
 
-def example_message(mechanism: str = "paper", *, rng=None) -> Message:
+def example_message(mechanism: str = "paper", *, rng: np.random.Generator | int | None = None) -> Message:
     """A small valid message of the given mechanism, with random content.
 
     Parameters

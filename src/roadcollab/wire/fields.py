@@ -8,8 +8,6 @@ from __future__ import annotations
 
 from typing import Union
 
-import numpy as np
-
 from ..lti.realisation import StateSpaceData, SystemCache
 from .layout import (MESSAGE_TYPE_INVERSION, MESSAGE_TYPE_KEY_ADVERT, MESSAGE_TYPE_MASKED_INPUT,
                      MESSAGE_TYPE_SEALED_SHARES, Header, SecAggHeader)

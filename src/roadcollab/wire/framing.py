@@ -1,7 +1,7 @@
 """Byte-level framing: header bytes to and from :class:`~.layout.Header`, arrays to and from bytes.
 
 Decoding only parses here: whether the parsed values are acceptable is decided by
-:mod:`.limits`, and :mod:`roadcollab.wire.protocol` runs the steps in order so that nothing is
+:mod:`~roadcollab.wire.limits`, and :mod:`roadcollab.wire.protocol` runs the steps in order so that nothing is
 allocated from a declared size before the header has passed every check.
 """
 

@@ -1,7 +1,7 @@
 """Byte layout of the wire format: codes, ``struct`` headers, array order and sizes.
 
 Described in full in :mod:`roadcollab.wire.protocol`. This module only states the layout;
-whether a header's values are acceptable is decided in :mod:`.limits`.
+whether a header's values are acceptable is decided in :mod:`~roadcollab.wire.limits`.
 """
 
 from __future__ import annotations

@@ -118,9 +118,9 @@ whatever :func:`decode` accepts, :func:`encode` reproduces byte for byte.
 Modules
 -------
 This module is the public entry point. The layout (codes, ``struct`` headers, sizes) is
-stated in :mod:`.layout`, the limits and the checks above in :mod:`.limits`, the byte-level
+stated in :mod:`.layout`, the limits and the checks above in :mod:`~roadcollab.wire.limits`, the byte-level
 framing in :mod:`.framing` (secure aggregation: :mod:`.secagg_framing`), the message objects in
-:mod:`.message` and :mod:`.secagg`, and the conversion between message objects and header plus
+:mod:`~roadcollab.wire.message` and :mod:`.secagg`, and the conversion between message objects and header plus
 arrays in :mod:`.describe` and :mod:`.fields`.
 """
 

@@ -1,6 +1,6 @@
 """Byte-level framing of the secure-aggregation messages: 48-byte header and payload fields.
 
-As in :mod:`.framing`, decoding only parses here; :mod:`.limits` decides whether the values are
+As in :mod:`.framing`, decoding only parses here; :mod:`~roadcollab.wire.limits` decides whether the values are
 acceptable and :mod:`roadcollab.wire.protocol` runs the steps in order (nothing is read from the
 payload before the header has passed every check and the byte count matches it exactly).
 """

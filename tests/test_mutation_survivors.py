@@ -1,0 +1,61 @@
+"""Tests written for the survivors of the mutation pass (docs/mutation.md), from hand-derivable inputs."""
+
+import math
+
+import numpy as np
+import pytest
+
+from roadcollab.detection.detector import Detection
+from roadcollab.detection.scoring import MatchTally, match_detections
+from roadcollab.errors import ParameterError
+from roadcollab.estimation.grid import SegmentGrid, bin_index
+from roadcollab.models.road import Anomaly
+
+TRUTH = [Anomaly(9.75, "left", "pothole", 0.05, 0.5), Anomaly(29.75, "right", "bump", 0.04, 0.5)]   # centers 10, 30
+
+
+def _det(x, side="left", kind="pothole", depth=0.05):
+    return Detection(position=x, side=side, kind=kind, depth=depth, confidence=0.9)
+
+
+def test_tally_pools_counts_and_pairs_of_every_result():
+    # Run 1: both found, the second on the wrong side ("both" is compatible) and of the wrong kind, one false
+    # positive. Run 2: only the first, 0.5 m off, depth 0.04 (relative error 0.2).
+    r1 = match_detections([_det(10.25), _det(30.0, side="both", kind="pothole"), _det(50.0)], TRUTH)
+    r2 = match_detections([_det(10.5, depth=0.04)], TRUTH)
+    tally = MatchTally()
+    tally.add(r1)
+    tally.add(r2)
+    s = tally.scores()
+    assert (s.n_true, s.n_detected, s.n_matched) == (4, 4, 3)
+    assert (s.precision, s.recall) == (0.75, 0.75)
+    assert s.kind_accuracy == pytest.approx(2 / 3) and s.side_accuracy == pytest.approx(2 / 3)
+    assert s.median_position_error_m == 0.25                   # of 0.25, 0.0, 0.5
+    assert s.median_depth_rel_error == pytest.approx(0.1)      # of 0.0 and 0.2 (same-kind pairs only)
+
+
+def test_empty_tally_has_nan_agreement_and_perfect_precision_recall():
+    s = MatchTally().scores()
+    assert (s.precision, s.recall, s.n_matched) == (1.0, 1.0, 0)
+    assert math.isnan(s.kind_accuracy) and math.isnan(s.side_accuracy) and math.isnan(s.median_depth_rel_error)
+
+
+def test_bin_index_is_a_slice_exactly_for_contiguous_masks():
+    m = np.zeros(10, bool)
+    m[3:7] = True
+    assert bin_index(m) == slice(3, 7)
+    m[8] = True
+    assert bin_index(m) is m
+    m = np.zeros(10, bool)
+    m[[0, 1]] = True
+    assert bin_index(m) == slice(0, 2)
+
+
+def test_band_limit_returns_n_samples_and_names_x_in_errors():
+    g = SegmentGrid(400, 100.0, band_low_hz=1.0)
+    x = np.random.default_rng(1).standard_normal((400, 2))
+    assert g.band_limit(x).shape == (400, 2)
+    assert g.band_limit(x, 250).shape == (250, 2)
+    np.testing.assert_array_equal(g.band_limit(x, 250), g.band_limit(x)[:250])
+    with pytest.raises(ParameterError, match="^x "):
+        g.band_limit(np.full((400, 2), np.nan))
