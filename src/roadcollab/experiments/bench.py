@@ -266,6 +266,25 @@ def bench_exactness(*, segments: int = 10, n_samples: int = 4000, seed: int = 0)
     return out
 
 
+def _scaling(sizes, repeats: int, seed: int) -> list[dict]:
+    """The scaling points of :func:`run_bench`, with the cost per ``N log2 N`` relative to the
+    4000-sample point (else the first): flat means ``N log N``."""
+    scaling = []
+    for n in sizes:
+        rec = {"n_samples": int(n)}
+        for m in ("paper", "hardened"):
+            rec[f"ms_{m}"] = bench_segment(n, mechanism=m, repeats=max(3, repeats // 3), seed=seed)[
+                "ms_per_vehicle_segment"]
+        scaling.append(rec)
+    ref = next((s for s in scaling if s["n_samples"] == 4000), scaling[0])
+    for s in scaling:
+        for m in ("paper", "hardened"):
+            nl = s["n_samples"] * np.log2(s["n_samples"])
+            nl0 = ref["n_samples"] * np.log2(ref["n_samples"])
+            s[f"{m}_per_nlogn_rel"] = (s[f"ms_{m}"] / nl) / (ref[f"ms_{m}"] / nl0)
+    return scaling
+
+
 def run_bench(*, sizes=(1000, 2000, 4000, 8000, 16000, 32000, 64000), repeats: int = 30, seed: int = 0,
               kernels: str | None = None, exactness_segments: int | None = None) -> dict:
     """The benchmark record printed by ``roadcollab bench --json``.
@@ -318,20 +337,7 @@ def run_bench(*, sizes=(1000, 2000, 4000, 8000, 16000, 32000, 64000), repeats: i
         floor = floor_ms(FleetPipeline(cfg, sample_fleet(2, cfg.fleet, rng=seed)).grid)
         exact = bench_exactness(segments=exactness_segments or repeats, seed=seed)
         path = kernel_path()
-        scaling = []
-        for n in sizes:
-            rec = {"n_samples": int(n)}
-            for m in ("paper", "hardened"):
-                rec[f"ms_{m}"] = bench_segment(n, mechanism=m, repeats=max(3, repeats // 3), seed=seed)[
-                    "ms_per_vehicle_segment"]
-            scaling.append(rec)
-    # Normalised cost per N log2 N, relative to the 4000-sample point: flat means N log N.
-    ref = next((s for s in scaling if s["n_samples"] == 4000), scaling[0])
-    for s in scaling:
-        for m in ("paper", "hardened"):
-            nl = s["n_samples"] * np.log2(s["n_samples"])
-            nl0 = ref["n_samples"] * np.log2(ref["n_samples"])
-            s[f"{m}_per_nlogn_rel"] = (s[f"ms_{m}"] / nl) / (ref[f"ms_{m}"] / nl0)
+        scaling = _scaling(sizes, repeats, seed)
     f = floor["floor_ms"]
     by_mech = {m: {"ms_min": r["ms_min"], "ms_median": r["ms_per_vehicle_segment"],
                    "ms_receive_median": r["ms_receive_median"], "ms_send_median": r["ms_send_median"],
