@@ -6,6 +6,7 @@ import sys
 import numpy as np
 import pytest
 
+from roadcollab.errors import ParameterError
 from roadcollab.lti import kernels
 from roadcollab.lti.blockdiag import block_response, block_schur
 from roadcollab.lti.response import ss_response
@@ -67,9 +68,17 @@ def test_compiled_pole_residue_equals_reference():
 def test_kernel_choice():
     with kernels.use_kernels("reference"):
         assert kernels.kernel_path() == "reference"
-    with pytest.raises(ValueError, match="kernels must be one of"):
+    with pytest.raises(ParameterError, match="kernels must be one of"):
         with kernels.use_kernels("fast"):
             pass
+
+
+def test_kernel_environment_variable(monkeypatch):
+    monkeypatch.setenv("ROADCOLLAB_KERNELS", "reference")
+    assert kernels.kernel_path() == "reference"
+    monkeypatch.setenv("ROADCOLLAB_KERNELS", "turbo")
+    with pytest.raises(ParameterError, match="ROADCOLLAB_KERNELS must be 'compiled' or 'reference', got 'turbo'"):
+        kernels.kernel_path()
 
 
 def test_everything_runs_on_the_numpy_path_without_numba():

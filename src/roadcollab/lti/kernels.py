@@ -28,6 +28,8 @@ import os
 
 import numpy as np
 
+from ..errors import ParameterError
+
 __all__ = ["KERNELS", "kernel_path", "use_kernels", "compiled_available", "block_eval", "pole_residue_eval"]
 
 KERNELS = ("compiled", "reference")
@@ -130,10 +132,16 @@ def kernel_path() -> str:
     Returns
     -------
     {"compiled", "reference"}
+
+    Raises
+    ------
+    ParameterError
+        If ``ROADCOLLAB_KERNELS`` is set to anything else.
     """
-    choice = _CHOICE.get() or os.environ.get("ROADCOLLAB_KERNELS", "compiled")
+    choice = _CHOICE.get() or os.environ.get("ROADCOLLAB_KERNELS") or "compiled"
     if choice not in KERNELS:
-        choice = "compiled"
+        raise ParameterError(f"environment variable ROADCOLLAB_KERNELS must be 'compiled' or 'reference', "
+                             f"got {choice!r}")
     return "compiled" if choice == "compiled" and compiled_available() else "reference"
 
 
@@ -148,11 +156,11 @@ def use_kernels(name: str):
 
     Raises
     ------
-    ValueError
-        For another name (a ``ParameterError`` from the command line).
+    ParameterError
+        For another name.
     """
     if name not in KERNELS:
-        raise ValueError(f"kernels must be one of {KERNELS}, got {name!r}")
+        raise ParameterError(f"kernels must be one of {KERNELS}, got {name!r}")
     token = _CHOICE.set(name)
     try:
         yield
