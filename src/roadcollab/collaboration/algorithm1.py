@@ -203,20 +203,7 @@ class CollaborativeEstimator:
     @functools.cached_property
     def posterior_responses(self) -> np.ndarray:
         """Plausible true plants given this vehicle's estimate, (n, K_active, 2, 2) (see
-        :func:`roadcollab.collaboration.fusion.posterior_responses`); needs ``fleet``. Kept (about
-        7 MB) once used: the guard and the posterior inversion use it."""
-        return self.posterior_stack()
-
-    def posterior_stack(self) -> np.ndarray:
-        """:attr:`posterior_responses`, computed without keeping it (a setup that needs it once,
-        like the centralized estimator's plant moments, leaves no 7 MB per vehicle behind).
-
-        Returns
-        -------
-        (n, K_active, 2, 2) complex ndarray
-        """
-        if "posterior_responses" in self.__dict__:
-            return self.__dict__["posterior_responses"]
+        :func:`roadcollab.collaboration.fusion.posterior_responses`); needs ``fleet``."""
         if self.fleet is None:
             raise ParameterError("the posterior inversion needs the fleet distribution: pass fleet= to "
                                  "CollaborativeEstimator")

@@ -86,7 +86,7 @@ class FleetPipeline:
     def centralized(self) -> LinearMMSE:
         """Linear MMSE from every record with the nominal models and the parameter uncertainty."""
         S = self.road_moment
-        moments = [plant_moments(e.posterior_stack(), S) for e in self.estimators]   # not kept per vehicle
+        moments = [plant_moments(e.posterior_responses, S) for e in self.estimators]
         return LinearMMSE(self.grid, S, moments, [self.config.sensor_noise_std] * len(self.fleet))
 
     @functools.cached_property
