@@ -30,7 +30,7 @@ ALLOWED = {
 }
 BASE = {"errors", "_validation", "__version__"}
 #: Imports allowed inside functions: optional or heavy third-party modules only.
-LAZY_OK = {"control", "slycot", "dask", "matplotlib", "phe", "cryptography", "rich", "tomllib", "tomli", "gmpy2",
+LAZY_OK = {"control", "slycot", "numba", "dask", "matplotlib", "phe", "cryptography", "rich", "tomllib", "tomli", "gmpy2",
            "psycopg", "paho", "amqtt", "pwdlib"}
 #: Heavy submodules of a core dependency that may be imported inside functions (SciPy's ``signal`` and
 #: ``stats`` packages take about 1 s to import; the kernels that use them import them when first called).

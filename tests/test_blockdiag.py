@@ -85,7 +85,11 @@ def test_caches_hit_only_on_identical_bytes():
     cache = FrequencyResponseCache()
     om = np.linspace(0.1, 1.0, 5)
     H = cache.response(first, om)
-    assert cache.response(StateSpaceData(A.copy(), B, C, D, 0.01), om) is H
+    assert not cache._store                     # seen once: only its hash is remembered
+    H2 = cache.response(StateSpaceData(A.copy(), B, C, D, 0.01), om)
+    assert H2 is not H and np.array_equal(H2, H)  # seen twice: kept
+    assert cache.response(StateSpaceData(A.copy(), B, C, D, 0.01), om) is H2
+    H = H2
     assert not np.array_equal(cache.response(StateSpaceData(A2, B, C, D, 0.01), om), H)
     assert np.allclose(cache.response(first, om, inverse=True) @ H, np.eye(2))
 

@@ -2,10 +2,13 @@
 
 Timing columns are skipped (``ms_per_message``, ``note`` of ``baselines.csv``), and so is the
 Paillier baseline's ``bytes_per_message``: ciphertext sizes depend on the OS-random key.
-Usage: python tools/compare_csv.py BEFORE AFTER   (exit status 1 if anything differs)
+With ``--numeric``, a file that differs is also compared cell by cell: the largest relative
+difference of its numeric cells (``|a - b| / max(|a|, |b|)``) and whether its text cells agree.
+Usage: python tools/compare_csv.py BEFORE AFTER [--numeric]   (exit status 1 if anything differs)
 """
 import csv
 import filecmp
+import math
 import sys
 from pathlib import Path
 
@@ -19,7 +22,31 @@ def _baseline_rows(path):
                 for r in csv.DictReader(fh)]
 
 
+def _rows(path):
+    with open(path, newline="") as fh:
+        return list(csv.reader(fh))
+
+
+def numeric_diff(f, g):
+    """Largest relative difference of the numeric cells, and the number of differing text cells."""
+    ra, rb = _rows(f), _rows(g)
+    if len(ra) != len(rb):
+        return math.inf, abs(len(ra) - len(rb))
+    worst, text = 0.0, 0
+    for x, y in zip(ra, rb):
+        for a, b in zip(x, y):
+            try:
+                fa, fb = float(a), float(b)
+            except ValueError:
+                text += a != b
+                continue
+            if fa != fb and not (math.isnan(fa) and math.isnan(fb)):
+                worst = max(worst, abs(fa - fb) / max(abs(fa), abs(fb)))
+    return worst, text
+
+
 A, B = Path(sys.argv[1]), Path(sys.argv[2])
+numeric = "--numeric" in sys.argv[3:]
 bad = 0
 n = 0
 for f in sorted(A.rglob("*.csv")):
@@ -30,6 +57,12 @@ for f in sorted(A.rglob("*.csv")):
     else:
         same = g.exists() and filecmp.cmp(f, g, shallow=False)
     if not same:
-        print("DIFF", f.relative_to(A))
         bad += 1
+        if numeric and g.exists():
+            worst, text = numeric_diff(f, g)
+            print(f"DIFF {f.relative_to(A)}: largest relative difference {worst:.2e}, differing text cells {text}")
+        else:
+            print("DIFF", f.relative_to(A))
 print(f"compared {n} csv files (baselines.csv without its timing columns); differing: {bad}")
+
+sys.exit(1 if bad else 0)

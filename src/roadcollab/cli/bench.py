@@ -53,6 +53,9 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
     p.add_argument("--repeats", type=_REPEATS, default=30,
                    help=f"timed segments per point (default 30; {help_range(_REPEATS)})")
     p.add_argument("--quick", action="store_true", help="only up to 16k samples")
+    p.add_argument("--kernels", choices=("compiled", "reference"), default=None,
+                   help="frequency-response kernels: compiled (numba; the default when it imports) or reference "
+                        "(numpy only); the paper mechanism is also timed on both, alternating")
     g = p.add_argument_group("fleet scale (a local Dask cluster)")
     g.add_argument("--scale", type=_SCALE, default=None, metavar="SEGMENTS",
                    help="instead of the per-segment benchmark: drive this many road segments (comma-separated "
@@ -124,7 +127,7 @@ def run(args: argparse.Namespace, command_line: str) -> int:
 
     if args.scale is not None:
         return _run_scale(args)
-    rec = run_bench(sizes=_QUICK_SIZES if args.quick else _SIZES, repeats=args.repeats)
+    rec = run_bench(sizes=_QUICK_SIZES if args.quick else _SIZES, repeats=args.repeats, kernels=args.kernels)
     if args.json:
         print(json.dumps(rec))
         return 0
@@ -140,7 +143,12 @@ def run(args: argparse.Namespace, command_line: str) -> int:
     print(f"naive paper chain: min {nv['ms_min']:.2f} ms, median {nv['ms_median']:.2f} ms; on the same segments "
           f"the library took {nv['library_ms_min']:.2f} / {nv['library_ms_median']:.2f} ms: {sp['min']:.1f}x (min), "
           f"{sp['median']:.1f}x (median), {sp['per_segment_median']:.1f}x (median per segment) faster")
-    print("exactness: " + ", ".join(f"{k} {v:.1e}" for k, v in rec["exactness"].items()))
+    print("exactness: " + ", ".join(f"{k} {v:.1e}" for k, v in rec["exactness"].items())
+          + f"; privacy vs clear over every benchmark segment {rec['max_rel_privacy_vs_clear']:.1e}")
+    kp = rec["kernel_paths"]
+    print(f"kernels: {rec['kernels']}; paper on both paths, alternating: " + ", ".join(
+        f"{k} {kp[k]['ms_min']:.2f} / {kp[k]['ms_median']:.2f} ms (min / median)" for k in ("compiled", "reference")
+        if k in kp) + (f"; reference / compiled {kp['speedup_median']:.2f}x (median)" if "speedup_median" in kp else ""))
     print_table("scaling (cost per N log N relative to N = 4000)", ("N", "paper ms", "rel", "hardened ms", "rel"),
                 [(str(s_["n_samples"]), f"{s_['ms_paper']:.2f}", f"{s_['paper_per_nlogn_rel']:.2f}",
                   f"{s_['ms_hardened']:.2f}", f"{s_['hardened_per_nlogn_rel']:.2f}") for s_ in rec["scaling"]])

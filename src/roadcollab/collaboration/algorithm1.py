@@ -38,7 +38,7 @@ from ..errors import MessageError, ParameterError
 from ..estimation.estimator import JDPNoise, RoadInputEstimator, build_road_input_estimator
 from ..collaboration.fusion import DESIGN_SEED, posterior_responses
 from ..wire.message import ExchangeMessage, InversionMessage
-from ..lti.realisation import StateSpaceData, SystemCache, series
+from ..lti.realisation import StateSpaceData, SystemCache, minreal, series
 from ..models.simulation import DiscretePlant, discretize_plant
 from ..estimation.grid import SegmentGrid
 from ..lti.batch2x2 import inv2x2, matmul, matvec, receiver_z
@@ -157,8 +157,6 @@ class CollaborativeEstimator:
 
             T = (I - P D) P :  u -> P -> [I - P D] -> y,  with  I - P D = I + (-P) o D
         """
-        import control
-
         p = self.model_plant
         dt = self.grid.dt
         P = StateSpaceData(p.Ad, p.Bd, p.C, p.D, dt)
@@ -167,9 +165,8 @@ class CollaborativeEstimator:
         PD = series(Dj, P)
         I_minus_PD = StateSpaceData(PD.A, PD.B, -PD.C, np.eye(2) - PD.D, dt)
         T_full = series(P, I_minus_PD)
-        T_min = control.minreal(T_full.to_control(), tol=1e-9, verbose=False)
-        # Own copies (python-control returns views): a message holding them freezes and validates them once.
-        T = StateSpaceData(*(np.array(a, dtype=float) for a in (T_min.A, T_min.B, T_min.C, T_min.D)), dt)
+        # Own arrays: a message holding them freezes and validates them once.
+        T = minreal(T_full, tol=1e-9)
         S = StateSpaceData(p.Ad.copy(), p.Bd.copy(), -p.C, -p.D, dt)
         return T, S
 

@@ -37,8 +37,9 @@ from ..collaboration.relay import Exchange, Relay, simulate_measurements
 from .bench_naive import exactness_figures, floor_ms, naive_paper_step
 from ..models.simulation import add_sensor_noise, simulate_response
 from ..models.vehicle import sample_fleet
+from ..lti.kernels import KERNELS, compiled_available, kernel_path, use_kernels
 
-__all__ = ["bench_segment", "bench_naive", "bench_exactness", "run_bench"]
+__all__ = ["bench_segment", "bench_kernel_paths", "bench_naive", "bench_exactness", "run_bench"]
 
 MECHANISMS = ("none", "paper", "paper_vehicle", "hardened")
 
@@ -50,7 +51,8 @@ def _config_for(n_samples: int) -> ExperimentConfig:
     return dataclasses.replace(base, segment_length=length)
 
 
-def bench_segment(n_samples: int = 4000, *, mechanism: str = "paper", repeats: int = 30, seed: int = 0) -> dict:
+def bench_segment(n_samples: int = 4000, *, mechanism: str = "paper", repeats: int = 30, seed: int = 0,
+                  kernels: str | None = None) -> dict:
     """Median milliseconds of one vehicle's per-segment work, and of its setup.
 
     Parameters
@@ -61,18 +63,32 @@ def bench_segment(n_samples: int = 4000, *, mechanism: str = "paper", repeats: i
     repeats : int
         Timed segments (each on a fresh road, after one untimed segment); the median is reported.
     seed : int
+    kernels : {"compiled", "reference"}, optional
+        The evaluation path (:mod:`~roadcollab.lti.kernels`); by default the one in effect.
 
     Returns
     -------
     dict
-        ``ms_per_vehicle_segment`` (median), ``ms_min``, ``ms_receive_median`` (decode, estimate and
-        learn) and ``ms_send_median`` (build, obfuscate, encode), ``ms_per_vehicle_setup``,
-        ``ms_pipeline_setup_2_vehicles`` (ms), ``samples_per_segment``, ``nfft``, ``mechanism``.
+        ``ms_per_vehicle_segment`` (median), ``ms_min``, ``kernels`` (the path used),
+        ``ms_receive_median`` (decode, estimate and learn) and ``ms_send_median`` (build, obfuscate,
+        encode), ``ms_per_vehicle_setup``, ``ms_pipeline_setup_2_vehicles`` (ms),
+        ``samples_per_segment``, ``nfft``, ``mechanism``, and ``max_rel_privacy_vs_clear``: for
+        ``paper`` and ``paper_vehicle`` the largest ``max |W_hat - W_hat_clear| / max |W_hat_clear|``
+        over every segment run (the receiver's estimate from the obfuscated message against the one
+        from the clear message; 0 otherwise).
     """
     n_samples = check_int("n_samples", n_samples, low=64, high=2**20)
     repeats = check_int("repeats", repeats, low=1)
     if mechanism not in MECHANISMS:
         raise ParameterError(f"mechanism must be one of {MECHANISMS}, got {mechanism!r}")
+    if kernels is not None and kernels not in KERNELS:
+        raise ParameterError(f"kernels must be one of {KERNELS}, got {kernels!r}")
+    with use_kernels(kernels or kernel_path()):
+        return _bench_segment(n_samples, mechanism, repeats, seed)
+
+
+def _bench_segment(n_samples: int, mechanism: str, repeats: int, seed: int) -> dict:
+    """:func:`bench_segment` on the kernel path in effect."""
     cfg = _config_for(n_samples)
     rng = np.random.default_rng(seed)
     fleet = sample_fleet(2, cfg.fleet, rng=rng)
@@ -90,13 +106,14 @@ def bench_segment(n_samples: int = 4000, *, mechanism: str = "paper", repeats: i
     if mechanism == "paper_vehicle":     # per-vehicle channels are drawn once, in setup
         relay.channel(0)
         relay.channel(1)
-    times, receive, send = [], [], []
+    times, receive, send, worst = [], [], [], 0.0
     for k in range(repeats + 1):
         w = pipe.road(rng).velocity[:grid.n_samples]
         # The previous vehicle's message and this vehicle's record (not timed: the former is the
         # other vehicle's work, the latter comes from the sensors).
         y_prev = add_sensor_noise(simulate_response(prev.true_plant, w), cfg.sensor_noise_std, rng=rng)
-        incoming = protocol.encode(relay.send(0, prev.estimate(y_prev)).message)
+        sent = relay.send(0, prev.estimate(y_prev))
+        incoming = protocol.encode(sent.message)
         y = add_sensor_noise(simulate_response(car.true_plant, w), cfg.sensor_noise_std, rng=rng)
         # Relay.step, split where the receiver's work ends and the sender's begins (no guard here).
         t0 = time.perf_counter()
@@ -109,10 +126,54 @@ def bench_segment(n_samples: int = 4000, *, mechanism: str = "paper", repeats: i
             times.append((t2 - t0) * 1e3)
             receive.append((t1 - t0) * 1e3)
             send.append((t2 - t1) * 1e3)
-    return {"mechanism": mechanism, "samples_per_segment": grid.n_samples, "nfft": grid.nfft,
+        if sent.clear is not None:            # Theorem 1 on every segment (not timed)
+            ref = car.estimate(y, sent.clear, unguarded=True).W_hat
+            worst = max(worst, float(np.max(np.abs(result.W_hat - ref)) / np.max(np.abs(ref))))
+    return {"mechanism": mechanism, "kernels": kernel_path(), "samples_per_segment": grid.n_samples, "nfft": grid.nfft,
             "ms_per_vehicle_segment": statistics.median(times), "ms_min": min(times),
             "ms_receive_median": statistics.median(receive), "ms_send_median": statistics.median(send),
-            "ms_per_vehicle_setup": statistics.median(setups), "ms_pipeline_setup_2_vehicles": setup_total * 1e3}
+            "max_rel_privacy_vs_clear": worst, "ms_per_vehicle_setup": statistics.median(setups), "ms_pipeline_setup_2_vehicles": setup_total * 1e3}
+
+
+def bench_kernel_paths(n_samples: int = 4000, *, mechanism: str = "paper", repeats: int = 30, seed: int = 0,
+                       rounds: int = 3) -> dict:
+    """:func:`bench_segment` on the compiled and the reference path in one run, alternating: ``rounds``
+    rounds of ``repeats // rounds`` segments each (the same seed, so the same segments), the two
+    paths in turn (which goes first alternates), so both are timed under the same machine load.
+
+    Parameters
+    ----------
+    n_samples : int
+    mechanism : str
+    repeats : int
+        Timed segments per path over all rounds.
+    seed : int
+    rounds : int
+
+    Returns
+    -------
+    dict
+        ``{path: {"ms_min", "ms_median", "ms_receive_median", "ms_send_median"}}`` for the paths
+        that ran (``compiled`` only when numba imports), and ``speedup_median`` / ``speedup_min``
+        (reference over compiled, the medians of the per-round ratios), when both ran.
+    """
+    paths = list(KERNELS) if compiled_available() else ["reference"]
+    per = max(1, check_int("repeats", repeats, low=1) // check_int("rounds", rounds, low=1))
+    rows: dict[str, list[dict]] = {k: [] for k in paths}
+    for r in range(rounds):
+        for k in (paths if r % 2 == 0 else paths[::-1]):
+            rows[k].append(bench_segment(n_samples, mechanism=mechanism, repeats=per, seed=seed, kernels=k))
+    out: dict = {}
+    for k, rs in rows.items():
+        out[k] = {"ms_min": min(x["ms_min"] for x in rs),
+                  "ms_median": statistics.median(x["ms_per_vehicle_segment"] for x in rs),
+                  "ms_receive_median": statistics.median(x["ms_receive_median"] for x in rs),
+                  "ms_send_median": statistics.median(x["ms_send_median"] for x in rs)}
+    if len(paths) == 2:
+        out["speedup_median"] = statistics.median(a["ms_per_vehicle_segment"] / b["ms_per_vehicle_segment"]
+                                                  for a, b in zip(rows["reference"], rows["compiled"]))
+        out["speedup_min"] = statistics.median(a["ms_min"] / b["ms_min"] for a, b in zip(rows["reference"], rows["compiled"]))
+    return out
 
 
 def bench_naive(n_samples: int = 4000, *, repeats: int = 30, seed: int = 0) -> dict:
@@ -205,7 +266,27 @@ def bench_exactness(*, segments: int = 10, n_samples: int = 4000, seed: int = 0)
     return out
 
 
-def run_bench(*, sizes=(1000, 2000, 4000, 8000, 16000, 32000, 64000), repeats: int = 30, seed: int = 0) -> dict:
+def _scaling(sizes, repeats: int, seed: int) -> list[dict]:
+    """The scaling points of :func:`run_bench`, with the cost per ``N log2 N`` relative to the
+    4000-sample point (else the first): flat means ``N log N``."""
+    scaling = []
+    for n in sizes:
+        rec = {"n_samples": int(n)}
+        for m in ("paper", "hardened"):
+            rec[f"ms_{m}"] = bench_segment(n, mechanism=m, repeats=max(3, repeats // 3), seed=seed)[
+                "ms_per_vehicle_segment"]
+        scaling.append(rec)
+    ref = next((s for s in scaling if s["n_samples"] == 4000), scaling[0])
+    for s in scaling:
+        for m in ("paper", "hardened"):
+            nl = s["n_samples"] * np.log2(s["n_samples"])
+            nl0 = ref["n_samples"] * np.log2(ref["n_samples"])
+            s[f"{m}_per_nlogn_rel"] = (s[f"ms_{m}"] / nl) / (ref[f"ms_{m}"] / nl0)
+    return scaling
+
+
+def run_bench(*, sizes=(1000, 2000, 4000, 8000, 16000, 32000, 64000), repeats: int = 30, seed: int = 0,
+              kernels: str | None = None, exactness_segments: int | None = None) -> dict:
     """The benchmark record printed by ``roadcollab bench --json``.
 
     Single-threaded (BLAS limited to one thread): :func:`bench_segment` at 4000 samples for every
@@ -223,6 +304,11 @@ def run_bench(*, sizes=(1000, 2000, 4000, 8000, 16000, 32000, 64000), repeats: i
         ``max(3, repeats // 3)``.
     seed : int
         Seed of every measurement (fleet, roads, sensor noise, obfuscators).
+    kernels : {"compiled", "reference"}, optional
+        The evaluation path of every measurement except ``kernel_paths`` (which times both); by
+        default the one in effect (:mod:`~roadcollab.lti.kernels`).
+    exactness_segments : int, optional
+        Segments of :func:`bench_exactness` (default ``repeats``).
 
     Returns
     -------
@@ -237,28 +323,21 @@ def run_bench(*, sizes=(1000, 2000, 4000, 8000, 16000, 32000, 64000), repeats: i
         ``samples_per_segment``, ``nfft``, ``scaling`` (one dict per size: ``n_samples``,
         ``ms_paper``, ``ms_hardened`` (medians, ms), and ``paper_per_nlogn_rel``,
         ``hardened_per_nlogn_rel``: cost per ``N log2 N`` relative to the reference point, 1
-        everywhere for ``N log N`` scaling), ``repeats`` and ``threads`` (1).
+        everywhere for ``N log N`` scaling), ``repeats`` and ``threads`` (1), ``kernels`` (the path
+        used), ``kernel_paths`` (``paper`` on both paths, :func:`bench_kernel_paths`) and
+        ``max_rel_privacy_vs_clear`` (the largest of every mechanism's, over every segment it ran).
     """
-    with threadpool_limits(limits=1):
+    if kernels is not None and kernels not in KERNELS:
+        raise ParameterError(f"kernels must be one of {KERNELS}, got {kernels!r}")
+    with threadpool_limits(limits=1), use_kernels(kernels or kernel_path()):
         main = {m: bench_segment(4000, mechanism=m, repeats=repeats, seed=seed) for m in MECHANISMS}
+        paths = bench_kernel_paths(4000, repeats=repeats, seed=seed)
         naive = bench_naive(4000, repeats=repeats, seed=seed)
         cfg = _config_for(4000)
         floor = floor_ms(FleetPipeline(cfg, sample_fleet(2, cfg.fleet, rng=seed)).grid)
-        exact = bench_exactness(seed=seed)
-        scaling = []
-        for n in sizes:
-            rec = {"n_samples": int(n)}
-            for m in ("paper", "hardened"):
-                rec[f"ms_{m}"] = bench_segment(n, mechanism=m, repeats=max(3, repeats // 3), seed=seed)[
-                    "ms_per_vehicle_segment"]
-            scaling.append(rec)
-    # Normalised cost per N log2 N, relative to the 4000-sample point: flat means N log N.
-    ref = next((s for s in scaling if s["n_samples"] == 4000), scaling[0])
-    for s in scaling:
-        for m in ("paper", "hardened"):
-            nl = s["n_samples"] * np.log2(s["n_samples"])
-            nl0 = ref["n_samples"] * np.log2(ref["n_samples"])
-            s[f"{m}_per_nlogn_rel"] = (s[f"ms_{m}"] / nl) / (ref[f"ms_{m}"] / nl0)
+        exact = bench_exactness(segments=exactness_segments or repeats, seed=seed)
+        path = kernel_path()
+        scaling = _scaling(sizes, repeats, seed)
     f = floor["floor_ms"]
     by_mech = {m: {"ms_min": r["ms_min"], "ms_median": r["ms_per_vehicle_segment"],
                    "ms_receive_median": r["ms_receive_median"], "ms_send_median": r["ms_send_median"],
@@ -279,4 +358,7 @@ def run_bench(*, sizes=(1000, 2000, 4000, 8000, 16000, 32000, 64000), repeats: i
         "scaling": scaling,
         "repeats": repeats,
         "threads": 1,
+        "kernels": path,
+        "kernel_paths": paths,
+        "max_rel_privacy_vs_clear": max(r["max_rel_privacy_vs_clear"] for r in main.values()),
     }

@@ -25,6 +25,7 @@ from dataclasses import dataclass
 from typing import Callable
 
 import numpy as np
+from threadpoolctl import threadpool_limits
 
 from .._validation import check_int, check_positive
 from ..collaboration.relay import Exchange, Relay
@@ -374,7 +375,10 @@ def run_reproduction(config: ExperimentConfig, seed: int, *, progress: Callable[
         iri_segment_length = check_positive("iri_segment_length", iri_segment_length)
     cache = PipelineCache() if cache is None else cache
     if not config.redraw_fleet and scheduler is None:   # built here once, inherited by a forked pool
-        cache.pipeline(config, seed).warm()
+        # Single-threaded like the runs: the setup's small dense kernels (6x6 expm, 2x2 stacks) are
+        # slower on two BLAS threads (a 6x6 expm 7.9 ms against 0.23-0.52 ms on one, measured).
+        with threadpool_limits(limits=1):
+            cache.pipeline(config, seed).warm()
     runs = map_runs(_ReproductionTask(config, seed, privacy, iri_segment_length), config.n_runs, workers=workers,
                     scheduler=scheduler, progress=progress, shared=cache)
     return ReproductionResult(config=config, seed=seed, fleet=fleet, runs=runs)

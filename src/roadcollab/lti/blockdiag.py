@@ -22,6 +22,8 @@ import numpy as np
 import scipy.linalg
 from scipy.linalg import lapack
 
+from .kernels import block_eval, kernel_path
+
 __all__ = ["MAX_COUPLING", "CLUSTER_TOL", "SMALL_BLOCK", "BlockSchur", "block_schur", "block_response"]
 
 #: Largest ``||X||_F`` of one decoupling step (module docstring); larger splits are merged. Measured on
@@ -163,6 +165,10 @@ def block_response(bs: BlockSchur, D, z: np.ndarray) -> np.ndarray:
     (M, p, m) complex ndarray
     """
     R, Bw, Cw = bs.R, bs.Bw, bs.Cw
+    if kernel_path() == "compiled":
+        # One pass over the bins, per-bin back substitution in registers (lti.kernels): 4x faster
+        # than the products below for the obfuscated T~, S~ (measured, see docs/speed.md).
+        return block_eval(R, Bw, Cw, np.asarray(D, dtype=float), bs.blocks, z)
     p, m = Cw.shape[0], Bw.shape[1]
     # A block of size k <= SMALL_BLOCK contributes through its resolvent entries, each a product
     # of g_i = 1 / (z - R_ii) (paths through the triangular block); all of them, with the

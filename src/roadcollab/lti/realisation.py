@@ -11,7 +11,7 @@ import scipy.linalg
 from .response import content_key, dlti_frequency_response
 from .stability import spectral_radius_and_gain
 
-__all__ = ["StateSpaceData", "SystemCache", "continuous_poles", "series", "random_orthogonal", "similarity"]
+__all__ = ["StateSpaceData", "SystemCache", "continuous_poles", "series", "minreal", "random_orthogonal", "similarity"]
 
 
 def continuous_poles(poles_z, dt: float) -> np.ndarray:
@@ -251,6 +251,39 @@ def series(first: StateSpaceData, second: StateSpaceData) -> StateSpaceData:
     C = np.hstack([second.D @ first.C, second.C])
     D = second.D @ first.D
     return StateSpaceData(A, B, C, D, first.dt)
+
+
+def minreal(sys: StateSpaceData, *, tol: float = 0.0) -> StateSpaceData:
+    """Minimal realisation: the uncontrollable and unobservable states removed (SLICOT ``TB01PD``).
+
+    The same call and padding as python-control's ``StateSpace.minreal`` (so the same realisation to
+    the bit), without importing python-control: that import cost 1.33 s of the default reproduction
+    for this one call, slycot's 0.1-0.5 s.
+
+    Parameters
+    ----------
+    sys : StateSpaceData
+    tol : float
+        Tolerance of the controllability and observability rank decisions (0: SLICOT's default).
+
+    Returns
+    -------
+    StateSpaceData
+        Order ``nr <= sys.order``; own arrays (not views of SLICOT's work arrays).
+    """
+    n, (p, m) = sys.order, sys.D.shape
+    if n == 0:
+        return StateSpaceData(sys.A.copy(), sys.B.copy(), sys.C.copy(), sys.D.copy(), sys.dt)
+    from slycot import tb01pd
+
+    # TB01PD works on B (n, max(m, p)) and C (max(m, p), n) arrays (it dualises internally).
+    B = np.empty((n, max(m, p)))
+    B[:, :m] = sys.B
+    C = np.empty((max(m, p), n))
+    C[:p, :] = sys.C
+    A, B, C, nr = tb01pd(n, m, p, np.array(sys.A, dtype=float), B, C, tol=tol)
+    return StateSpaceData(A[:nr, :nr].copy(), B[:nr, :m].copy(), C[:p, :nr].copy(),
+                          np.array(sys.D, dtype=float), sys.dt)
 
 
 def random_orthogonal(n: int, rng: np.random.Generator) -> np.ndarray:

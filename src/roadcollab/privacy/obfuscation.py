@@ -37,7 +37,8 @@ from ..estimation.grid import SegmentGrid, bin_index
 from ..lti.batch2x2 import inv2x2, matvec, receiver_z
 from .obfuscator_design import ObfuscationSpec, Obfuscator, draw_obfuscator
 
-__all__ = ["ObfuscationSpec", "Obfuscator", "ObfuscationChannel", "draw_obfuscator", "obfuscate", "theorem1_errors"]
+__all__ = ["ObfuscationSpec", "Obfuscator", "ObfuscationChannel", "draw_obfuscator", "obfuscate", "obfuscate_spectra",
+           "theorem1_errors"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -186,20 +187,56 @@ def obfuscate(message: ExchangeMessage, grid: SegmentGrid, spec: ObfuscationSpec
         raise ParameterError(f"message.mechanism must be 'none', got {message.mechanism!r}")
     if construction not in ("direct", "consistent"):
         raise ParameterError(f"construction must be 'direct' or 'consistent', got {construction!r}")
-    ch = ObfuscationChannel.draw(message.T, message.S, grid, spec, rng=rng) if channel is None else channel
-    act = grid.active
     E, Wf = (grid.rfft(message.e), grid.rfft(message.wf)) if spectra is None else spectra
+    T_f = S_f = None
+    if construction == "consistent":
+        om = grid.omega_dt[grid.active]
+        T_f = message.T.frequency_response(om) if T_response is None else T_response
+        S_f = message.S.frequency_response(om) if S_response is None else S_response
+    return obfuscate_spectra(message.T, message.S, E, Wf, grid, spec, rng=rng, channel=channel,
+                             consistent=(T_f, S_f) if construction == "consistent" else None)
+
+
+def obfuscate_spectra(T, S, E: np.ndarray, Wf: np.ndarray, grid: SegmentGrid,
+                      spec: ObfuscationSpec = ObfuscationSpec(), *, rng=None,
+                      channel: ObfuscationChannel | None = None,
+                      consistent: tuple[np.ndarray, np.ndarray] | None = None
+                      ) -> tuple[ExchangeMessage, Obfuscator, Obfuscator]:
+    """:func:`obfuscate` from the sender's ``T``, ``S`` and spectra, without a clear message.
+
+    A sender that keeps its clear message only for measuring Theorem 1 builds it when asked
+    (:class:`~roadcollab.collaboration.relay.RelayStep`): building and checking it cost 0.31 ms of
+    every ``paper`` message, for a message never sent.
+
+    Parameters
+    ----------
+    T, S : StateSpaceData
+        The sender's clear ``T_j``, ``S_j``.
+    E, Wf : (n_bins, 2) complex ndarray
+        Spectra of ``e_j`` and ``w^f_j`` on the grid.
+    grid : SegmentGrid
+    spec : ObfuscationSpec
+    rng : numpy.random.Generator | int | None
+    channel : ObfuscationChannel, optional
+        Reuse this draw (see :func:`obfuscate`).
+    consistent : (T_f, S_f), optional
+        The ``consistent`` construction of :func:`obfuscate` with these responses of ``T``, ``S``
+        on the active bins; by default ``direct``.
+
+    Returns
+    -------
+    (ExchangeMessage, Obfuscator, Obfuscator)
+    """
+    ch = ObfuscationChannel.draw(T, S, grid, spec, rng=rng) if channel is None else channel
+    act = grid.active
     # Every bin is obfuscated, also outside the band, where the receiver uses nothing (W = 0):
     # the time signals hold no clear component.
     Wf_t = matvec(ch.psi2_inv_all, Wf)
     E_t = matvec(ch.psi1_all, E)
-    if construction == "consistent":
-        om = grid.omega_dt[act]
-        T_f = message.T.frequency_response(om) if T_response is None else T_response
-        S_f = message.S.frequency_response(om) if S_response is None else S_response
-        z = receiver_z(T_f, S_f, E[act], Wf[act])
+    if consistent is not None:
+        z = receiver_z(consistent[0], consistent[1], E[act], Wf[act])
         E_t[act] = matvec(ch.T_f, z) + matvec(ch.S_f, Wf_t[act])
-    out = ExchangeMessage(mechanism="paper", sample_rate=message.sample_rate, n_samples=message.n_samples,
+    out = ExchangeMessage(mechanism="paper", sample_rate=grid.sample_rate, n_samples=grid.n_samples,
                           T=ch.T, S=ch.S, e=grid.irfft(E_t), wf=grid.irfft(Wf_t))
     return out, ch.psi1, ch.psi2
 
