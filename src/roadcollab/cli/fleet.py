@@ -1,4 +1,4 @@
-"""``roadcollab fleet --fleet DIR --drive FILE ... --broker URL [--concurrent]``: one vehicle process per drive."""
+"""``roadcollab fleet --fleet DIR --drive FILE [--drive FILE] --broker URL [--concurrent]``: one vehicle process per drive."""
 
 from __future__ import annotations
 

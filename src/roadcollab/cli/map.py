@@ -1,4 +1,4 @@
-"""``roadcollab map --drive FILE ... [--network FILE] --store FILE --out DIR``: roads on a map.
+"""``roadcollab map --drive FILE [--drive FILE] [--network FILE] --store FILE --out DIR``: roads on a map.
 
 A command of its own rather than options of ``estimate``: its inputs (GPS drives, a road network,
 a store that persists between runs) and its outputs (GIS files, a web map) are about roads and
