@@ -9,8 +9,10 @@ Two paths compute the same quantities:
   per-bin work in registers. They differ from the reference by round-off only (a different
   summation order; tested to 1e-12 relative per bin).
 
-The default is ``"compiled"`` when numba can be imported and ``"reference"`` otherwise; the
-environment variable ``ROADCOLLAB_KERNELS=reference`` (or ``compiled``) sets the default, and
+The default is ``"reference"`` (numpy): measured, the compiled path made ``paper`` only 1.02-1.3x faster per
+segment (median, docs/speed.md) while importing numba and loading its cache added 0.4-0.9 s to every process
+that evaluates a response (a vehicle, a short command), so it is opt-in until it pays for itself. The
+environment variable ``ROADCOLLAB_KERNELS=compiled`` (or ``reference``) sets the default, and
 :func:`use_kernels` selects a path for a block of code (``roadcollab bench --kernels``).
 
 numba is compiled with ``error_model="numpy"``: its default ``"python"`` model checks every float
@@ -126,8 +128,8 @@ def compiled_available() -> bool:
 
 
 def kernel_path() -> str:
-    """The path in effect: :func:`use_kernels`' choice, else ``ROADCOLLAB_KERNELS``, else
-    ``"compiled"`` when numba imports; ``"reference"`` whenever numba does not.
+    """The path in effect: :func:`use_kernels`' choice, else ``ROADCOLLAB_KERNELS``, else ``"reference"``;
+    always ``"reference"`` when numba does not import.
 
     Returns
     -------
@@ -138,7 +140,7 @@ def kernel_path() -> str:
     ParameterError
         If ``ROADCOLLAB_KERNELS`` is set to anything else.
     """
-    choice = _CHOICE.get() or os.environ.get("ROADCOLLAB_KERNELS") or "compiled"
+    choice = _CHOICE.get() or os.environ.get("ROADCOLLAB_KERNELS") or "reference"
     if choice not in KERNELS:
         raise ParameterError(f"environment variable ROADCOLLAB_KERNELS must be 'compiled' or 'reference', "
                              f"got {choice!r}")
