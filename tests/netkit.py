@@ -79,8 +79,8 @@ def rc(*args, timeout: float = 300.0, check: bool = True) -> subprocess.Complete
 
 
 def start(*cmd, log: Path) -> subprocess.Popen:
-    fh = open(log, "ab")
-    return subprocess.Popen(list(map(str, cmd)), stdout=fh, stderr=subprocess.STDOUT, start_new_session=True)
+    with open(log, "ab") as fh:   # the child keeps its own copy of the descriptor
+        return subprocess.Popen(list(map(str, cmd)), stdout=fh, stderr=subprocess.STDOUT, start_new_session=True)
 
 
 def start_serve(fleet: Path, store: Path, log: Path, *, listen: int | None = None, broker: str | None = None,
