@@ -55,7 +55,8 @@ from .distance_maps import band_limit_stretch, covered, distance_grid, elevation
 from .drive_estimation import AnomalyRow, integrate_elevation, window_plan, window_slices
 
 __all__ = ["FLEET_ESTIMATORS", "FleetEstimates", "VehicleRecord", "invert_drive", "estimate_fleet",
-           "find_fleet_anomalies", "fused_iri", "drive_stretches", "covered_runs"]
+           "find_fleet_anomalies", "fused_iri", "drive_stretches", "covered_runs",
+           "collaborative_velocity"]
 
 FLEET_ESTIMATORS = ("single", "inversion", "collaborative", "fused")
 
@@ -195,9 +196,31 @@ def _to_grid(drive: Drive, w: np.ndarray, x: np.ndarray, shift: float) -> np.nda
     return elevation_to_distance(drive.positions + shift, integrate_elevation(w, drive.sample_rate), x)
 
 
-def _collaborative(rec: VehicleRecord, drive: Drive, x: np.ndarray, previous: np.ndarray, shift: float
-                   ) -> np.ndarray:
-    """Algorithm 1's road velocity with the previous drive's elevation sent through distance."""
+def collaborative_velocity(rec: VehicleRecord, drive: Drive, x: np.ndarray, previous: np.ndarray, shift: float
+                           ) -> np.ndarray:
+    """Algorithm 1's road velocity with the previous drive's elevation sent through distance.
+
+    The one implementation :func:`estimate_fleet` and the networked engine
+    (:class:`roadcollab.network.engine.VehicleEngine`) share, window by window as :func:`invert_drive`.
+
+    Parameters
+    ----------
+    rec : VehicleRecord
+        This vehicle's estimator and windows.
+    drive : Drive
+        This vehicle's drive.
+    x : (m,) ndarray
+        Distance grid of ``previous``, m.
+    previous : (m, 2) ndarray
+        The previous vehicle's band-limited elevation on ``x``, m (NaN where it did not pass).
+    shift : float
+        Start offset applied to this drive's positions, m.
+
+    Returns
+    -------
+    (N, 2) ndarray
+        Road velocity in this vehicle's time base, m/s.
+    """
     grid = rec.car.grid
     h = elevation_at(x, previous, drive.positions + shift)
     w = np.zeros_like(h)
@@ -296,7 +319,7 @@ def estimate_fleet(drives: list[Drive], *, spacing: float = 0.05, align: bool = 
     if align:
         inv = [band(_to_grid(d, r.w_inversion, x, s)) for d, r, s in zip(drives, recs, offsets)]
     single = [band(_to_grid(d, r.w_single, x, s)) for d, r, s in zip(drives, recs, offsets)]
-    collab = [single[0]] + [band(_to_grid(d, _collaborative(r, d, x, inv[j - 1], s), x, s))
+    collab = [single[0]] + [band(_to_grid(d, collaborative_velocity(r, d, x, inv[j - 1], s), x, s))
                             for j, (d, r, s) in enumerate(zip(drives, recs, offsets)) if j > 0]
     fuse_from = inv if fleet is None else [band(_to_grid(d, r.w_posterior, x, s))
                                            for d, r, s in zip(drives, recs, offsets)]

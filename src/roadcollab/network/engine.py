@@ -25,7 +25,7 @@ import numpy as np
 from ..errors import ParameterError
 from ..experiments.distance_maps import band_limit_stretch, covered, elevation_to_distance
 from ..experiments.drive_estimation import integrate_elevation
-from ..experiments.fleet_estimation import _collaborative as collaborative_velocity, invert_drive
+from ..experiments.fleet_estimation import collaborative_velocity, invert_drive
 from ..io.drives import Drive
 from .plan import RoadPlan
 

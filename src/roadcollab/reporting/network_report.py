@@ -12,7 +12,6 @@ from __future__ import annotations
 from pathlib import Path
 from types import SimpleNamespace
 
-import numpy as np
 
 from ..errors import ParameterError
 from ..experiments.drive_estimation import AnomalyRow
@@ -26,15 +25,6 @@ __all__ = ["NETWORK_FILES", "write_network_results"]
 
 NETWORK_FILES = ["road_estimates.csv", "final_estimate.csv", "iri.csv", "anomalies.csv", "config.json", "report.md"]
 _SIDES = ("left", "right")
-
-
-def _blank(v: float):
-    return "" if not np.isfinite(v) else float(v)
-
-
-def _wide(position: np.ndarray, named: list) -> tuple[list[dict], list[str]]:
-    cols = ["position_m"] + [n for n, _ in named]
-    return [{"position_m": float(p), **{n: _blank(s[i]) for n, s in named}} for i, p in enumerate(position)], cols
 
 
 def write_network_results(r: NetworkResults, out, *, command: str, segment_length: float, plan: dict) -> dict:
