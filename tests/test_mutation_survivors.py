@@ -59,3 +59,30 @@ def test_band_limit_returns_n_samples_and_names_x_in_errors():
     np.testing.assert_array_equal(g.band_limit(x, 250), g.band_limit(x)[:250])
     with pytest.raises(ParameterError, match="^x "):
         g.band_limit(np.full((400, 2), np.nan))
+
+
+# --- survivors of the pass over collaboration/guard.py and detection/ (docs/mutation.md) ---------------------
+
+def test_corroboration_agrees_by_center_distance_kind_and_a_shared_track():
+    from roadcollab.detection.corroboration import confirmed_by_own
+
+    msg = [_det(100.0), _det(200.0, side="right", kind="bump"), _det(300.0, side="both")]
+    # own detections: 0.5 m from the first (agrees), the second on the other track (does not), the third
+    # 1.5 m away (does not at tolerance 1 m); and one far away whose sum with a message's center would be small.
+    own = [_det(100.5), _det(200.0, side="left", kind="bump"), _det(301.5, side="both"), _det(-100.0)]
+    assert confirmed_by_own(msg, own) == [msg[0]]
+    assert confirmed_by_own([_det(100.0)], [_det(-100.0)]) == []          # |a - b| = 200, |a + b| = 0
+    assert confirmed_by_own([_det(100.0)], [_det(100.0, kind="bump")]) == []
+    exact = _det(101.0)
+    assert confirmed_by_own([_det(100.0)], [exact], tolerance=1.0)          # the boundary is inclusive
+
+
+def test_detector_confidence_is_the_stated_logistic_of_the_snr():
+    from roadcollab.detection.detector import DetectorSpec
+
+    spec = DetectorSpec()
+    mid, scale = spec.confidence_mid, spec.confidence_scale
+    snr = np.array([mid - 2 * scale, mid, mid + scale])
+    expected = 1.0 / (1.0 + np.exp(-(snr - mid) / scale))
+    np.testing.assert_allclose(spec.confidence(snr), expected, rtol=1e-12)
+    assert spec.confidence(mid) == 0.5

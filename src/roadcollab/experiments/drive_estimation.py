@@ -48,7 +48,7 @@ from .config import ExperimentConfig
 from ..io.drives import Drive, common_time_grid
 from ..models.vehicle import Vehicle
 
-__all__ = ["ESTIMATORS", "DEFAULT_WINDOW", "DEFAULT_MARGIN_PERIODS", "AnomalyRow", "DriveEstimates",
+__all__ = ["ESTIMATORS", "DEFAULT_WINDOW", "DEFAULT_MARGIN_PERIODS", "AnomalyRow", "OffsetRow", "DriveEstimates",
            "integrate_elevation", "window_plan", "window_slices", "estimate_drives", "find_anomalies"]
 
 ESTIMATORS = ("single", "collaborative", "fused")
@@ -83,6 +83,31 @@ class AnomalyRow:
     kind: str
     depth_m: float
     confidence: float
+
+
+@dataclass(frozen=True)
+class OffsetRow:
+    """One drive of ``offsets.csv`` (the fields are its columns, in order).
+
+    Attributes
+    ----------
+    drive : int
+        1-based drive number.
+    csv : str
+        The drive's file name.
+    start_m_given, offset_m, start_m_used : float
+        The start the parameters file gives, the estimated offset and their sum, m.
+    correlation_peak : float or str
+        Peak of the normalised cross-correlation that set the offset; an empty string for a drive that did
+        not pass.
+    """
+
+    drive: int
+    csv: str
+    start_m_given: float
+    offset_m: float
+    start_m_used: float
+    correlation_peak: float | str
 
 
 def integrate_elevation(w, sample_rate: float) -> np.ndarray:

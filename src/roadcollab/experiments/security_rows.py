@@ -2,7 +2,8 @@
 
 ``attack.csv`` (:class:`AttackRow`), ``exactness.csv`` (:class:`ExactnessRow`), ``linkability.csv``
 (:class:`LinkabilityRow`), ``baselines.csv`` (:class:`BaselineRow`), ``dp_composition.csv``
-(:class:`CompositionRow`) and the privacy/accuracy frontier (:class:`FrontierPoint`); ``poisoning.csv`` is
+(:class:`CompositionRow`), the privacy/accuracy frontier (:class:`FrontierPoint`) and ``fig8_10_poles.csv``
+(:class:`PoleRow`, from :func:`pole_rows`); ``poisoning.csv`` is
 :class:`~roadcollab.experiments.fusion_poisoning.PoisoningSummary`.
 """
 
@@ -15,7 +16,47 @@ import numpy as np
 from ..privacy.attacks import SUCCESS_TOLERANCE
 
 __all__ = ["AttackRow", "ExactnessRow", "LinkabilityRow", "BaselineRow", "CompositionRow", "FrontierPoint",
-           "attack_row"]
+           "PoleRow", "POLE_KINDS", "pole_rows", "attack_row"]
+
+#: The pole sets of a Figs. 8-10 example, in the order of ``fig8_10_poles.csv``.
+POLE_KINDS = ("true", "model_reduction", "pole_intersection", "multiplicity")
+
+
+@dataclass(frozen=True)
+class PoleRow:
+    """One pole of a Figs. 8-10 example, a row of ``fig8_10_poles.csv``.
+
+    Attributes
+    ----------
+    vehicle : int
+        1-based vehicle whose message was attacked.
+    kind : str
+        One of :data:`POLE_KINDS`: the true poles, or the poles an attack recovered.
+    real, imag : float
+        The pole, rad/s.
+    """
+
+    vehicle: int
+    kind: str
+    real: float
+    imag: float
+
+
+def pole_rows(pole_examples: list[dict]) -> list[PoleRow]:
+    """Rows of ``fig8_10_poles.csv``: every pole of every example, kind-major within an example.
+
+    Parameters
+    ----------
+    pole_examples : list of dict
+        The security study's Figs. 8-10 examples: ``vehicle`` and one array of poles (rad/s) per kind of
+        :data:`POLE_KINDS`.
+
+    Returns
+    -------
+    list of PoleRow
+    """
+    return [PoleRow(ex["vehicle"], kind, float(p.real), float(p.imag))
+            for ex in pole_examples for kind in POLE_KINDS for p in np.asarray(ex[kind])]
 
 
 @dataclass(frozen=True)

@@ -47,7 +47,8 @@ def encode_fixed(x: np.ndarray, clip: float, frac_bits: int) -> np.ndarray:
     ``clip * 2^frac_bits < 2^53`` (checked by the caller's spec) keeps the rounding exact.
     """
     q = np.rint(np.clip(x, -clip, clip) * float(2 ** frac_bits)).astype(np.int64)
-    return q.view(np.uint64)
+    out: np.ndarray = q.view(np.uint64)
+    return out
 
 
 def decode_sum(total: np.ndarray, frac_bits: int) -> np.ndarray:

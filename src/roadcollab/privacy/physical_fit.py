@@ -9,6 +9,8 @@ reads the poles of the fitted ``P_hat``.
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 import scipy.optimize
 
@@ -19,19 +21,20 @@ from ..models.vehicle import HalfCarParameters, half_car_model
 __all__ = ["attack_physical_fit"]
 
 
-def _ratio_model(log_ratios: np.ndarray):
+def _ratio_model(log_ratios: np.ndarray) -> Any:
     """Half-car model from scale-free parameters ``log [k/m, c/m, I/m, L1, L2]`` (m = 1)."""
     k, c, I, L1, L2 = np.exp(log_ratios)
     return half_car_model(HalfCarParameters(sprung_mass=1.0, roll_inertia=I, left_arm=L1, right_arm=L2,
                                             stiffness=k, damping=c))
 
 
-def _log_ratios(params) -> np.ndarray:
+def _log_ratios(params: Any) -> np.ndarray:
     return np.log([params.stiffness / params.sprung_mass, params.damping / params.sprung_mass,
                    params.roll_inertia / params.sprung_mass, params.left_arm, params.right_arm])
 
 
-def attack_physical_fit(z: np.ndarray, w_band: np.ndarray, grid, nominal, *, band_hz=(0.5, 20.0),
+def attack_physical_fit(z: np.ndarray, w_band: np.ndarray, grid: Any, nominal: Any, *,
+                        band_hz: tuple[float, float] = (0.5, 20.0),
                         max_bins: int = 300) -> np.ndarray:
     """Hardened ``physical_fit``: knows the half-car structure and the fleet's nominal
     parameters; fits ``Z = P(theta_hat)^-1 P(theta) W`` over both parameter sets by nonlinear
@@ -73,7 +76,7 @@ def attack_physical_fit(z: np.ndarray, w_band: np.ndarray, grid, nominal, *, ban
     norm = np.sqrt(np.mean(np.abs(Zs) ** 2))
     x0 = np.concatenate([_log_ratios(nominal), _log_ratios(nominal)])
 
-    def resid(x):
+    def resid(x: np.ndarray) -> np.ndarray:
         Ph = _ratio_model(x[:5]).frequency_response(s)
         P = _ratio_model(x[5:]).frequency_response(s)
         r = (Zs - matvec(inv2x2(Ph) @ P, Ws)) / norm
@@ -83,4 +86,5 @@ def attack_physical_fit(z: np.ndarray, w_band: np.ndarray, grid, nominal, *, ban
         sol = scipy.optimize.least_squares(resid, x0, x_scale=0.1, max_nfev=400)
     except (ValueError, np.linalg.LinAlgError, ParameterError):
         return np.zeros(0, complex)
-    return _ratio_model(sol.x[:5]).poles()
+    poles: np.ndarray = _ratio_model(sol.x[:5]).poles()
+    return poles

@@ -28,6 +28,8 @@ several segments of the same vehicle linked (one ``theta`` and one ``theta_hat``
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 from dataclasses import dataclass
 
 import numpy as np
@@ -76,7 +78,8 @@ class ReplicaFit:
         return cls(np.zeros(0, complex), nan, nan.copy(), float("nan"), 0)
 
 
-def replica_z(road_w: np.ndarray, grid: SegmentGrid, true_log_ratios, nominal_log_ratios) -> np.ndarray:
+def replica_z(road_w: np.ndarray, grid: SegmentGrid, true_log_ratios: np.ndarray,
+              nominal_log_ratios: np.ndarray) -> np.ndarray:
     """The receiver's ``z`` spectrum re-run for given parameters: ``W_reg P_hat_d^-1 rfft(P_d w)``.
 
     .. math:: Z_k = W_{reg,k}\\,\\hat P_d(e^{j\\omega_k})^{-1}\\,\\mathrm{DFT}_{nfft}\\{P_d\\,w\\}_k
@@ -117,7 +120,7 @@ def _bin_weights(grid: SegmentGrid) -> np.ndarray:
     return wts
 
 
-def _check_segments(segments, grid: SegmentGrid) -> list[tuple[np.ndarray, np.ndarray]]:
+def _check_segments(segments: Sequence[tuple[np.ndarray, np.ndarray]], grid: SegmentGrid) -> list[tuple[np.ndarray, np.ndarray]]:
     """Validate ``[(z, road_w), ...]``: z (<= nfft, 2) and road (<= nfft, 2), both finite."""
     if not isinstance(grid, SegmentGrid):
         raise ParameterError(f"grid must be a SegmentGrid, got {type(grid).__name__}")
@@ -141,7 +144,7 @@ def _check_segments(segments, grid: SegmentGrid) -> list[tuple[np.ndarray, np.nd
     return out
 
 
-def replica_fit(segments, grid: SegmentGrid, nominal: HalfCarParameters, *, max_nfev: int = 200,
+def replica_fit(segments: Sequence[tuple[np.ndarray, np.ndarray]], grid: SegmentGrid, nominal: HalfCarParameters, *, max_nfev: int = 200,
                 x_scale: float = 0.1, whiten: bool = True) -> ReplicaFit:
     """Fit one ``theta`` and one ``theta_hat`` to one or more segments of one vehicle.
 
@@ -192,7 +195,7 @@ def replica_fit(segments, grid: SegmentGrid, nominal: HalfCarParameters, *, max_
     P0 = discretize_plant(_ratio_model(x0[:5]), grid.dt).frequency_response(om)
     ynorm = np.sqrt(np.mean([np.mean(np.abs(matvec(P0, Z)) ** 2) for Z in Zs])) or 1.0
 
-    def resid(x):
+    def resid(x: np.ndarray) -> np.ndarray:
         parts = []
         for Z, (_, w) in zip(Zs, segs):
             if whiten:
@@ -244,7 +247,7 @@ def attack_replica(z: np.ndarray, road_w: np.ndarray, grid: SegmentGrid, nominal
     return replica_fit([(z, road_w)], grid, nominal, max_nfev=max_nfev).poles
 
 
-def attack_replica_linked(segments, grid: SegmentGrid, nominal: HalfCarParameters, *,
+def attack_replica_linked(segments: Sequence[tuple[np.ndarray, np.ndarray]], grid: SegmentGrid, nominal: HalfCarParameters, *,
                           max_nfev: int = 300) -> np.ndarray:
     """The replica attack on linked segments of one vehicle: one ``theta_hat`` for all of them.
 

@@ -6,19 +6,14 @@ from __future__ import annotations
 import dataclasses
 from pathlib import Path
 
-import numpy as np
-
 from ..experiments.fusion_poisoning import PoisoningSummary
 from ..experiments.security_rows import (AttackRow, BaselineRow, CompositionRow, ExactnessRow, FrontierPoint,
-                                         LinkabilityRow)
+                                         LinkabilityRow, PoleRow, pole_rows)
 from . import plotting, plotting_security
-from .records import markdown_table, output_dir, row_columns, run_header, write_config, write_csv, write_rows
+from .records import markdown_table, output_dir, row_columns, run_header, write_config, write_rows
 
 __all__ = ["security_markdown", "write_attack"]
 
-_POLE_COLUMNS = ["vehicle", "kind", "real", "imag"]
-#: Pole sets of each Figs. 8-10 example, in CSV order: the truth and the three attacks on the paper's message.
-_POLE_KINDS = ("true", "model_reduction", "pole_intersection", "multiplicity")
 _ATTACK_SHOWN = ["mechanism", "attack", "road", "segments", "median_rel_pole_error", "success_rate", "n_messages",
                  "epsilon_total"]
 _POISON_SHOWN = ["strategy", "target", "ratio", "max_ratio_to_observer", "fake_anomalies_reported",
@@ -110,13 +105,9 @@ def security_markdown(result) -> str:
 
 def _write_pole_figures(pole_examples, out: Path) -> None:
     """Figs. 8-10 and ``fig8_10_poles.csv`` (poles in rad/s, one row per pole)."""
-    pole_rows = []
     for ex in pole_examples:
         plotting.plot_poles(ex, out / _pole_figure(ex))
-        for key in _POLE_KINDS:
-            for p in np.asarray(ex[key]):
-                pole_rows.append({"vehicle": ex["vehicle"], "kind": key, "real": float(p.real), "imag": float(p.imag)})
-    write_csv(out / "fig8_10_poles.csv", pole_rows, _POLE_COLUMNS)
+    write_rows(out / "fig8_10_poles.csv", pole_rows(pole_examples), PoleRow)
 
 
 def write_attack(result, out, *, command: str, elapsed: float) -> None:

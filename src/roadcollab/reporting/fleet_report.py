@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..experiments.drive_estimation import AnomalyRow
+from ..experiments.drive_estimation import AnomalyRow, OffsetRow
 from ..experiments.fleet_estimation import FLEET_ESTIMATORS, FleetEstimates, covered_runs
 from ..models.iri import IRISegments
 from . import plotting_drives
@@ -76,10 +76,9 @@ def _tables(est: FleetEstimates, out: Path, anomalies: list[AnomalyRow]) -> None
                     [est.position] + [series for _, series in named])
     write_final_estimate(out / "final_estimate.csv", est.position, est.fused, est.elevation["collaborative"][-1],
                          est.coverage)
-    rows = [{"drive": j + 1, "csv": d.csv_path.name, "start_m_given": d.start_m,
-             "offset_m": float(est.offsets[j]), "start_m_used": d.start_m + float(est.offsets[j]),
-             "correlation_peak": _blank(est.offset_peaks[j])} for j, d in enumerate(est.drives)]
-    write_csv(out / "offsets.csv", rows, list(rows[0]))
+    rows = [OffsetRow(j + 1, d.csv_path.name, d.start_m, float(est.offsets[j]), d.start_m + float(est.offsets[j]),
+                      _blank(est.offset_peaks[j])) for j, d in enumerate(est.drives)]
+    write_rows(out / "offsets.csv", rows, OffsetRow)
     write_rows(out / "anomalies.csv", anomalies, AnomalyRow)
 
 

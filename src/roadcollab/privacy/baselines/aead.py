@@ -7,6 +7,8 @@ everything. Keys and nonces come from :func:`os.urandom` (intended, cannot be se
 
 from __future__ import annotations
 
+from typing import Any
+
 import os
 
 from ..._validation import check_int
@@ -24,14 +26,14 @@ AEAD_TAG_BYTES = 16
 AEAD_OVERHEAD_BYTES = AEAD_NONCE_BYTES + AEAD_TAG_BYTES   # 28
 
 
-def _as_bytes(name: str, value, error=ParameterError) -> bytes:
+def _as_bytes(name: str, value: object, error: type[Exception] = ParameterError) -> bytes:
     """``value`` as ``bytes``; ``error`` (ParameterError or, for untrusted input, MessageError) otherwise."""
     if not isinstance(value, (bytes, bytearray, memoryview)):
         raise error(f"{name} must be bytes, got {type(value).__name__}")
     return bytes(value)
 
 
-def _check_key(key) -> bytes:
+def _check_key(key: object) -> bytes:
     """The caller's key as 32 ``bytes`` (a local error, so ParameterError)."""
     key = _as_bytes("key", key)
     if len(key) != AEAD_KEY_BYTES:
@@ -114,7 +116,7 @@ def open_sealed(key: bytes, blob: bytes, *, associated_data: bytes = b"") -> byt
         raise MessageError(f"sealed blob refused: {err}") from err
 
 
-def aead_cost(data, *, repeats: int = 20) -> dict:
+def aead_cost(data: bytes, *, repeats: int = 20) -> dict[str, Any]:
     """Cost of sealing one message with ChaCha20-Poly1305 under a fresh key.
 
     Parameters

@@ -29,6 +29,8 @@ Randomness: the noise comes from ``np.random.default_rng(rng)`` and never from g
 
 from __future__ import annotations
 
+from typing import Any, Callable
+
 import math
 from dataclasses import dataclass
 
@@ -77,7 +79,7 @@ class DPSpec:
         object.__setattr__(self, "rho", check_positive("rho", self.rho))
 
 
-def _check_delta(delta) -> float:
+def _check_delta(delta: float) -> float:
     """``delta`` of (epsilon, delta)-DP, checked to lie in the open interval (0, 1)."""
     return check_real("delta", delta, low=0.0, high=1.0, low_open=True, high_open=True)
 
@@ -99,7 +101,7 @@ def _bin_gains(P: np.ndarray, weight: np.ndarray) -> np.ndarray:
     return gains
 
 
-def l2_sensitivity(estimator, rho: float) -> float:
+def l2_sensitivity(estimator: Any, rho: float) -> float:
     """l2 sensitivity of the hardened message ``z = W P_hat^-1 y`` of one vehicle.
 
     Parameters
@@ -167,7 +169,7 @@ def _log_b_minus(u: float, eps: float) -> float:
     la = scipy.special.log_ndtr(-math.sqrt(eps * u))
     lb = scipy.special.log_ndtr(-math.sqrt(eps * (u + 2.0)))
     # The difference is positive for every u >= 0 (the ratio of the two terms is < 1).
-    return la + math.log(-math.expm1(min(eps + lb - la, -1e-300)))
+    return float(la + math.log(-math.expm1(min(eps + lb - la, -1e-300))))
 
 
 def _b_plus(v: float, eps: float) -> float:
@@ -177,7 +179,7 @@ def _b_plus(v: float, eps: float) -> float:
     return float(norm.cdf(math.sqrt(eps * v)) - math.exp(eps + scipy.special.log_ndtr(-math.sqrt(eps * (v + 2.0)))))
 
 
-def _bracket_up(f, start: float = 1.0) -> float:
+def _bracket_up(f: Callable[[float], float], start: float = 1.0) -> float:
     """Smallest ``start * 2**i`` with ``f(x) <= 0`` (f decreasing)."""
     x = start
     while f(x) > 0.0:
@@ -250,7 +252,7 @@ def gaussian_sigma(epsilon: float, delta: float, sensitivity: float) -> float:
     return alpha * sensitivity / math.sqrt(2.0 * eps)
 
 
-def dp_sigmas(estimator, spec: DPSpec = DPSpec()) -> dict[float, float]:
+def dp_sigmas(estimator: Any, spec: DPSpec = DPSpec()) -> dict[float, float]:
     """Analytic-Gaussian noise level for every ``epsilon`` of ``spec`` on one vehicle's message.
 
     Parameters
@@ -271,7 +273,7 @@ def dp_sigmas(estimator, spec: DPSpec = DPSpec()) -> dict[float, float]:
     return {e: gaussian_sigma(e, spec.delta, sens) for e in spec.epsilons}
 
 
-def dp_message(message: InversionMessage, sigma: float, *, rng=None) -> InversionMessage:
+def dp_message(message: InversionMessage, sigma: float, *, rng: Any = None) -> InversionMessage:
     """Gaussian mechanism on a hardened message: ``z + N(0, sigma^2)`` on every sample.
 
     Parameters

@@ -21,6 +21,9 @@ adjacency with the same ``Delta`` agree).
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+from typing import Any
+
 import math
 
 import dp_accounting
@@ -122,7 +125,8 @@ def composed_epsilon(sigma_over_sensitivity: float, n_messages: int, delta: floa
     return float(acc.compose(event).get_epsilon(delta))
 
 
-def composition_table(spec: DPSpec = DPSpec(), segments=(1, 10, 100), *, accountant: str = "pld") -> list[dict]:
+def composition_table(spec: DPSpec = DPSpec(), segments: Sequence[int] = (1, 10, 100), *,
+                      accountant: str = "pld") -> list[dict[str, Any]]:
     """Total epsilon of each per-message level of ``spec`` after ``n`` segments of one vehicle.
 
     The per-message noise multiplier is ``gaussian_sigma(epsilon, delta, 1)`` (the ``dp``
