@@ -43,6 +43,10 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
     p.add_argument("--shared", action="store_true",
                    help="subscribe through the shared subscription $share/FLEET/... (several serve instances "
                         "against one broker split the messages)")
+    p.add_argument("--roads", metavar="URL", default=None,
+                   help="road-condition store to keep up to date while serving (IRI per 100 m with its interval "
+                        "and vehicles, fused profile, anomalies; history kept): an SQLite file, sqlite:///path or "
+                        "postgresql://user@host/db; the store 'roadcollab map' writes")
     p.add_argument("--quiet", action="store_true", help="print only the start and stop lines")
     return p
 
@@ -72,7 +76,17 @@ def run(args: argparse.Namespace, command_line: str) -> int:
     login = load_login(Path(args.fleet) / "service" / "broker.toml")
     store = ServiceStore(args.store, plan)
     log = (lambda line: None) if args.quiet else (lambda line: print(line, flush=True))
-    service = Service(store, trust, log=log)
+    sync = None
+    if args.roads is not None:
+        from ..network.roadsync import RoadSync
+        from ..store import RoadStore
+
+        try:
+            sync = RoadSync(RoadStore.open(args.roads), store, source=command_line, min_interval_s=1.0)
+        except BaseException:
+            store.close()
+            raise
+    service = Service(store, trust, log=log, on_fused=sync)
     broker = None
     if args.broker is None:
         host, port = parse_listen(args.listen)
@@ -96,6 +110,13 @@ def run(args: argparse.Namespace, command_line: str) -> int:
         client.close()
         if broker is not None:
             broker.stop()
+        if sync is not None:
+            try:
+                sync.flush()
+                print(f"road store {args.roads}: {sync.written_segments} segment estimates and "
+                      f"{sync.written_anomalies} anomalies written this run", flush=True)
+            finally:
+                sync.roads.close()
         store.close()
     print(f"stopped: {handled} messages handled this run, store {args.store} closed", flush=True)
     return 0
