@@ -32,10 +32,12 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
              "vehicles' signed contributions, orders the vehicles on each segment, keeps the fused estimate per "
              "segment and the message waiting there, and refuses (with a reason in the store) whatever does not "
              "verify. Runs until SIGINT/SIGTERM; restarted on the same store it continues.",
-        writes="--store FILE (SQLite; each message's effect one transaction); one line per event on stdout.",
+        writes="--store FILE (SQLite, or PostgreSQL for a URL; each message's effect one transaction); one line per event on stdout.",
         example="roadcollab serve --fleet fleet --store road.sqlite --listen 127.0.0.1:1883")
     p.add_argument("--fleet", required=True, metavar="DIR", help="the fleet folder from 'roadcollab enroll'")
-    p.add_argument("--store", required=True, metavar="FILE", help="the service's SQLite file (created if missing)")
+    p.add_argument("--store", required=True, metavar="FILE",
+                   help="the service's SQLite file (created if missing) or a PostgreSQL URL "
+                        "postgresql://user@host/db (the same tables; several serve --shared may share it)")
     g = p.add_mutually_exclusive_group()
     g.add_argument("--listen", default="127.0.0.1:1883", metavar="HOST:PORT",
                    help="where the embedded broker listens (default 127.0.0.1:1883)")
@@ -70,11 +72,11 @@ def run(args: argparse.Namespace, command_line: str) -> int:
     from ..network.mqtt_client import MqttClient
     from ..network.mqtt_run import run_service
     from ..network.service import Service
-    from ..network.store import ServiceStore
+    from ..network.pgstore import open_service_store
 
     plan, trust = load_plan(args.fleet), load_trust(args.fleet)
     login = load_login(Path(args.fleet) / "service" / "broker.toml")
-    store = ServiceStore(args.store, plan)
+    store = open_service_store(args.store, plan)
     log = (lambda line: None) if args.quiet else (lambda line: print(line, flush=True))
     sync = None
     if args.roads is not None:

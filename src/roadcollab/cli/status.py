@@ -26,7 +26,7 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
     p = command_parser(subparsers, NAME, summary="what a service store holds: vehicles, segments, refusals",
                        does="Reads the service's store (also while 'serve' runs) and prints its counts.",
                        writes="nothing.", example="roadcollab status --store road.sqlite")
-    p.add_argument("--store", required=True, metavar="FILE", help="the service's SQLite file")
+    p.add_argument("--store", required=True, metavar="FILE", help="the service's SQLite file or PostgreSQL URL")
     p.add_argument("--roads", metavar="URL", default=None,
                    help="also summarise this road-condition store ('serve --roads', 'roadcollab map')")
     return p
@@ -47,11 +47,11 @@ def run(args: argparse.Namespace, command_line: str) -> int:
     """
 
     from ..errors import ParameterError
-    from ..network.store import ServiceStore
+    from ..network.pgstore import is_url, open_service_store
 
-    if not Path(args.store).is_file():
+    if not is_url(args.store) and not Path(args.store).is_file():
         raise ParameterError(f"--store {args.store}: not found (expected the file 'roadcollab serve' writes)")
-    store = ServiceStore(args.store)
+    store = open_service_store(args.store)
     st = store.status()
     store.close()
     print(f"fleet {store.plan.fleet_id!r}: {st['vehicles']} vehicles seen, {st['segments']} segments with a fused "
