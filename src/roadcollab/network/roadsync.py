@@ -131,19 +131,21 @@ class RoadSync:
         return n
 
     def _anomalies(self, r, anomalies) -> int:
-        stored = [[a.measure_m, a.kind, a.votes] for a in self.roads.anomalies() if a.road_id == self.road_id]
+        # (measure_m, kind, [votes]) of the stored anomalies on this fleet's road
+        stored: list[tuple[float, str, list[int]]] = [
+            (a.measure_m, a.kind, [a.votes]) for a in self.roads.anomalies() if a.road_id == self.road_id]
         n = 0
         for row in anomalies:
             V = max(int(row.vehicle), 1)
             near = [a for a in stored if a[1] == row.kind and abs(a[0] - row.position_m) <= 2.0]
-            new = V - (max(a[2] for a in near) if near else 0)
+            new = V - (max(a[2][0] for a in near) if near else 0)
             if new <= 0:
                 continue
             self.roads.record_anomaly(self.road_id, 1, row.position_m, 0.0, 0.0, row.kind, row.side,
                                       row.depth_m, votes=new, source=self.source)
             if near:
-                near[0][2] = V
+                near[0][2][0] = V
             else:
-                stored.append([row.position_m, row.kind, V])
+                stored.append((row.position_m, row.kind, [V]))
             n += 1
         return n
