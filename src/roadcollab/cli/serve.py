@@ -49,6 +49,9 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
                    help="road-condition store to keep up to date while serving (IRI per 100 m with its interval "
                         "and vehicles, fused profile, anomalies; history kept): an SQLite file, sqlite:///path or "
                         "postgresql://user@host/db; the store 'roadcollab map' writes")
+    p.add_argument("--map", nargs="?", const="127.0.0.1:8765", default=None, metavar="HOST:PORT",
+                   help="serve the live map of --roads (the page 'roadcollab map' writes, redrawn as segments "
+                        "finish) on HOST:PORT (default with no value 127.0.0.1:8765, loopback only)")
     p.add_argument("--quiet", action="store_true", help="print only the start and stop lines")
     return p
 
@@ -74,6 +77,11 @@ def run(args: argparse.Namespace, command_line: str) -> int:
     from ..network.service import Service
     from ..network.pgstore import open_service_store
 
+    if args.map is not None and args.roads is None:
+        from ..errors import ParameterError
+
+        raise ParameterError("--map: needs --roads URL (the live map shows the road store)")
+    map_at = parse_listen(args.map, "--map") if args.map is not None else None
     plan, trust = load_plan(args.fleet), load_trust(args.fleet)
     login = load_login(Path(args.fleet) / "service" / "broker.toml")
     store = open_service_store(args.store, plan)
@@ -89,6 +97,16 @@ def run(args: argparse.Namespace, command_line: str) -> int:
             store.close()
             raise
     service = Service(store, trust, log=log, on_fused=sync)
+    live = None
+    if map_at is not None:
+        from ..network.livemap import LiveMap
+
+        try:
+            live = LiveMap(args.roads, *map_at).start()
+        except BaseException:
+            store.close()
+            raise
+        print(f"live map of {args.roads} on {live.url}", flush=True)
     broker = None
     if args.broker is None:
         host, port = parse_listen(args.listen)
@@ -110,6 +128,8 @@ def run(args: argparse.Namespace, command_line: str) -> int:
         handled = run_service(service, client, stop, republish, log=log)
     finally:
         client.close()
+        if live is not None:
+            live.stop()
         if broker is not None:
             broker.stop()
         if sync is not None:
