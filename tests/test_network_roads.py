@@ -1,8 +1,11 @@
 """The service's results in the road-condition store while it serves (serve --roads; network/roadsync.py)."""
 
 import csv
+import json
+import urllib.request
 
 import numpy as np
+import pytest
 
 from netkit import write_drives
 from roadcollab.cli.main import main
@@ -88,3 +91,37 @@ def test_status_of_a_missing_road_store_is_one_line(tmp_path, capsys):
     err = capsys.readouterr().err
     assert "--roads" in err and err.count("\n") == 1
     assert not (tmp_path / "none.sqlite").exists()
+
+
+@pytest.mark.slow
+def test_serve_roads_and_map_over_mqtt(tmp_path):
+    """``serve --roads --map`` with its embedded broker and 4 vehicle processes: the road store holds
+    ``estimate``'s iri.csv, the terminal shows the counts, the live map answers (nothing to draw: no GPS)."""
+    from netkit import free_port, rc, start_serve, stop
+
+    drives, _ = write_drives(tmp_path / "drives")
+    vmin = min(float(d.speeds().min()) for d in load_drives(drives))
+    rc("enroll", "--fleet", tmp_path / "fleet", "--vehicles", 4, "--fleet-id", "t", "--min-speed", repr(vmin))
+    rc("estimate", *sum((["--drive", d] for d in drives), []), "--out", tmp_path / "estimate")
+    port, web = free_port(), free_port()
+    serve = start_serve(tmp_path / "fleet", tmp_path / "s.sqlite", tmp_path / "serve.log", listen=port,
+                        extra=["--roads", tmp_path / "roads.sqlite", "--map", f"127.0.0.1:{web}"])
+    try:
+        rc("fleet", "--fleet", tmp_path / "fleet", *sum((["--drive", d] for d in drives), []), "--broker",
+           f"mqtt://127.0.0.1:{port}", "--timeout", 120, timeout=240)
+        with urllib.request.urlopen(f"http://127.0.0.1:{web}/data.json", timeout=10) as r:
+            live = json.loads(r.read())
+    finally:
+        assert stop(serve) == 0
+    log = (tmp_path / "serve.log").read_text()
+    assert f"live map of {tmp_path / 'roads.sqlite'} on http://127.0.0.1:{web}/" in log
+    assert "4 vehicles, " in log and "road store" in log and "segment estimates" in log
+    assert live["segments"]["features"] == []                     # the network's drives carry no GPS
+    with open(tmp_path / "estimate" / "iri.csv") as f:
+        rows = list(csv.DictReader(f))
+    with RoadStore.open(tmp_path / "roads.sqlite") as roads:
+        segs = {s.from_m: s for s in roads.segments()}
+    assert len(segs) == len(rows)
+    for row in rows:
+        assert np.isclose(segs[float(row["start_m"])].iri_m_per_km, float(row["iri_m_per_km"]), rtol=1e-9)
+        assert segs[float(row["start_m"])].n_vehicles >= 1

@@ -85,7 +85,13 @@ def run(args: argparse.Namespace, command_line: str) -> int:
     plan, trust = load_plan(args.fleet), load_trust(args.fleet)
     login = load_login(Path(args.fleet) / "service" / "broker.toml")
     store = open_service_store(args.store, plan)
-    log = (lambda line: None) if args.quiet else (lambda line: print(line, flush=True))
+    def log(line: str) -> None:
+        """One line per event, with the running counts (vehicles seen, segments done, refusals)."""
+        if not args.quiet:
+            st = store.status()
+            print(f"{line}  [{st['vehicles']} vehicles, {st['segments']} segments, {st['contributions']} "
+                  f"contributions, {sum(st['refused'].values())} refused]", flush=True)
+
     sync = None
     if args.roads is not None:
         from ..network.roadsync import RoadSync
@@ -96,7 +102,15 @@ def run(args: argparse.Namespace, command_line: str) -> int:
         except BaseException:
             store.close()
             raise
-    service = Service(store, trust, log=log, on_fused=sync)
+    def on_fused(segment: int, st) -> None:
+        assert sync is not None
+        before = (sync.written_segments, sync.written_anomalies)
+        sync(segment, st)
+        if (sync.written_segments, sync.written_anomalies) != before:
+            log(f"road store {args.roads}: +{sync.written_segments - before[0]} segment estimates, "
+                f"+{sync.written_anomalies - before[1]} anomalies")
+
+    service = Service(store, trust, log=log, on_fused=None if sync is None else on_fused)
     live = None
     if map_at is not None:
         from ..network.livemap import LiveMap

@@ -52,7 +52,7 @@ def _content(url) -> dict:
     with RoadStore.open(url) as store:
         segs = [s for s in store.segments() if s.lonlat.ndim == 2 and len(s.lonlat) >= 2]
         anoms = [a for a in store.anomalies() if not (a.lon == 0.0 and a.lat == 0.0)]
-    data = {"segments": segments_geojson(segs), "anomalies": anomalies_geojson(anoms)}
+    data: dict = {"segments": segments_geojson(segs), "anomalies": anomalies_geojson(anoms)}
     data["version"] = hashlib.sha256(json.dumps(data, sort_keys=True).encode()).hexdigest()[:16]
     return data
 
