@@ -84,10 +84,10 @@ def start(*cmd, log: Path) -> subprocess.Popen:
 
 
 def start_serve(fleet: Path, store: Path, log: Path, *, listen: int | None = None, broker: str | None = None,
-                shared: bool = False) -> subprocess.Popen:
+                shared: bool = False, extra=()) -> subprocess.Popen:
     where = ["--listen", f"127.0.0.1:{listen}"] if broker is None else ["--broker", broker]
     p = start(PY, "-m", "roadcollab.cli.main", "serve", "--fleet", fleet, "--store", store, *where,
-              *(["--shared"] if shared else []), log=log)
+              *(["--shared"] if shared else []), *extra, log=log)
     end = time.monotonic() + 60
     while time.monotonic() < end:                        # ready when it printed its "serving" line
         if p.poll() is not None:

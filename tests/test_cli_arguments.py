@@ -21,7 +21,7 @@ import roadcollab.cli.main as cli_main
 from roadcollab.cli.main import build_parser, main
 
 #: Options that take a value that is not a number (checked elsewhere: files, folders, addresses, names).
-NOT_NUMERIC = {"--out", "--kernels", "--fleet-id", "--drive", "--road-profile", "--road", "--network", "--store", "--tiles", "--fleet", "--id",
+NOT_NUMERIC = {"--out", "--roads", "--map", "--kernels", "--fleet-id", "--drive", "--road-profile", "--road", "--network", "--store", "--tiles", "--fleet", "--id",
                "--broker", "--listen", "--scheduler", "--mechanism", "--iso-class", "--seeds"}
 #: Options whose type checks a set that is not an interval (tested on their own below).
 SPECIAL = {"--paillier-bits"}

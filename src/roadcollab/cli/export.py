@@ -31,7 +31,7 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
         writes="into --out (replaced as a whole at the end): final_estimate.csv, road_estimates.csv, iri.csv, "
                "anomalies.csv, config.json, report.md.",
         example="roadcollab export --store road.sqlite --out results/road")
-    p.add_argument("--store", required=True, metavar="FILE", help="the service's SQLite file")
+    p.add_argument("--store", required=True, metavar="FILE", help="the service's SQLite file or PostgreSQL URL")
     p.add_argument("--out", type=out_path, required=True, metavar="DIR",
                    help="output folder: absent, empty or a previous export result")
     p.add_argument("--segment-length", type=SEGMENT_LENGTH, default=100.0, metavar="M",
@@ -55,13 +55,13 @@ def run(args: argparse.Namespace, command_line: str) -> int:
 
     from ..errors import ParameterError
     from ..network.results import results_from_store
-    from ..network.store import ServiceStore
+    from ..network.pgstore import is_url, open_service_store
     from ..reporting.network_report import write_network_results
     from ..reporting.records import staged_output
 
-    if not Path(args.store).is_file():
+    if not is_url(args.store) and not Path(args.store).is_file():
         raise ParameterError(f"--store {args.store}: not found (expected the file 'roadcollab serve' writes)")
-    store = ServiceStore(args.store)
+    store = open_service_store(args.store)
     try:
         r = results_from_store(store)
         with staged_output(args.out, NAME, input_paths(args)) as out:

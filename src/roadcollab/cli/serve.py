@@ -32,10 +32,12 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
              "vehicles' signed contributions, orders the vehicles on each segment, keeps the fused estimate per "
              "segment and the message waiting there, and refuses (with a reason in the store) whatever does not "
              "verify. Runs until SIGINT/SIGTERM; restarted on the same store it continues.",
-        writes="--store FILE (SQLite; each message's effect one transaction); one line per event on stdout.",
+        writes="--store FILE (SQLite, or PostgreSQL for a URL; each message's effect one transaction); one line per event on stdout.",
         example="roadcollab serve --fleet fleet --store road.sqlite --listen 127.0.0.1:1883")
     p.add_argument("--fleet", required=True, metavar="DIR", help="the fleet folder from 'roadcollab enroll'")
-    p.add_argument("--store", required=True, metavar="FILE", help="the service's SQLite file (created if missing)")
+    p.add_argument("--store", required=True, metavar="FILE",
+                   help="the service's SQLite file (created if missing) or a PostgreSQL URL "
+                        "postgresql://user@host/db (the same tables; several serve --shared may share it)")
     g = p.add_mutually_exclusive_group()
     g.add_argument("--listen", default="127.0.0.1:1883", metavar="HOST:PORT",
                    help="where the embedded broker listens (default 127.0.0.1:1883)")
@@ -43,6 +45,13 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
     p.add_argument("--shared", action="store_true",
                    help="subscribe through the shared subscription $share/FLEET/... (several serve instances "
                         "against one broker split the messages)")
+    p.add_argument("--roads", metavar="URL", default=None,
+                   help="road-condition store to keep up to date while serving (IRI per 100 m with its interval "
+                        "and vehicles, fused profile, anomalies; history kept): an SQLite file, sqlite:///path or "
+                        "postgresql://user@host/db; the store 'roadcollab map' writes")
+    p.add_argument("--map", nargs="?", const="127.0.0.1:8765", default=None, metavar="HOST:PORT",
+                   help="serve the live map of --roads (the page 'roadcollab map' writes, redrawn as segments "
+                        "finish) on HOST:PORT (default with no value 127.0.0.1:8765, loopback only)")
     p.add_argument("--quiet", action="store_true", help="print only the start and stop lines")
     return p
 
@@ -66,13 +75,52 @@ def run(args: argparse.Namespace, command_line: str) -> int:
     from ..network.mqtt_client import MqttClient
     from ..network.mqtt_run import run_service
     from ..network.service import Service
-    from ..network.store import ServiceStore
+    from ..network.pgstore import open_service_store
 
+    if args.map is not None and args.roads is None:
+        from ..errors import ParameterError
+
+        raise ParameterError("--map: needs --roads URL (the live map shows the road store)")
+    map_at = parse_listen(args.map, "--map") if args.map is not None else None
     plan, trust = load_plan(args.fleet), load_trust(args.fleet)
     login = load_login(Path(args.fleet) / "service" / "broker.toml")
-    store = ServiceStore(args.store, plan)
-    log = (lambda line: None) if args.quiet else (lambda line: print(line, flush=True))
-    service = Service(store, trust, log=log)
+    store = open_service_store(args.store, plan)
+    def log(line: str) -> None:
+        """One line per event, with the running counts (vehicles seen, segments done, refusals)."""
+        if not args.quiet:
+            st = store.status()
+            print(f"{line}  [{st['vehicles']} vehicles, {st['segments']} segments, {st['contributions']} "
+                  f"contributions, {sum(st['refused'].values())} refused]", flush=True)
+
+    sync = None
+    if args.roads is not None:
+        from ..network.roadsync import RoadSync
+        from ..store import RoadStore
+
+        try:
+            sync = RoadSync(RoadStore.open(args.roads), store, source=command_line, min_interval_s=1.0)
+        except BaseException:
+            store.close()
+            raise
+    def on_fused(segment: int, st) -> None:
+        assert sync is not None
+        before = (sync.written_segments, sync.written_anomalies)
+        sync(segment, st)
+        if (sync.written_segments, sync.written_anomalies) != before:
+            log(f"road store {args.roads}: +{sync.written_segments - before[0]} segment estimates, "
+                f"+{sync.written_anomalies - before[1]} anomalies")
+
+    service = Service(store, trust, log=log, on_fused=None if sync is None else on_fused)
+    live = None
+    if map_at is not None:
+        from ..network.livemap import LiveMap
+
+        try:
+            live = LiveMap(args.roads, *map_at).start()
+        except BaseException:
+            store.close()
+            raise
+        print(f"live map of {args.roads} on {live.url}", flush=True)
     broker = None
     if args.broker is None:
         host, port = parse_listen(args.listen)
@@ -94,8 +142,17 @@ def run(args: argparse.Namespace, command_line: str) -> int:
         handled = run_service(service, client, stop, republish, log=log)
     finally:
         client.close()
+        if live is not None:
+            live.stop()
         if broker is not None:
             broker.stop()
+        if sync is not None:
+            try:
+                sync.flush()
+                print(f"road store {args.roads}: {sync.written_segments} segment estimates and "
+                      f"{sync.written_anomalies} anomalies written this run", flush=True)
+            finally:
+                sync.roads.close()
         store.close()
     print(f"stopped: {handled} messages handled this run, store {args.store} closed", flush=True)
     return 0

@@ -26,7 +26,9 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
     p = command_parser(subparsers, NAME, summary="what a service store holds: vehicles, segments, refusals",
                        does="Reads the service's store (also while 'serve' runs) and prints its counts.",
                        writes="nothing.", example="roadcollab status --store road.sqlite")
-    p.add_argument("--store", required=True, metavar="FILE", help="the service's SQLite file")
+    p.add_argument("--store", required=True, metavar="FILE", help="the service's SQLite file or PostgreSQL URL")
+    p.add_argument("--roads", metavar="URL", default=None,
+                   help="also summarise this road-condition store ('serve --roads', 'roadcollab map')")
     return p
 
 
@@ -45,15 +47,30 @@ def run(args: argparse.Namespace, command_line: str) -> int:
     """
 
     from ..errors import ParameterError
-    from ..network.store import ServiceStore
+    from ..network.pgstore import is_url, open_service_store
 
-    if not Path(args.store).is_file():
+    if not is_url(args.store) and not Path(args.store).is_file():
         raise ParameterError(f"--store {args.store}: not found (expected the file 'roadcollab serve' writes)")
-    store = ServiceStore(args.store)
+    store = open_service_store(args.store)
     st = store.status()
     store.close()
     print(f"fleet {store.plan.fleet_id!r}: {st['vehicles']} vehicles seen, {st['segments']} segments with a fused "
           f"estimate, {st['contributions']} contributions applied, {st['duplicates']} copies applied once")
     for reason, k in sorted(st["refused"].items(), key=lambda kv: -kv[1]):
         print(f"  refused {k}: {reason}")
+    if args.roads is not None:
+        from ..store import RoadStore
+
+        path = RoadStore.path_of(args.roads)
+        if path is not None and not path.is_file():
+            raise ParameterError(f"--roads {args.roads}: not found (expected a road store 'serve --roads' writes)")
+        with RoadStore.open(args.roads) as roads:
+            segs, anoms = roads.segments(), roads.anomalies()
+        if segs:
+            iri = [s.iri_m_per_km for s in segs]
+            print(f"road store {args.roads}: {len(segs)} segments on {len({s.road_id for s in segs})} road(s), "
+                  f"IRI {min(iri):.2f}-{max(iri):.2f} m/km, {sum(s.n_updates for s in segs)} estimates in the "
+                  f"history, last update {max(s.last_update for s in segs)}; {len(anoms)} anomalies")
+        else:
+            print(f"road store {args.roads}: no segment yet; {len(anoms)} anomalies")
     return 0

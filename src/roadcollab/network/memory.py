@@ -44,7 +44,7 @@ def _pump(service: Service, svc, agent: VehicleAgent, car, limit: int) -> None:
 
 
 def run_in_memory(drives, plan: RoadPlan, *, store: ServiceStore | None = None, authority: FleetAuthority | None = None,
-                  ) -> tuple[ServiceStore, MemoryBroker]:
+                  on_fused=None) -> tuple[ServiceStore, MemoryBroker]:
     """Every drive through the service over the in-memory transport, in order.
 
     Parameters
@@ -56,6 +56,8 @@ def run_in_memory(drives, plan: RoadPlan, *, store: ServiceStore | None = None, 
         Default: a new in-memory store.
     authority : FleetAuthority, optional
         Default: a throwaway authority (the identities never leave the process).
+    on_fused : callable, optional
+        The service's hook (:class:`~roadcollab.network.service.Service`), e.g. a ``RoadSync``.
 
     Returns
     -------
@@ -66,7 +68,7 @@ def run_in_memory(drives, plan: RoadPlan, *, store: ServiceStore | None = None, 
     """
     store = ServiceStore(":memory:", plan) if store is None else store
     authority = FleetAuthority.generate(plan.fleet_id) if authority is None else authority
-    service = Service(store, authority.trust())
+    service = Service(store, authority.trust(), on_fused=on_fused)
     broker = MemoryBroker()
     svc = broker.client()
     svc.subscribe(service.topics.from_vehicles)

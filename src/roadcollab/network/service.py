@@ -86,12 +86,17 @@ class Service:
         The fleet's trust anchor (authority key, revocations).
     log : callable, optional
         Called with one line per event (default: nothing).
+    on_fused : callable, optional
+        Called with ``(segment, store)`` after a contribution changed that segment's fused sums (e.g.
+        :class:`roadcollab.network.roadsync.RoadSync`, which writes the road store).
     """
 
-    def __init__(self, store: ServiceStore, trust: FleetTrust, *, log: Callable[[str], None] | None = None) -> None:
+    def __init__(self, store: ServiceStore, trust: FleetTrust, *, log: Callable[[str], None] | None = None,
+                 on_fused: Callable[[int, ServiceStore], None] | None = None) -> None:
         self.store, self.trust, self.plan = store, trust, store.plan
         self.topics = Topics(self.plan.fleet_id)
         self._log = log or (lambda line: None)
+        self.on_fused = on_fused
 
     def on_connect(self) -> list[Publish]:
         """The retained waiting messages again (a restarted broker may have lost them)."""
@@ -156,4 +161,6 @@ class Service:
             self.store.log("duplicate", f"segment {s} from {vid} again (applied once)", vid=vid, topic=topic)
             return [ack]
         self._log(f"segment {s}: accepted {vid}")
+        if self.on_fused is not None:
+            self.on_fused(s, self.store)
         return [ack, Publish(self.topics.waiting(s), encode_waiting(vid, envelope), retain=True)]

@@ -1,0 +1,151 @@
+"""The service's results in the road-condition store (:mod:`roadcollab.store`) while it serves.
+
+:class:`RoadSync` is the observer :class:`~roadcollab.network.service.Service` calls when a segment's
+fused sums change. It reads the service store back (:func:`~roadcollab.network.results.results_from_store`)
+and computes the IRI per segment and the corroborated anomalies of the fused elevation with the very
+functions ``roadcollab export`` uses (:func:`~roadcollab.experiments.fleet_estimation.fused_iri`,
+:func:`~roadcollab.experiments.fleet_estimation.find_fleet_anomalies`), so the road store and
+``export``'s ``iri.csv``/``anomalies.csv`` hold the same numbers.
+
+What is written
+---------------
+- per IRI segment (``road_id`` = the fleet id, direction +1, ``from_m``/``to_m`` on the fleet's distance
+  axis): IRI (m/km, in/mi), the 95 % interval ``fused ± 1.96 s / sqrt(V)`` of the IRI of each vehicle's own
+  inversion on that segment alone (``s`` their standard deviation; NULL with fewer than two), the vehicles behind it
+  (the most inversions covering a point of the segment) and the fused profile. A segment gets a new history
+  row only when its IRI or vehicle count changed (a restarted service adds no copies).
+- per anomaly of the fused elevation: a detection in the store's anomaly history when more vehicles are
+  behind it than its stored votes (same kind within 2 m), with the new vehicles as votes, so the stored
+  anomaly's votes are the vehicles behind the fused detection and its position and depth the vote-weighted
+  means of the fused detections as the fleet grew (``RoadStore.record_anomaly``). The network's fleet has no GPS: the geometry is empty and lon/lat are 0.
+"""
+
+from __future__ import annotations
+
+import time
+from types import SimpleNamespace
+
+import numpy as np
+
+from ..errors import ParameterError
+from ..experiments.fleet_estimation import find_fleet_anomalies, fused_iri
+from ..models.iri import iri_segments
+from ..store import RoadStore
+from .results import results_from_store
+from .store import ServiceStore
+
+__all__ = ["RoadSync"]
+
+
+def _view(r, fused):
+    """The attributes fused_iri / find_fleet_anomalies read (as reporting.network_report builds it)."""
+    return SimpleNamespace(fused=fused, position=r.position, spacing=r.spacing,
+                           drives=[SimpleNamespace(speed=float(h["speed_mps"])) for _, h in r.vehicles])
+
+
+class RoadSync:
+    """Keeps a road store up to date with a service store.
+
+    Parameters
+    ----------
+    roads : RoadStore
+        The road-condition store (open; closed by the caller).
+    service_store : ServiceStore
+    segment_length : float
+        IRI segment length, m (``export``'s default 100).
+    source : str
+        Written as each row's ``source``.
+    min_interval_s : float
+        At most one update per this many seconds while serving (0: after every change); :meth:`flush`
+        writes what is pending.
+    """
+
+    def __init__(self, roads: RoadStore, service_store: ServiceStore, *, segment_length: float = 100.0,
+                 source: str = "roadcollab serve", min_interval_s: float = 0.0) -> None:
+        self.roads, self.service_store = roads, service_store
+        self.segment_length, self.source, self.min_interval_s = float(segment_length), source, float(min_interval_s)
+        self.road_id = service_store.plan.fleet_id
+        self._last: dict[float, tuple[float, int]] = {
+            s.from_m: (s.iri_m_per_km, s.n_vehicles) for s in roads.segments() if s.road_id == self.road_id}
+        self._dirty, self._t = False, -np.inf
+        self.written_segments = self.written_anomalies = 0
+
+    def __call__(self, segment: int, store: ServiceStore) -> None:
+        """The service's hook: segment ``segment``'s fused sums in ``store`` changed."""
+        self._dirty = True
+        if time.monotonic() - self._t >= self.min_interval_s:
+            self.flush()
+
+    def flush(self) -> tuple[int, int]:
+        """Write the changed segments and the new anomalies; ``(segments, anomalies)`` written now."""
+        if not self._dirty and self._t > -np.inf:
+            return 0, 0
+        self._dirty, self._t = False, time.monotonic()
+        try:
+            r = results_from_store(self.service_store)
+        except ParameterError:                 # nothing applied yet
+            return 0, 0
+        iri, _ = fused_iri(_view(r, r.fused), self.segment_length)
+        n_seg = 0 if iri is None else self._segments(r, iri)
+        try:
+            anomalies = find_fleet_anomalies(_view(r, r.fused))
+        except ParameterError:                 # stretches too short for the detector: none yet
+            anomalies = []
+        n_an = self._anomalies(r, anomalies)
+        self.written_segments += n_seg
+        self.written_anomalies += n_an
+        return n_seg, n_an
+
+    @staticmethod
+    def _vehicle_iri(r, a: float, b: float) -> list[float]:
+        """IRI of each vehicle's own inversion on ``[a, b]`` alone (the vehicles covering all of it)."""
+        on = (r.position >= a - 1e-9) & (r.position <= b + 1e-9)
+        out = []
+        for j in range(len(r.vehicles)):
+            inv = r.elevation["inversion"][j][on]
+            if np.isfinite(inv).all():
+                try:
+                    out.append(float(iri_segments(r.position[on], inv, b - a).mean[0]))
+                except (ParameterError, IndexError):   # shorter than the IRI's initialisation
+                    continue
+        return out
+
+    def _segments(self, r, iri) -> int:
+        n = 0
+        for a, b, value in zip(iri.start.tolist(), iri.end.tolist(), iri.mean.tolist()):
+            inside = (r.position >= a) & (r.position < b)
+            k = int(r.coverage[inside].max()) if inside.any() else 0
+            if self._last.get(a) is not None and np.isclose(self._last[a][0], value, rtol=1e-12, atol=0.0) \
+                    and self._last[a][1] == k:
+                continue
+            own = self._vehicle_iri(r, a, b)
+            lo = hi = None
+            if len(own) >= 2:
+                half = 1.96 * float(np.std(own, ddof=1)) / np.sqrt(len(own))
+                lo, hi = max(value - half, 0.0), value + half
+            self.roads.record_segment(self.road_id, 1, a, b, np.zeros((0, 2)), value, iri_low=lo, iri_high=hi,
+                                      n_vehicles=max(k, 1), profile=r.fused[inside], profile_spacing_m=r.spacing,
+                                      source=self.source)
+            self._last[a] = (value, k)
+            n += 1
+        return n
+
+    def _anomalies(self, r, anomalies) -> int:
+        # (measure_m, kind, [votes]) of the stored anomalies on this fleet's road
+        stored: list[tuple[float, str, list[int]]] = [
+            (a.measure_m, a.kind, [a.votes]) for a in self.roads.anomalies() if a.road_id == self.road_id]
+        n = 0
+        for row in anomalies:
+            V = max(int(row.vehicle), 1)
+            near = [a for a in stored if a[1] == row.kind and abs(a[0] - row.position_m) <= 2.0]
+            new = V - (max(a[2][0] for a in near) if near else 0)
+            if new <= 0:
+                continue
+            self.roads.record_anomaly(self.road_id, 1, row.position_m, 0.0, 0.0, row.kind, row.side,
+                                      row.depth_m, votes=new, source=self.source)
+            if near:
+                near[0][2][0] = V
+            else:
+                stored.append((row.position_m, row.kind, [V]))
+            n += 1
+        return n
