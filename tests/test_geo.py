@@ -230,3 +230,39 @@ def test_track_road_without_network():
     assert abs(length - np.hypot(400, 8)) < 0.05 * 400        # the smoothed track is nearly the road's length
     lo, la = lonlat_at(net, "mine", [0.0, length])
     assert lo.shape == (2,)
+
+
+@pytest.mark.parametrize("sigma", [0.0, 3.0])
+def test_a_drive_that_passes_the_same_road_twice(tmp_path, sigma):
+    """South forward to the junction, east out and back (a U-turn), south backward: four passes, each on
+    its own samples with its own direction; noise-free fixes give the exact lane coordinate."""
+    net, proj = _parallel_network()
+    fs, v = 100.0, 12.0
+    legs = [("south", 20.0, 500.0), ("east", 0.0, 150.0), ("east", 150.0, 0.0), ("south", 500.0, 100.0)]
+    xy, truth = [], []
+    for road, a, b in legs:
+        n = int(abs(b - a) / v * fs)
+        m = a + np.sign(b - a) * v * np.arange(n) / fs
+        xy.append(np.column_stack([m, np.zeros(n)]) if road == "south" else np.column_stack([np.full(n, 500.0), -m]))
+        truth.append(m)
+    xy, n = np.vstack(xy), sum(len(m) for m in truth)
+    t = np.arange(n) / fs
+    lat, lon = np.full(n, np.nan), np.full(n, np.nan)
+    k = np.arange(0, n, 20)
+    noisy = xy[k] + np.random.default_rng(3).normal(0, sigma, (k.size, 2))
+    lon[k], lat[k] = proj.to_lonlat(noisy[:, 0], noisy[:, 1])
+    path = write_gps_drive_csv(tmp_path / "twice.csv", t, np.random.default_rng(0).normal(0, 0.1, (n, 2)), lat, lon)
+    write_drive_params(path.with_suffix(".toml"), speed=v, params=PARAMS, start_m=0.0)
+    passes = road_passes(load_drive(path), net)
+    assert [(p.road_id, p.direction) for p in passes] == [("south", 1), ("east", 1), ("east", -1), ("south", -1)]
+    if sigma > 0:                                   # 3 m noise: the passes are found; positions are tested above
+        return
+    start = np.cumsum([0] + [len(m) for m in truth])
+    for p, (road, a, b), m, i0 in zip(passes, legs, truth, start):
+        length = net.roads[road].length
+        u_true = m if p.direction > 0 else length - m
+        assert np.max(np.abs(p.drive.positions[i0:i0 + len(m)] - u_true)) < 1e-6
+        lo, hi = sorted((a, b))
+        expect = (lo, hi) if p.direction > 0 else (length - hi, length - lo)
+        gap = v * 20 / fs                           # odometer between two fixes: where the turn is known
+        assert abs(p.u_range[0] - expect[0]) <= gap and abs(p.u_range[1] - expect[1]) <= gap

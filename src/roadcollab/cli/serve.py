@@ -56,6 +56,49 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
     return p
 
 
+def _road_outputs(args, store, command_line: str, log, map_at):
+    """``(RoadSync or None, LiveMap or None, the service's hook or None)`` of ``--roads`` / ``--map``.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+    store : ServiceStore
+        The service's store (closed here if the road store or the live map cannot be opened).
+    command_line : str
+        Recorded as the road store rows' source.
+    log : callable
+        One line per event.
+    map_at : (str, int) or None
+        Where the live map listens.
+    """
+    if args.roads is None:
+        return None, None, None
+    from ..network.livemap import LiveMap
+    from ..network.roadsync import RoadSync
+    from ..store import RoadStore
+
+    sync = live = None
+    try:
+        sync = RoadSync(RoadStore.open(args.roads), store, source=command_line, min_interval_s=1.0)
+        if map_at is not None:
+            live = LiveMap(args.roads, *map_at).start()
+            print(f"live map of {args.roads} on {live.url}", flush=True)
+    except BaseException:
+        if sync is not None:
+            sync.roads.close()
+        store.close()
+        raise
+
+    def on_fused(segment: int, st) -> None:
+        before = (sync.written_segments, sync.written_anomalies)
+        sync(segment, st)
+        if (sync.written_segments, sync.written_anomalies) != before:
+            log(f"road store {args.roads}: +{sync.written_segments - before[0]} segment estimates, "
+                f"+{sync.written_anomalies - before[1]} anomalies")
+
+    return sync, live, on_fused
+
+
 def run(args: argparse.Namespace, command_line: str) -> int:
     """Serve until SIGINT/SIGTERM.
 
@@ -85,6 +128,7 @@ def run(args: argparse.Namespace, command_line: str) -> int:
     plan, trust = load_plan(args.fleet), load_trust(args.fleet)
     login = load_login(Path(args.fleet) / "service" / "broker.toml")
     store = open_service_store(args.store, plan)
+
     def log(line: str) -> None:
         """One line per event, with the running counts (vehicles seen, segments done, refusals)."""
         if not args.quiet:
@@ -92,35 +136,8 @@ def run(args: argparse.Namespace, command_line: str) -> int:
             print(f"{line}  [{st['vehicles']} vehicles, {st['segments']} segments, {st['contributions']} "
                   f"contributions, {sum(st['refused'].values())} refused]", flush=True)
 
-    sync = None
-    if args.roads is not None:
-        from ..network.roadsync import RoadSync
-        from ..store import RoadStore
-
-        try:
-            sync = RoadSync(RoadStore.open(args.roads), store, source=command_line, min_interval_s=1.0)
-        except BaseException:
-            store.close()
-            raise
-    def on_fused(segment: int, st) -> None:
-        assert sync is not None
-        before = (sync.written_segments, sync.written_anomalies)
-        sync(segment, st)
-        if (sync.written_segments, sync.written_anomalies) != before:
-            log(f"road store {args.roads}: +{sync.written_segments - before[0]} segment estimates, "
-                f"+{sync.written_anomalies - before[1]} anomalies")
-
-    service = Service(store, trust, log=log, on_fused=None if sync is None else on_fused)
-    live = None
-    if map_at is not None:
-        from ..network.livemap import LiveMap
-
-        try:
-            live = LiveMap(args.roads, *map_at).start()
-        except BaseException:
-            store.close()
-            raise
-        print(f"live map of {args.roads} on {live.url}", flush=True)
+    sync, live, on_fused = _road_outputs(args, store, command_line, log, map_at)
+    service = Service(store, trust, log=log, on_fused=on_fused)
     broker = None
     if args.broker is None:
         host, port = parse_listen(args.listen)

@@ -216,11 +216,12 @@ def road_passes(drive: Drive, network: RoadNetwork, *, sigma_z: float = 5.0, min
     odo_all = drive.positions - drive.positions[0]
     odo = np.interp(g.time, drive.time, odo_all)
     out = []
-    order = [r for r in dict.fromkeys(matched.road_id.tolist()) if r is not None]
-    for rid in order:
-        sel = matched.road_id == rid          # a drive passes a road once (a loop would need a split here)
-        if np.count_nonzero(sel) < min_fixes:
-            continue
+    for rid, first, last, lo, hi in _split_turns(_road_runs(matched.road_id, min_fixes), matched, odo, min_fixes,
+                                                 sigma_z):
+        # one pass per contiguous run of fixes on a road: a drive that comes back to a road (a loop, a
+        # U-turn) passes it again, with its own direction and offset
+        sel = np.zeros(len(odo), dtype=bool)
+        sel[first:last + 1] = matched.road_id[first:last + 1] == rid
         m, o = matched.measure[sel], odo[sel]
         s = 1 if np.polyfit(o, m, 1)[0] >= 0 else -1
         m0, err = _offset(m, o, s, sigma_z)
@@ -229,12 +230,77 @@ def road_passes(drive: Drive, network: RoadNetwork, *, sigma_z: float = 5.0, min
         # lane coordinate of every sample of the whole record (continued past the road's ends, where
         # the drive is on other roads): the inversion runs on the whole record, free of cut edges
         u = meas if s > 0 else length - meas
-        on = np.flatnonzero((meas >= 0) & (meas <= length))
+        # on the road between the fixes of the runs before and after this one (another pass of the same
+        # road has its own samples)
+        between = (odo_all > (odo[lo] if lo is not None else -np.inf)) & \
+            (odo_all < (odo[hi] if hi is not None else np.inf))
+        on = np.flatnonzero((meas >= 0) & (meas <= length) & between)
         if on.size < 64 or np.ptp(u[on]) < min_length:
             continue
         whole = dataclasses.replace(drive, positions=u, start_m=float(u[0]), gps=None)
         out.append(RoadPass(road_id=rid, direction=s, drive=whole, n_fixes=int(np.count_nonzero(sel)), offset_std=err,
                             u_range=(float(max(u[on[0]], 0.0)), float(min(u[on[-1]], length)))))
+    return out
+
+
+def _road_runs(road_id: np.ndarray, min_fixes: int) -> list[tuple[str, int, int, int | None, int | None]]:
+    """Contiguous runs of fixes on one road: ``(road, first fix, last fix, last fix before, first fix after)``.
+
+    Fixes matched to no road are skipped; runs of fewer than ``min_fixes`` fixes (a flicker at a
+    junction) are dropped first, and the runs of one road they separated are joined again. ``before`` /
+    ``after`` are the neighbouring runs' nearest fixes (None at the record's ends).
+    """
+    idx = [i for i, r in enumerate(road_id.tolist()) if r is not None]
+    runs: list[list] = []
+    for i in idx:
+        if runs and runs[-1][0] == road_id[i]:
+            runs[-1][2] = i
+            runs[-1][3] += 1
+        else:
+            runs.append([road_id[i], i, i, 1])
+    kept: list[list] = []
+    for r in runs:
+        if r[3] < min_fixes:
+            continue
+        if kept and kept[-1][0] == r[0]:
+            kept[-1][2], kept[-1][3] = r[2], kept[-1][3] + r[3]
+        else:
+            kept.append(list(r))
+    return [(str(r[0]), int(r[1]), int(r[2]), None if k == 0 else int(kept[k - 1][2]),
+             None if k == len(kept) - 1 else int(kept[k + 1][1])) for k, r in enumerate(kept)]
+
+
+def _split_turns(runs, matched, odo: np.ndarray, min_fixes: int, sigma_z: float) -> list:
+    """Runs split where the drive turns back on the road (a U-turn): the measure's trend between fixes
+    ``L`` apart (``L`` covering 8 GPS errors of odometer) changes sign and keeps it for ``min_fixes`` fixes."""
+    out = []
+    for rid, first, last, lo, hi in runs:
+        idx = np.flatnonzero(matched.road_id[first:last + 1] == rid) + first
+        m, o = matched.measure[idx], odo[idx]
+        step = max(float(np.median(np.diff(o))) if idx.size > 1 else 1.0, 1e-3)
+        lag = max(int(np.ceil(8.0 * sigma_z / step)), 1)
+        if idx.size < 2 * lag + 2 * min_fixes:
+            out.append((rid, first, last, lo, hi))
+            continue
+        trend = np.sign(m[2 * lag:] - m[:-2 * lag])            # at fix i + lag
+        stretches: list[tuple[int, float]] = []               # (first fix, sign) of each lasting trend
+        k = 0
+        while k < trend.size:
+            j = k
+            while j < trend.size and trend[j] == trend[k]:
+                j += 1
+            if trend[k] != 0 and j - k >= min_fixes and (not stretches or stretches[-1][1] != trend[k]):
+                stretches.append((k + lag, float(trend[k])))
+            k = j
+        # the turn: the extreme measure between two opposite trends
+        bounds = [0]
+        for (a, sa), (b, _) in zip(stretches, stretches[1:]):
+            seg = m[a:min(b + lag + 1, m.size)]
+            bounds.append(a + int(np.argmax(seg) if sa > 0 else np.argmin(seg)) + 1)
+        bounds.append(idx.size)
+        pieces = [(int(idx[p]), int(idx[q - 1])) for p, q in zip(bounds, bounds[1:]) if q > p]
+        for n, (a, b) in enumerate(pieces):
+            out.append((rid, a, b, lo if n == 0 else pieces[n - 1][1], hi if n == len(pieces) - 1 else pieces[n + 1][0]))
     return out
 
 

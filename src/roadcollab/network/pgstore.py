@@ -28,7 +28,13 @@ _UPSERT = re.compile(r"INSERT OR REPLACE INTO fused VALUES \(\?, \?, \?, \?, \?\
 
 
 def is_url(text) -> bool:
-    """True for a ``postgresql://`` / ``postgres://`` URL."""
+    """True for a ``postgresql://`` / ``postgres://`` URL.
+
+    Parameters
+    ----------
+    text : str or Path
+        A ``--store`` value.
+    """
     return str(text).startswith(("postgresql://", "postgres://"))
 
 

@@ -71,7 +71,15 @@ class RoadSync:
         self.written_segments = self.written_anomalies = 0
 
     def __call__(self, segment: int, store: ServiceStore) -> None:
-        """The service's hook: segment ``segment``'s fused sums in ``store`` changed."""
+        """The service's hook: a segment's fused sums changed.
+
+        Parameters
+        ----------
+        segment : int
+            The plan's segment index.
+        store : ServiceStore
+            The service's store (the one this object reads).
+        """
         self._dirty = True
         if time.monotonic() - self._t >= self.min_interval_s:
             self.flush()
