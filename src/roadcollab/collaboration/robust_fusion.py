@@ -293,7 +293,8 @@ def vehicle_scores(z) -> np.ndarray:
     if not np.all(scale > 0) or n < 3:
         return np.zeros(n)
     u = z / scale[None, None, :]
-    d = np.mean((u[:, None] - u[None, :]) ** 2, axis=(2, 3))
+    with np.errstate(over="ignore"):     # a huge contribution scores +inf (squares are >= 0: no NaN)
+        d = np.mean((u[:, None] - u[None, :]) ** 2, axis=(2, 3))
     return np.array([np.median(np.delete(d[i], i)) for i in range(n)])
 
 
