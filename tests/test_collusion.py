@@ -71,3 +71,19 @@ def test_four_colluders_of_ten_plant_nothing_and_erase_nothing(rows):
         assert r.fake_anomalies_reported == 0 and r.real_anomalies_lost == 0, r
         assert r.ratio < 4.0, r
     assert rows["collusion_c4_fake", "fused_robust"].ratio <= 2.0
+
+
+@pytest.mark.parametrize("shift", [3.0, 4.0])
+def test_vehicle_screening_drops_a_coherent_coalition(shift):
+    """4 of 10 pooling colluders send one message ``shift`` honest scales away on every sample (inside the
+    biweight's reach of 4.685 scales, where the per-sample rule is pulled): a
+    coherent deviation over the whole segment. ``screened_biweight`` scores each vehicle's mean squared
+    difference to its median partner over the segment and drops them (score ~ 1.25 + shift^2 against ~2
+    for honest vehicles, threshold 3 x the median score), so its bias is that of the honest six and well
+    below the per-sample biweight's."""
+    rng = np.random.default_rng(11)
+    z = _pooled_attack(rng, 10, 4, shift)
+    per_sample = float(np.abs(RobustFusion("common_biweight").combine(z).mean()))
+    screened = float(np.abs(RobustFusion("screened_biweight").combine(z).mean()))
+    honest = float(np.abs(RobustFusion("screened_biweight").combine(z[:6]).mean()))
+    assert screened < honest + 0.05 and screened < 0.5 * per_sample, (screened, per_sample, honest)

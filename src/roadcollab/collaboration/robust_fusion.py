@@ -80,10 +80,11 @@ from ..errors import MessageError, ParameterError
 from ..estimation.grid import SegmentGrid
 from ..wire.message import InversionMessage
 
-__all__ = ["FUSION_RULES", "common_scale", "RobustFusion", "FusionRefusal", "FusionOutcome", "fuse_inversions"]
+__all__ = ["FUSION_RULES", "common_scale", "vehicle_scores", "RobustFusion", "FusionRefusal", "FusionOutcome", "fuse_inversions"]
 
 #: Combination rules of :class:`RobustFusion`.
-FUSION_RULES = ("mean", "median", "trimmed_mean", "huber", "weighted_huber", "common_huber", "common_biweight")
+FUSION_RULES = ("mean", "median", "trimmed_mean", "huber", "weighted_huber", "common_huber", "common_biweight",
+                "screened_biweight")
 _MAD_TO_STD = 1.4826          # Gaussian sigma per median absolute deviation
 _HUBER_ITERATIONS = 20
 
@@ -104,6 +105,10 @@ class RobustFusion:
         Smallest vehicle scale, relative to the median vehicle scale (``weighted_huber``).
     biweight_c : float
         Tukey biweight threshold in units of the common scale (``common_biweight``).
+    screen_k : float
+        Vehicle-level screening threshold of ``screened_biweight``: a vehicle whose mean squared
+        residual over the whole segment (in common scales) exceeds ``screen_k`` times the median
+        vehicle's is dropped before the per-sample biweight.
     """
 
     rule: str = "common_biweight"
@@ -111,6 +116,7 @@ class RobustFusion:
     huber_c: float = 1.5
     scale_floor: float = 0.5
     biweight_c: float = 4.685
+    screen_k: float = 3.0
 
     def __post_init__(self) -> None:
         if self.rule not in FUSION_RULES:
@@ -119,6 +125,7 @@ class RobustFusion:
         check_positive("huber_c", self.huber_c)
         check_real("scale_floor", self.scale_floor, low=0.0, low_open=True, high=1.0)
         check_positive("biweight_c", self.biweight_c)
+        check_real("screen_k", self.screen_k, low=1.0)
 
     def tolerated(self, n: int) -> int:
         """Largest number of arbitrary contributions out of ``n`` that cannot move the result
@@ -171,6 +178,8 @@ class RobustFusion:
             return _common_huber(z, self.huber_c)
         if self.rule == "common_biweight":
             return _common_huber(z, self.biweight_c, biweight=True)
+        if self.rule == "screened_biweight":
+            return _screened_biweight(z, self.biweight_c, self.screen_k)
         return _weighted_huber(z, self.huber_c, self.scale_floor)
 
 
@@ -252,6 +261,61 @@ def _common_huber(z: np.ndarray, c: float, biweight: bool = False) -> np.ndarray
     if not np.all(scale > 0):        # a track where most vehicles agree exactly: the median is the answer
         return mu
     return _irls(z, mu, scale[None, :], c, biweight)
+
+
+def vehicle_scores(z) -> np.ndarray:
+    """Each vehicle's median, over the other vehicles, of the mean squared difference over the segment.
+
+    .. math::
+
+        D_i = \\operatorname{med}_{k \\ne i} \\frac{1}{N m} \\sum_{t, j}
+              \\left(\\frac{z_{ij}(t) - z_{kj}(t)}{s_j}\\right)^2
+
+    with ``s`` :func:`common_scale`. An honest vehicle's median partner is honest while the colluders
+    are a minority (``D ~ 2``); a coalition sending one message is at distance 0 from itself, but its
+    median partner is honest too, so a coherent deviation ``delta`` costs it ``~ 1 + delta^2``
+    whatever the coalition does (a Krum-like score, Blanchard et al., NeurIPS 2017, with the median
+    partner in place of the nearest ones, which pooling colluders would own).
+
+    Parameters
+    ----------
+    z : (n, N, channels) array_like
+        The vehicles' signals, m/s.
+
+    Returns
+    -------
+    (n,) ndarray
+        Dimensionless.
+    """
+    z = np.asarray(z, dtype=float)
+    n = z.shape[0]
+    scale = common_scale(z)
+    if not np.all(scale > 0) or n < 3:
+        return np.zeros(n)
+    u = z / scale[None, None, :]
+    with np.errstate(over="ignore"):     # a huge contribution scores +inf (squares are >= 0: no NaN)
+        d = np.mean((u[:, None] - u[None, :]) ** 2, axis=(2, 3))
+    return np.array([np.median(np.delete(d[i], i)) for i in range(n)])
+
+
+def _screened_biweight(z: np.ndarray, c: float, k: float) -> np.ndarray:
+    """Vehicle-level screening over the whole segment, then the common biweight on the kept vehicles.
+
+    A vehicle is kept when its score :func:`vehicle_scores` is at most ``k`` times the median score;
+    at least ``floor(n/2) + 1`` vehicles (the lowest scores) are always kept, so a minority can neither
+    empty the fleet nor choose the median score. Trimming whole contributions by a robust score is the
+    vehicle-level analogue of the trimmed mean for Byzantine aggregation (Yin et al., ICML 2018) and of
+    Krum's score-based selection (Blanchard et al., NeurIPS 2017).
+    """
+    n = z.shape[0]
+    d = vehicle_scores(z)
+    order = np.argsort(d, kind="stable")
+    keep = d <= k * np.median(d)
+    keep[order[:n // 2 + 1]] = True
+    kept = z[keep]
+    if kept.shape[0] <= 2:
+        return kept.mean(axis=0)
+    return _common_huber(kept, c, biweight=True)
 
 
 def _weighted_huber(z: np.ndarray, c: float, floor: float) -> np.ndarray:

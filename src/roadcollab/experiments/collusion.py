@@ -14,6 +14,9 @@ pooled mean ``z_p``, with full knowledge of the node (its rule, its scale, the h
 ``edge``     ``mu + huber_c * s * sign(mu)``: every colluder exactly at the node's Huber corner on every
              sample (``s``: the node's common scale from the honest inputs), the largest shift that
              still carries full weight: the bounded-influence worst case
+``inside``   ``mu + sqrt(0.95 k D_med) * s * sign(mu)``: a coherent, road-correlated bias on every band
+             shaped to sit just inside the vehicle-level screening of ``screened_biweight``
+             (``k``: its ``screen_k``, ``D_med``: the median honest vehicle score)
 ============ ==================================================================================
 
 The colluders also vote: their own detections (of the message they sent) go to the corroboration,
@@ -26,7 +29,7 @@ from __future__ import annotations
 import numpy as np
 
 from .._validation import check_int
-from ..collaboration.robust_fusion import RobustFusion, common_scale, fuse_inversions
+from ..collaboration.robust_fusion import RobustFusion, common_scale, fuse_inversions, vehicle_scores
 from ..detection.corroboration import corroborate, min_votes_for
 from ..detection.scoring import lost_anomalies, new_false_detections
 from ..errors import ParameterError
@@ -37,7 +40,7 @@ from .seeds import SeedPlan
 
 __all__ = ["COLLUSION_ATTACKS", "collusion_rows"]
 
-COLLUSION_ATTACKS = ("fake", "erase", "weight", "edge")
+COLLUSION_ATTACKS = ("fake", "erase", "weight", "edge", "inside")
 
 
 def _colluding_z(attack: str, run, z: np.ndarray, c: int, mu: np.ndarray, fusion: RobustFusion) -> np.ndarray:
@@ -53,6 +56,9 @@ def _colluding_z(attack: str, run, z: np.ndarray, c: int, mu: np.ndarray, fusion
     if attack == "edge":
         corner = fusion.biweight_c / np.sqrt(5.0) if fusion.rule == "common_biweight" else fusion.huber_c
         return mu + corner * common_scale(z)[None, :] * np.sign(mu)
+    if attack == "inside":
+        amp = np.sqrt(0.95 * fusion.screen_k * np.median(vehicle_scores(z)))
+        return mu + amp * common_scale(z)[None, :] * np.sign(mu)
     raise ParameterError(f"attack must be one of {COLLUSION_ATTACKS}, got {attack!r}")
 
 
