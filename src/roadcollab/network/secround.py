@@ -1,0 +1,455 @@
+"""One segment's secure-aggregation round as messages between the service and the vehicles.
+
+The active protocol of :mod:`roadcollab.privacy.secagg_active` (Bonawitz et al. 2017, signed adverts
+bound to fleet identities, committed shares, consistency round on ``U_3``, one input per segment and
+epoch kept in each vehicle's :class:`~roadcollab.privacy.secagg_store.SessionLedger`) driven as
+``(topic, payload)`` messages, with no transport of its own: :class:`RoundCoordinator` is the service's
+side, :class:`RoundAgent` a vehicle's; :func:`pump` moves their messages over any
+:class:`~roadcollab.network.transport.Transport` (a :class:`~roadcollab.network.transport.MemoryBroker`
+in the fast tests).
+
+Topics of round ``(segment, epoch)`` under ``{fleet}/secagg/{segment}/{epoch}``:
+
+- ``.../{kind}/{vid}``, vehicle -> service, ``kind`` in ``advert``, ``shares``, ``masked``, ``sign``,
+  ``reveal``; every payload sealed by the vehicle's identity for that topic
+  (:func:`~roadcollab.network.messages.seal`), so the service knows its sender;
+- ``.../to/{vid}``, service -> vehicle: ``invite`` (its protocol id), ``roster`` (``U_1``, signed
+  adverts), ``dealt`` (the sealed shares other vehicles dealt it and every signed commitment),
+  ``survivors`` (``U_3``), ``signatures`` (the consistency signatures).
+
+The sealed shares pass the service (Algorithm of Bonawitz et al.: the server routes them) but are
+encrypted to their recipient with X25519 + AEAD, so the service reads none of them. Roster rule: the
+``n`` certified vehicles the service names in :meth:`RoundCoordinator.open` (those that passed the
+segment, by a count rule: the first ``n``), ``k <= n <= 2t - c - 1``.
+
+Phases advance when every expected message of the phase has arrived, or when the service calls
+:meth:`RoundCoordinator.advance` on its timeout (a vehicle that vanished is left behind; its masks are
+removed by reconstruction if at least ``t`` vehicles reveal). A message for a finished or aborted round,
+a duplicate, a message of a phase already closed, or one that does not verify is refused, with its
+reason in :attr:`RoundCoordinator.events`; nothing a vehicle sends raises out of ``handle``.
+"""
+
+from __future__ import annotations
+
+import base64
+import json
+
+import numpy as np
+
+from ..errors import MessageError, ParameterError
+from ..privacy.secagg_active import SecAggVehicle, unmask_verified, verify_roster
+from ..privacy.secagg_messages import AggregationRefused, SecAggSpec, session_id
+from ..privacy.secagg_store import SessionLedger
+from ..wire.identity import FleetTrust, VehicleIdentity
+from ..wire.protocol import decode, encode
+from ..wire.secagg import MaskedInput, Reveal
+from .messages import open_from, seal
+from .service import Publish
+
+__all__ = ["RoundTopics", "RoundCoordinator", "RoundAgent", "pump", "PHASES"]
+
+PHASES = ("adverts", "shares", "masked", "consistency", "reveal", "finished", "aborted")
+_KIND_OF_PHASE = {"adverts": "advert", "shares": "shares", "masked": "masked", "consistency": "sign",
+                  "reveal": "reveal"}
+
+
+def _b64(data: bytes) -> str:
+    return base64.b64encode(bytes(data)).decode()
+
+
+def _unb64(text, what: str) -> bytes:
+    if not isinstance(text, str) or len(text) > 4 * 2 ** 20:
+        raise MessageError(f"{what}: expected a base64 string")
+    try:
+        return base64.b64decode(text.encode(), validate=True)
+    except ValueError:
+        raise MessageError(f"{what}: not base64") from None
+
+
+def _json(data: bytes, what: str) -> dict:
+    try:
+        obj = json.loads(bytes(data).decode())
+    except (UnicodeDecodeError, ValueError):
+        raise MessageError(f"{what}: not JSON") from None
+    if not isinstance(obj, dict):
+        raise MessageError(f"{what}: expected a JSON object")
+    return obj
+
+
+def _int_map(obj, what: str) -> dict:
+    if not isinstance(obj, dict) or len(obj) > 10000:
+        raise MessageError(f"{what}: expected an object of protocol ids")
+    try:
+        return {int(k): _unb64(v, what) for k, v in obj.items()}
+    except (TypeError, ValueError):
+        raise MessageError(f"{what}: keys must be protocol ids") from None
+
+
+class RoundTopics:
+    """Topic names of one round.
+
+    Parameters
+    ----------
+    fleet_id : str
+    segment, epoch : int
+    """
+
+    def __init__(self, fleet_id: str, segment: int, epoch: int) -> None:
+        self.base = f"{fleet_id}/secagg/{int(segment)}/{int(epoch)}"
+
+    def up(self, kind: str, vid: str) -> str:
+        """Vehicle -> service."""
+        return f"{self.base}/{kind}/{vid}"
+
+    def down(self, vid: str) -> str:
+        """Service -> vehicle."""
+        return f"{self.base}/to/{vid}"
+
+    @property
+    def from_vehicles(self) -> str:
+        """The service's subscription."""
+        return f"{self.base}/+/+"
+
+    def parse_up(self, topic: str) -> tuple[str, str]:
+        """``(kind, vid)`` of a vehicle -> service topic.
+
+        Raises
+        ------
+        MessageError
+        """
+        head, _, rest = topic.partition(self.base + "/")
+        parts = rest.split("/")
+        if head or len(parts) != 2 or parts[0] not in _KIND_OF_PHASE.values():
+            raise MessageError(f"topic {topic!r} is not a round message of {self.base}")
+        return parts[0], parts[1]
+
+
+class RoundCoordinator:
+    """The service's side of one round on one segment: routes, collects, unmasks.
+
+    Parameters
+    ----------
+    fleet_id : str
+    segment, epoch : int
+        The measurement aggregated: ``session_id(segment, epoch)``.
+    spec : SecAggSpec
+    trust : FleetTrust
+
+    Attributes
+    ----------
+    phase : str
+        One of :data:`PHASES`.
+    events : list of (str, str)
+        ``(kind, reason)``: ``refused``, ``duplicate``, ``aborted``, ``finished``.
+    average : (L, 2) ndarray or None
+        The revealed sum over ``U_2`` divided by ``|U_2|``, m/s (once finished).
+    """
+
+    def __init__(self, fleet_id: str, segment: int, epoch: int, spec: SecAggSpec, trust: FleetTrust) -> None:
+        if not isinstance(spec, SecAggSpec) or not isinstance(trust, FleetTrust):
+            raise ParameterError("spec must be a SecAggSpec and trust a FleetTrust")
+        self.segment, self.epoch, self.spec, self.trust = int(segment), int(epoch), spec, trust
+        self.session = session_id(self.segment, self.epoch)
+        self.topics = RoundTopics(fleet_id, self.segment, self.epoch)
+        self.phase = "adverts"
+        self.pid: dict[str, int] = {}
+        self.got: dict[str, dict[int, bytes]] = {p: {} for p in _KIND_OF_PHASE}
+        self.events: list[tuple[str, str]] = []
+        self.average = None
+        self.result = None
+        self.bytes_in = 0
+        self.bytes_out = 0
+
+    # -- hooks an attacking service overrides (honest: forward unchanged) --
+    def relay_roster(self, vid: str, signed: dict) -> dict:
+        return signed
+
+    def relay_survivors(self, vid: str, survivors: list) -> list:
+        return survivors
+
+    def relay_signatures(self, vid: str, signatures: dict) -> dict:
+        return signatures
+
+    def _send(self, vid: str, obj: dict) -> Publish:
+        payload = json.dumps(obj, separators=(",", ":")).encode()
+        self.bytes_out += len(payload)
+        return Publish(self.topics.down(vid), payload)
+
+    def open(self, roster: list[str]) -> list[Publish]:
+        """Invite the certified vehicles ``roster`` (vehicle ids); protocol ids ``1..n`` in that order.
+
+        Parameters
+        ----------
+        roster : list of str
+        """
+        if len(set(roster)) != len(roster) or not roster:
+            raise ParameterError("roster must be a non-empty list of distinct vehicle ids")
+        self.pid = {v: i + 1 for i, v in enumerate(roster)}
+        return [self._send(v, {"type": "invite", "id": i, "segment": self.segment, "epoch": self.epoch})
+                for v, i in self.pid.items()]
+
+    def _members(self, phase: str) -> list[str]:
+        """Vehicles expected in ``phase``: those that answered the previous phase."""
+        if phase == "adverts":
+            return list(self.pid)
+        prev = PHASES[PHASES.index(phase) - 1]
+        ids = set(self.got[prev])
+        return [v for v, i in self.pid.items() if i in ids]
+
+    def _refuse(self, reason: str) -> list[Publish]:
+        self.events.append(("refused", reason))
+        return []
+
+    def handle(self, topic: str, payload: bytes) -> list[Publish]:
+        """Apply one vehicle message; what to publish (empty when refused: reason in :attr:`events`).
+
+        Parameters
+        ----------
+        topic : str
+        payload : bytes
+        """
+        try:
+            kind, vid = self.topics.parse_up(topic)
+            if self.phase in ("finished", "aborted"):
+                return self._refuse(f"{topic}: round ({self.segment}, {self.epoch}) is {self.phase}")
+            if vid not in self.pid:
+                return self._refuse(f"{topic}: {vid} is not in the roster of this round")
+            body = open_from(payload, self.trust, topic, vid)
+            self.bytes_in += len(payload)
+            phase = next(p for p, k in _KIND_OF_PHASE.items() if k == kind)
+            i = self.pid[vid]
+            if phase != self.phase:
+                return self._refuse(f"{topic}: {kind} of {vid} arrived in phase {self.phase}")
+            if vid not in self._members(phase):
+                return self._refuse(f"{topic}: {vid} did not take part in the previous phase")
+            if i in self.got[phase]:
+                self.events.append(("duplicate" if self.got[phase][i] == body else "refused",
+                                    f"{topic}: {kind} of {vid} again (applied once)"))
+                return []
+            self._check(phase, i, body)
+            self.got[phase][i] = body
+        except MessageError as err:
+            return self._refuse(f"{topic}: {err}")
+        if len(self.got[self.phase]) == len(self._members(self.phase)):
+            return self.advance()
+        return []
+
+    def _check(self, phase: str, i: int, body: bytes) -> None:
+        """Well-formedness of a vehicle's message (its content is checked again where it is used)."""
+        if phase == "shares":
+            obj = _json(body, "shares")
+            _int_map(obj.get("sealed"), "shares.sealed")
+            _unb64(obj.get("commitments"), "shares.commitments")
+        elif phase in ("masked", "reveal"):
+            m = decode(body)
+            want = MaskedInput if phase == "masked" else Reveal
+            if not isinstance(m, want) or m.vehicle != i or m.session != self.session:
+                raise MessageError(f"{phase}: expected a {want.__name__} of vehicle {i} in this session")
+
+    def advance(self) -> list[Publish]:
+        """Close the current phase with what arrived (the service's timeout) and start the next.
+
+        Returns
+        -------
+        list of Publish
+        """
+        have = self.got.get(self.phase, {})
+        if self.phase in ("finished", "aborted"):
+            return []
+        need = self.spec.threshold if self.phase == "reveal" else self.spec.min_inputs
+        if len(have) < need:
+            return self._abort(f"phase {self.phase}: {len(have)} vehicles answered, {need} required")
+        vids = {i: v for v, i in self.pid.items()}
+        if self.phase == "adverts":
+            self.phase = "shares"
+            signed = {str(i): _b64(b) for i, b in have.items()}
+            return [self._send(vids[i], {"type": "roster", "adverts": self.relay_roster(vids[i], dict(signed))})
+                    for i in sorted(have)]
+        if self.phase == "shares":
+            self.phase = "masked"
+            dealt = {i: _json(b, "shares") for i, b in have.items()}
+            coms = {str(d): o["commitments"] for d, o in dealt.items()}
+            out = []
+            for j in sorted(have):
+                mine = {str(d): o["sealed"][str(j)] for d, o in dealt.items() if str(j) in o["sealed"]}
+                out.append(self._send(vids[j], {"type": "dealt", "sealed": mine, "commitments": coms}))
+            return out
+        if self.phase == "masked":
+            self.phase = "consistency"
+            u3 = sorted(have)
+            return [self._send(vids[i], {"type": "survivors", "ids": self.relay_survivors(vids[i], list(u3))})
+                    for i in u3]
+        if self.phase == "consistency":
+            self.phase = "reveal"
+            sigs = {str(i): _b64(b) for i, b in have.items()}
+            return [self._send(vids[i], {"type": "signatures", "signatures": self.relay_signatures(vids[i], dict(sigs))})
+                    for i in sorted(have)]
+        return self._unmask()
+
+    def _abort(self, reason: str) -> list[Publish]:
+        self.phase = "aborted"
+        self.events.append(("aborted", reason))
+        return []
+
+    def _unmask(self) -> list[Publish]:
+        try:
+            signed = self.got["adverts"]
+            roster = verify_roster({i: signed[i] for i in self.got["shares"]}, self.trust, self.session, self.spec)
+            coms = {i: _unb64(_json(b, "shares")["commitments"], "commitments") for i, b in self.got["shares"].items()}
+            masked = [decode(b) for b in self.got["masked"].values()]
+            reveals = [decode(b) for b in self.got["reveal"].values()]
+            agg = unmask_verified(roster, coms, masked, reveals, self.spec, self.trust)
+        except MessageError as err:
+            return self._abort(f"unmasking: {err}")
+        self.result = agg
+        self.average = agg.result.average
+        self.phase = "finished"
+        self.events.append(("finished", f"{len(agg.result.survivors)} inputs, dropped {list(agg.result.dropped)}"))
+        return []
+
+
+class RoundAgent:
+    """A vehicle's side of the rounds it is invited to: one :class:`SecAggVehicle` per round.
+
+    Parameters
+    ----------
+    identity : VehicleIdentity
+    trust : FleetTrust
+    spec : SecAggSpec
+    ledger : SessionLedger
+        Persistent (its fleet folder): one input per (segment, epoch), one signed survivor set per session.
+    fleet_id : str
+    inputs : dict
+        ``{(segment, epoch): z}`` with ``z`` of shape (L, 2), m/s: what this vehicle measured.
+    root : callable, optional
+        ``root(segment, epoch) -> 32 bytes`` of session secrets (tests); default :func:`os.urandom`.
+
+    Attributes
+    ----------
+    refusals : list of str
+        Why it stopped in a round (nothing was sent for that step).
+    """
+
+    def __init__(self, identity: VehicleIdentity, trust: FleetTrust, spec: SecAggSpec, ledger: SessionLedger,
+                 fleet_id: str, inputs: dict, *, root=None) -> None:
+        self.identity, self.trust, self.spec, self.ledger = identity, trust, spec, ledger
+        self.vid, self.fleet_id, self.inputs, self._root = identity.vehicle_id, fleet_id, dict(inputs), root
+        self.rounds: dict[tuple[int, int], SecAggVehicle] = {}
+        self.dealt: dict[tuple[int, int], tuple[dict, dict]] = {}
+        self.refusals: list[str] = []
+        self.bytes_out = 0
+
+    @property
+    def subscription(self) -> str:
+        """Topic filter of every round's messages to this vehicle."""
+        return f"{self.fleet_id}/secagg/+/+/to/{self.vid}"
+
+    def _send(self, key: tuple[int, int], kind: str, body: bytes) -> list[Publish]:
+        topic = RoundTopics(self.fleet_id, *key).up(kind, self.vid)
+        p = Publish(topic, seal(self.identity, topic, body))
+        self.bytes_out += len(p.payload)
+        return [p]
+
+    def on_message(self, topic: str, payload: bytes) -> list[Publish]:
+        """React to one service message; what to publish. Refusals go to :attr:`refusals`.
+
+        Parameters
+        ----------
+        topic : str
+        payload : bytes
+        """
+        parts = topic.split("/")
+        if len(parts) != 6 or parts[1] != "secagg" or parts[4:] != ["to", self.vid]:
+            return []
+        try:
+            key = (int(parts[2]), int(parts[3]))
+            msg = _json(payload, "round message")
+            return self._step(key, msg)
+        except (MessageError, ParameterError, ValueError) as err:
+            self.refusals.append(f"{topic}: {err}")
+            return []
+
+    def _step(self, key: tuple[int, int], msg: dict) -> list[Publish]:
+        kind = msg.get("type")
+        if kind == "invite":
+            if key not in self.inputs:
+                raise MessageError(f"invited to round {key} of a segment it has no measurement of")
+            if key in self.rounds:
+                raise MessageError(f"a second invite to round {key} (ignored)")
+            pid = int(msg.get("id", 0))
+            v = SecAggVehicle(pid, self.identity, self.trust, self.spec, self.ledger)
+            self.rounds[key] = v
+            root = None if self._root is None else self._root(*key)
+            return self._send(key, "advert", v.advertise(session_id(*key), root=root))
+        v = self.rounds.get(key)
+        if v is None:
+            raise MessageError(f"{kind} for round {key} it was not invited to")
+        if kind == "roster":
+            sealed, com = v.share_keys(_int_map(msg.get("adverts"), "roster"))
+            body = json.dumps({"sealed": {str(j): _b64(c) for j, c in sealed.items()}, "commitments": _b64(com)})
+            return self._send(key, "shares", body.encode())
+        if kind == "dealt":
+            if key in self.dealt:
+                raise MessageError(f"dealt shares of round {key} again (ignored)")
+            self.dealt[key] = (_int_map(msg.get("sealed"), "dealt.sealed"),
+                               _int_map(msg.get("commitments"), "dealt.commitments"))
+            return self._send(key, "masked", encode(v.mask_input(self.inputs[key], key)))
+        if kind == "survivors":
+            ids = msg.get("ids")
+            if not isinstance(ids, list) or not all(isinstance(i, int) for i in ids):
+                raise MessageError("survivors: expected a list of protocol ids")
+            return self._send(key, "sign", v.sign_survivors(ids))
+        if kind == "signatures":
+            sealed, coms = self.dealt[key]
+            return self._send(key, "reveal", encode(v.reveal(sealed, coms, _int_map(msg.get("signatures"),
+                                                                                  "signatures"))))
+        raise MessageError(f"unknown round message type {kind!r}")
+
+
+def pump(coordinator: RoundCoordinator, svc, agents: dict, clients: dict, *, limit: int = 1000,
+         offline=()) -> int:
+    """Deliver messages both ways over the transport until none move (``offline`` vehicles receive nothing).
+
+    Parameters
+    ----------
+    coordinator : RoundCoordinator
+    svc : Transport
+        The service's client, subscribed to ``coordinator.topics.from_vehicles``.
+    agents, clients : dict of str
+        Vehicle id -> :class:`RoundAgent` / its transport client (subscribed to ``agent.subscription``).
+    limit : int
+        Most passes.
+    offline : iterable of str
+        Vehicles that are gone (a killed process): their queues are drained unread.
+
+    Returns
+    -------
+    int
+        Messages delivered.
+    """
+    gone, moved_total = set(offline), 0
+    for _ in range(limit):
+        moved = 0
+        while (m := svc.receive(0.0)) is not None:
+            for p in coordinator.handle(*m):
+                svc.publish(p.topic, p.payload, p.retain)
+            moved += 1
+        for vid, car in clients.items():
+            while (m := car.receive(0.0)) is not None:
+                moved += 1
+                if vid in gone:
+                    continue
+                for p in agents[vid].on_message(*m):
+                    car.publish(p.topic, p.payload, p.retain)
+        moved_total += moved
+        if not moved:
+            return moved_total
+    raise ParameterError(f"the round did not settle within {limit} passes")
+
+
+def clip_mean(zs, spec: SecAggSpec) -> np.ndarray:
+    """The plain mean of the clipped inputs, m/s (what the round's revealed average must equal)."""
+    return np.mean([np.clip(np.asarray(z, float), -spec.clip, spec.clip) for z in zs], axis=0)
+
+
+__all__ += ["clip_mean", "AggregationRefused"]
