@@ -23,8 +23,10 @@ encrypted to their recipient with X25519 + AEAD, so the service reads none of th
 segment, by a count rule: the first ``n``), ``k <= n <= 2t - c - 1``.
 
 Phases advance when every expected message of the phase has arrived, or when the service calls
-:meth:`RoundCoordinator.advance` on its timeout (a vehicle that vanished is left behind; its masks are
-removed by reconstruction if at least ``t`` vehicles reveal). A message for a finished or aborted round,
+:meth:`RoundCoordinator.advance` on its timeout (a vehicle that vanished after dealing its shares is
+left behind; its masks are removed by reconstruction if at least ``t`` vehicles reveal). A vehicle that
+advertised but dealt no shares aborts the round (every vehicle's masks of round 2 span all of ``U_1``):
+the service opens a new round without it. A message for a finished or aborted round,
 a duplicate, a message of a phase already closed, or one that does not verify is refused, with its
 reason in :attr:`RoundCoordinator.events`; nothing a vehicle sends raises out of ``handle``.
 """
@@ -45,6 +47,7 @@ from ..wire.protocol import decode, encode
 from ..wire.secagg import MaskedInput, Reveal
 from .messages import open_from, seal
 from .service import Publish
+from .transport import MemoryBroker
 
 __all__ = ["RoundTopics", "RoundCoordinator", "RoundAgent", "pump", "PHASES"]
 
@@ -208,6 +211,8 @@ class RoundCoordinator:
         topic : str
         payload : bytes
         """
+        if topic.startswith(self.topics.base + "/to/"):
+            return []                                   # its own messages to the vehicles
         try:
             kind, vid = self.topics.parse_up(topic)
             if self.phase in ("finished", "aborted"):
@@ -266,6 +271,10 @@ class RoundCoordinator:
             return [self._send(vids[i], {"type": "roster", "adverts": self.relay_roster(vids[i], dict(signed))})
                     for i in sorted(have)]
         if self.phase == "shares":
+            missing = sorted(set(self.got["adverts"]) - set(have))
+            if missing:      # every mask of round 2 uses all of U_1: without their shares nothing unmasks
+                return self._abort(f"phase shares: vehicles {missing} advertised keys but dealt no shares "
+                                   f"(open a new round without them)")
             self.phase = "masked"
             dealt = {i: _json(b, "shares") for i, b in have.items()}
             coms = {str(d): o["commitments"] for d, o in dealt.items()}
@@ -294,7 +303,7 @@ class RoundCoordinator:
     def _unmask(self) -> list[Publish]:
         try:
             signed = self.got["adverts"]
-            roster = verify_roster({i: signed[i] for i in self.got["shares"]}, self.trust, self.session, self.spec)
+            roster = verify_roster(dict(signed), self.trust, self.session, self.spec)
             coms = {i: _unb64(_json(b, "shares")["commitments"], "commitments") for i, b in self.got["shares"].items()}
             masked = [decode(b) for b in self.got["masked"].values()]
             reveals = [decode(b) for b in self.got["reveal"].values()]
@@ -447,9 +456,47 @@ def pump(coordinator: RoundCoordinator, svc, agents: dict, clients: dict, *, lim
     raise ParameterError(f"the round did not settle within {limit} passes")
 
 
+def run_round(coordinator: RoundCoordinator, agents: dict, roster: list, *, offline=(), timeouts: int = 6):
+    """Open a round over a fresh :class:`~roadcollab.network.transport.MemoryBroker` and run it to its end.
+
+    Parameters
+    ----------
+    coordinator : RoundCoordinator
+    agents : dict of str to RoundAgent
+        Vehicle id -> agent (vehicles of ``roster`` absent here never answer).
+    roster : list of str
+        Vehicles invited.
+    offline : iterable of str
+        Vehicles gone: they receive nothing.
+    timeouts : int
+        Service timeouts at most (each closes the current phase with what arrived).
+
+    Returns
+    -------
+    MemoryBroker
+        The transport (``bytes_published``).
+    """
+    broker = MemoryBroker()
+    svc = broker.client()
+    svc.subscribe(coordinator.topics.from_vehicles)
+    clients = {}
+    for vid, a in agents.items():
+        clients[vid] = broker.client()
+        clients[vid].subscribe(a.subscription)
+    for p in coordinator.open(list(roster)):
+        svc.publish(p.topic, p.payload)
+    for _ in range(timeouts):
+        pump(coordinator, svc, agents, clients, offline=offline)
+        if coordinator.phase in ("finished", "aborted"):
+            break
+        for p in coordinator.advance():
+            svc.publish(p.topic, p.payload)
+    return broker
+
+
 def clip_mean(zs, spec: SecAggSpec) -> np.ndarray:
     """The plain mean of the clipped inputs, m/s (what the round's revealed average must equal)."""
     return np.mean([np.clip(np.asarray(z, float), -spec.clip, spec.clip) for z in zs], axis=0)
 
 
-__all__ += ["clip_mean", "AggregationRefused"]
+__all__ += ["clip_mean", "run_round", "AggregationRefused"]
