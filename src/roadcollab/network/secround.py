@@ -39,7 +39,7 @@ import json
 import numpy as np
 
 from ..errors import MessageError, ParameterError
-from ..privacy.secagg_active import SecAggVehicle, unmask_verified, verify_roster
+from ..privacy.secagg_active import SecAggVehicle, VerifiedAggregate, unmask_verified, verify_roster
 from ..privacy.secagg_messages import AggregationRefused, SecAggSpec, session_id
 from ..privacy.secagg_store import SessionLedger
 from ..wire.identity import FleetTrust, VehicleIdentity
@@ -158,8 +158,8 @@ class RoundCoordinator:
         self.pid: dict[str, int] = {}
         self.got: dict[str, dict[int, bytes]] = {p: {} for p in _KIND_OF_PHASE}
         self.events: list[tuple[str, str]] = []
-        self.average = None
-        self.result = None
+        self.average: np.ndarray | None = None
+        self.result: VerifiedAggregate | None = None
         self.bytes_in = 0
         self.bytes_out = 0
 
@@ -390,9 +390,9 @@ class RoundAgent:
             self.rounds[key] = v
             root = None if self._root is None else self._root(*key)
             return self._send(key, "advert", v.advertise(session_id(*key), root=root))
-        v = self.rounds.get(key)
-        if v is None:
+        if key not in self.rounds:
             raise MessageError(f"{kind} for round {key} it was not invited to")
+        v = self.rounds[key]
         if kind == "roster":
             sealed, com = v.share_keys(_int_map(msg.get("adverts"), "roster"))
             body = json.dumps({"sealed": {str(j): _b64(c) for j, c in sealed.items()}, "commitments": _b64(com)})

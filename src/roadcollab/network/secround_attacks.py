@@ -29,6 +29,7 @@ from ..privacy.secagg_messages import SecAggSpec, session_id
 from ..privacy.secagg_store import SessionLedger
 from ..wire.identity import FleetAuthority, VehicleIdentity
 from ..wire.protocol import decode
+from ..wire.secagg import Reveal
 from .secround import RoundAgent, RoundCoordinator, _b64, clip_mean, run_round
 
 __all__ = ["NETWORK_ATTACKS", "network_attack", "network_attack_study"]
@@ -112,21 +113,21 @@ def network_attack(attack: str, zs, spec: SecAggSpec, *, rng=None, keep_ledgers:
     if attack == "equivocation":
         co = _Equivocate("f", *_KEY, spec, trust)
         run_round(co, agents, list(agents))
-        reveals = [decode(b) for b in co.got["reveal"].values()]
+        reveals = [r for r in (decode(b) for b in co.got["reveal"].values()) if isinstance(r, Reveal)]
         b = sum(1 in r.self_mask_shares for r in reveals)
         s = sum(1 in r.key_shares for r in reveals)
         got = 1 in co.got["masked"] and b >= spec.threshold and s >= spec.threshold
         return (victim_z if got else None), co, agents
     _, fakes = _fake_adverts(range(2, spec.min_inputs + 1 if attack == "sybil" else n + 1), session, gen)
     if attack == "sybil":
-        co = _Sybil("f", *_KEY, spec, trust)
-        co.fakes = fakes
-        run_round(co, {"v1": agents["v1"]}, ["v1"] + [f"sybil{i}" for i in range(2, spec.min_inputs + 1)])
-        return (victim_z if 1 in co.got["masked"] else None), co, agents
-    co = _Substitute("f", *_KEY, spec, trust)
-    co.fakes = {i: _b64(d) for i, d in fakes.items()}
-    run_round(co, agents, list(agents))
-    return (victim_z if 1 in co.got["shares"] else None), co, agents
+        sy = _Sybil("f", *_KEY, spec, trust)
+        sy.fakes = fakes
+        run_round(sy, {"v1": agents["v1"]}, ["v1"] + [f"sybil{i}" for i in range(2, spec.min_inputs + 1)])
+        return (victim_z if 1 in sy.got["masked"] else None), sy, agents
+    ks = _Substitute("f", *_KEY, spec, trust)
+    ks.fakes = {i: _b64(d) for i, d in fakes.items()}
+    run_round(ks, agents, list(agents))
+    return (victim_z if 1 in ks.got["shares"] else None), ks, agents
 
 
 def network_attack_study(trials: int, n: int = 9, *, length: int = 64, rng=None) -> list[dict]:
