@@ -5,7 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from roadcollab.network.secround import RoundAgent, RoundCoordinator, clip_mean, pump
+from roadcollab.network.secround import RoundCoordinator
+from roadcollab.network.secround_agent import RoundAgent, clip_mean, pump
 from roadcollab.network.transport import MemoryBroker
 from roadcollab.privacy.secagg_messages import SecAggSpec
 from roadcollab.privacy.secagg_store import SessionLedger

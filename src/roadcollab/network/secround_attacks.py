@@ -30,7 +30,8 @@ from ..privacy.secagg_store import SessionLedger
 from ..wire.identity import FleetAuthority, VehicleIdentity
 from ..wire.protocol import decode
 from ..wire.secagg import Reveal
-from .secround import RoundAgent, RoundCoordinator, _b64, clip_mean, run_round
+from .secround import RoundCoordinator, _b64
+from .secround_agent import RoundAgent, clip_mean, run_round
 
 __all__ = ["NETWORK_ATTACKS", "network_attack", "network_attack_study"]
 
