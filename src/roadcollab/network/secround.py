@@ -100,11 +100,25 @@ class RoundTopics:
         self.base = f"{fleet_id}/secagg/{int(segment)}/{int(epoch)}"
 
     def up(self, kind: str, vid: str) -> str:
-        """Vehicle -> service."""
+        """Vehicle -> service.
+
+        Parameters
+        ----------
+        kind : str
+            ``advert``, ``shares``, ``masked``, ``sign`` or ``reveal``.
+        vid : str
+            The sending vehicle.
+        """
         return f"{self.base}/{kind}/{vid}"
 
     def down(self, vid: str) -> str:
-        """Service -> vehicle."""
+        """Service -> vehicle.
+
+        Parameters
+        ----------
+        vid : str
+            The receiving vehicle.
+        """
         return f"{self.base}/to/{vid}"
 
     @property
@@ -114,6 +128,10 @@ class RoundTopics:
 
     def parse_up(self, topic: str) -> tuple[str, str]:
         """``(kind, vid)`` of a vehicle -> service topic.
+
+        Parameters
+        ----------
+        topic : str
 
         Raises
         ------

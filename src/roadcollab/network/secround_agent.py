@@ -205,5 +205,17 @@ def run_round(coordinator: RoundCoordinator, agents: dict, roster: list, *, offl
 
 
 def clip_mean(zs, spec: SecAggSpec) -> np.ndarray:
-    """The plain mean of the clipped inputs, m/s (what the round's revealed average must equal)."""
+    """The plain mean of the clipped inputs, m/s (what the round's revealed average must equal).
+
+    Parameters
+    ----------
+    zs : iterable of (L, 2) array_like
+        Inputs, m/s.
+    spec : SecAggSpec
+        Its ``clip``.
+
+    Returns
+    -------
+    (L, 2) ndarray
+    """
     return np.mean([np.clip(np.asarray(z, float), -spec.clip, spec.clip) for z in zs], axis=0)
