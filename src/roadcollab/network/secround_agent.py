@@ -1,0 +1,221 @@
+"""A vehicle's side of :mod:`roadcollab.network.secround`'s rounds, and the in-memory drivers.
+
+:class:`RoundAgent` answers the service's ``invite``, ``roster``, ``dealt``, ``survivors`` and
+``signatures`` with one :class:`~roadcollab.privacy.secagg_active.SecAggVehicle` per round; its
+:class:`~roadcollab.privacy.secagg_store.SessionLedger` (a file in its fleet folder) refuses a second
+input for a (segment, epoch) across restarts. :func:`pump` and :func:`run_round` move messages over a
+:class:`~roadcollab.network.transport.MemoryBroker`.
+"""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+
+from ..errors import MessageError, ParameterError
+from ..privacy.secagg_active import SecAggVehicle
+from ..privacy.secagg_messages import SecAggSpec, session_id
+from ..privacy.secagg_store import SessionLedger
+from ..wire.identity import FleetTrust, VehicleIdentity
+from ..wire.protocol import encode
+from .messages import seal
+from .secround import RoundCoordinator, RoundTopics, _b64, _int_map, _json
+from .service import Publish
+from .transport import MemoryBroker
+
+__all__ = ["RoundAgent", "pump", "run_round", "clip_mean"]
+
+
+class RoundAgent:
+    """A vehicle's side of the rounds it is invited to: one :class:`SecAggVehicle` per round.
+
+    Parameters
+    ----------
+    identity : VehicleIdentity
+    trust : FleetTrust
+    spec : SecAggSpec
+    ledger : SessionLedger
+        Persistent (its fleet folder): one input per (segment, epoch), one signed survivor set per session.
+    fleet_id : str
+    inputs : dict
+        ``{(segment, epoch): z}`` with ``z`` of shape (L, 2), m/s: what this vehicle measured.
+    root : callable, optional
+        ``root(segment, epoch) -> 32 bytes`` of session secrets (tests); default :func:`os.urandom`.
+
+    Attributes
+    ----------
+    refusals : list of str
+        Why it stopped in a round (nothing was sent for that step).
+    """
+
+    def __init__(self, identity: VehicleIdentity, trust: FleetTrust, spec: SecAggSpec, ledger: SessionLedger,
+                 fleet_id: str, inputs: dict, *, root=None) -> None:
+        self.identity, self.trust, self.spec, self.ledger = identity, trust, spec, ledger
+        self.vid, self.fleet_id, self.inputs, self._root = identity.vehicle_id, fleet_id, dict(inputs), root
+        self.rounds: dict[tuple[int, int], SecAggVehicle] = {}
+        self.dealt: dict[tuple[int, int], tuple[dict, dict]] = {}
+        self.refusals: list[str] = []
+        self.bytes_out = 0
+
+    @property
+    def subscription(self) -> str:
+        """Topic filter of every round's messages to this vehicle."""
+        return f"{self.fleet_id}/secagg/+/+/to/{self.vid}"
+
+    def _send(self, key: tuple[int, int], kind: str, body: bytes) -> list[Publish]:
+        topic = RoundTopics(self.fleet_id, *key).up(kind, self.vid)
+        p = Publish(topic, seal(self.identity, topic, body))
+        self.bytes_out += len(p.payload)
+        return [p]
+
+    def on_message(self, topic: str, payload: bytes) -> list[Publish]:
+        """React to one service message; what to publish. Refusals go to :attr:`refusals`.
+
+        Parameters
+        ----------
+        topic : str
+        payload : bytes
+        """
+        parts = topic.split("/")
+        if len(parts) != 6 or parts[1] != "secagg" or parts[4:] != ["to", self.vid]:
+            return []
+        try:
+            key = (int(parts[2]), int(parts[3]))
+            msg = _json(payload, "round message")
+            return self._step(key, msg)
+        except (MessageError, ParameterError, ValueError) as err:
+            self.refusals.append(f"{topic}: {err}")
+            return []
+
+    def _step(self, key: tuple[int, int], msg: dict) -> list[Publish]:
+        kind = msg.get("type")
+        if kind == "invite":
+            if key not in self.inputs:
+                raise MessageError(f"invited to round {key} of a segment it has no measurement of")
+            if key in self.rounds:
+                raise MessageError(f"a second invite to round {key} (ignored)")
+            pid = int(msg.get("id", 0))
+            v = SecAggVehicle(pid, self.identity, self.trust, self.spec, self.ledger)
+            self.rounds[key] = v
+            root = None if self._root is None else self._root(*key)
+            return self._send(key, "advert", v.advertise(session_id(*key), root=root))
+        if key not in self.rounds:
+            raise MessageError(f"{kind} for round {key} it was not invited to")
+        v = self.rounds[key]
+        if kind == "roster":
+            sealed, com = v.share_keys(_int_map(msg.get("adverts"), "roster"))
+            body = json.dumps({"sealed": {str(j): _b64(c) for j, c in sealed.items()}, "commitments": _b64(com)})
+            return self._send(key, "shares", body.encode())
+        if kind == "dealt":
+            if key in self.dealt:
+                raise MessageError(f"dealt shares of round {key} again (ignored)")
+            self.dealt[key] = (_int_map(msg.get("sealed"), "dealt.sealed"),
+                               _int_map(msg.get("commitments"), "dealt.commitments"))
+            return self._send(key, "masked", encode(v.mask_input(self.inputs[key], key)))
+        if kind == "survivors":
+            ids = msg.get("ids")
+            if not isinstance(ids, list) or not all(isinstance(i, int) for i in ids):
+                raise MessageError("survivors: expected a list of protocol ids")
+            return self._send(key, "sign", v.sign_survivors(ids))
+        if kind == "signatures":
+            sealed, coms = self.dealt[key]
+            return self._send(key, "reveal", encode(v.reveal(sealed, coms, _int_map(msg.get("signatures"),
+                                                                                  "signatures"))))
+        raise MessageError(f"unknown round message type {kind!r}")
+
+
+def pump(coordinator: RoundCoordinator, svc, agents: dict, clients: dict, *, limit: int = 1000,
+         offline=()) -> int:
+    """Deliver messages both ways over the transport until none move (``offline`` vehicles receive nothing).
+
+    Parameters
+    ----------
+    coordinator : RoundCoordinator
+    svc : Transport
+        The service's client, subscribed to ``coordinator.topics.from_vehicles``.
+    agents, clients : dict of str
+        Vehicle id -> :class:`RoundAgent` / its transport client (subscribed to ``agent.subscription``).
+    limit : int
+        Most passes.
+    offline : iterable of str
+        Vehicles that are gone (a killed process): their queues are drained unread.
+
+    Returns
+    -------
+    int
+        Messages delivered.
+    """
+    gone, moved_total = set(offline), 0
+    for _ in range(limit):
+        moved = 0
+        while (m := svc.receive(0.0)) is not None:
+            for p in coordinator.handle(*m):
+                svc.publish(p.topic, p.payload, p.retain)
+            moved += 1
+        for vid, car in clients.items():
+            while (m := car.receive(0.0)) is not None:
+                moved += 1
+                if vid in gone:
+                    continue
+                for p in agents[vid].on_message(*m):
+                    car.publish(p.topic, p.payload, p.retain)
+        moved_total += moved
+        if not moved:
+            return moved_total
+    raise ParameterError(f"the round did not settle within {limit} passes")
+
+
+def run_round(coordinator: RoundCoordinator, agents: dict, roster: list, *, offline=(), timeouts: int = 6):
+    """Open a round over a fresh :class:`~roadcollab.network.transport.MemoryBroker` and run it to its end.
+
+    Parameters
+    ----------
+    coordinator : RoundCoordinator
+    agents : dict of str to RoundAgent
+        Vehicle id -> agent (vehicles of ``roster`` absent here never answer).
+    roster : list of str
+        Vehicles invited.
+    offline : iterable of str
+        Vehicles gone: they receive nothing.
+    timeouts : int
+        Service timeouts at most (each closes the current phase with what arrived).
+
+    Returns
+    -------
+    MemoryBroker
+        The transport (``bytes_published``).
+    """
+    broker = MemoryBroker()
+    svc = broker.client()
+    svc.subscribe(coordinator.topics.from_vehicles)
+    clients = {}
+    for vid, a in agents.items():
+        clients[vid] = broker.client()
+        clients[vid].subscribe(a.subscription)
+    for p in coordinator.open(list(roster)):
+        svc.publish(p.topic, p.payload)
+    for _ in range(timeouts):
+        pump(coordinator, svc, agents, clients, offline=offline)
+        if coordinator.phase in ("finished", "aborted"):
+            break
+        for p in coordinator.advance():
+            svc.publish(p.topic, p.payload)
+    return broker
+
+
+def clip_mean(zs, spec: SecAggSpec) -> np.ndarray:
+    """The plain mean of the clipped inputs, m/s (what the round's revealed average must equal).
+
+    Parameters
+    ----------
+    zs : iterable of (L, 2) array_like
+        Inputs, m/s.
+    spec : SecAggSpec
+        Its ``clip``.
+
+    Returns
+    -------
+    (L, 2) ndarray
+    """
+    return np.mean([np.clip(np.asarray(z, float), -spec.clip, spec.clip) for z in zs], axis=0)
