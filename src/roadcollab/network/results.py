@@ -10,6 +10,8 @@ from __future__ import annotations
 
 import re
 from dataclasses import dataclass
+from types import SimpleNamespace
+from typing import Any
 
 import numpy as np
 
@@ -51,6 +53,19 @@ class NetworkResults:
     fused: np.ndarray
     coverage: np.ndarray
     received_s: dict
+
+    def fleet_view(self) -> Any:   # duck-typed: the FleetEstimates attributes those functions read
+        """The attributes :func:`~roadcollab.experiments.fleet_estimation.fused_iri` and
+        :func:`~roadcollab.experiments.fleet_estimation.find_fleet_anomalies` read (fused elevation, grid,
+        each vehicle's mean speed), as a :class:`~roadcollab.experiments.fleet_estimation.FleetEstimates`
+        would give them.
+
+        Returns
+        -------
+        types.SimpleNamespace
+        """
+        return SimpleNamespace(fused=self.fused, position=self.position, spacing=self.spacing,
+                               drives=[SimpleNamespace(speed=float(h["speed_mps"])) for _, h in self.vehicles])
 
 
 def _natural(vid: str) -> tuple:

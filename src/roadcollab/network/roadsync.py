@@ -23,7 +23,6 @@ What is written
 from __future__ import annotations
 
 import time
-from types import SimpleNamespace
 
 import numpy as np
 
@@ -35,12 +34,6 @@ from .results import results_from_store
 from .store import ServiceStore
 
 __all__ = ["RoadSync"]
-
-
-def _view(r, fused):
-    """The attributes fused_iri / find_fleet_anomalies read (as reporting.network_report builds it)."""
-    return SimpleNamespace(fused=fused, position=r.position, spacing=r.spacing,
-                           drives=[SimpleNamespace(speed=float(h["speed_mps"])) for _, h in r.vehicles])
 
 
 class RoadSync:
@@ -93,10 +86,11 @@ class RoadSync:
             r = results_from_store(self.service_store)
         except ParameterError:                 # nothing applied yet
             return 0, 0
-        iri, _ = fused_iri(_view(r, r.fused), self.segment_length)
+        view = r.fleet_view()
+        iri, _ = fused_iri(view, self.segment_length)
         n_seg = 0 if iri is None else self._segments(r, iri)
         try:
-            anomalies = find_fleet_anomalies(_view(r, r.fused))
+            anomalies = find_fleet_anomalies(view)
         except ParameterError:                 # stretches too short for the detector: none yet
             anomalies = []
         n_an = self._anomalies(r, anomalies)

@@ -10,7 +10,6 @@
 from __future__ import annotations
 
 from pathlib import Path
-from types import SimpleNamespace
 
 
 from ..errors import ParameterError
@@ -55,9 +54,7 @@ def write_network_results(r: NetworkResults, out, *, command: str, segment_lengt
                     [r.position] + [series for _, series in named])
     write_final_estimate(out / "final_estimate.csv", r.position, r.fused, r.elevation["collaborative"][-1],
                          r.coverage)
-    # The fleet_estimation functions read these attributes only (fused elevation, grid, mean speed).
-    view = SimpleNamespace(fused=r.fused, position=r.position, spacing=r.spacing,
-                           drives=[SimpleNamespace(speed=float(h["speed_mps"])) for _, h in r.vehicles])
+    view = r.fleet_view()
     notes = []
     iri, iri_note = fused_iri(view, segment_length)
     if iri_note:
