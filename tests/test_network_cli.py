@@ -22,7 +22,8 @@ def test_enroll_writes_a_fleet_and_never_replaces_one(tmp_path, capsys):
     for f in ("vehicles/v2/broker.toml", "vehicles/v2/identity.key", "broker/mosquitto_passwd", "broker/amqtt_passwd"):
         assert stat.S_IMODE((fleet / f).stat().st_mode) == 0o600, f
     acl = (fleet / "broker" / "mosquitto_acl").read_text()
-    assert "user v2\ntopic write rc/fleet/v/v2/#\ntopic read rc/fleet/ack/v2\n" in acl
+    assert ("user v2\ntopic write rc/fleet/v/v2/#\ntopic write rc/fleet/secagg/+/+/+/v2\n"
+            "topic read rc/fleet/ack/v2\ntopic read rc/fleet/seg/+/waiting\ntopic read rc/fleet/secagg/+/+/to/v2\n") in acl
     key = (fleet / "authority" / "authority.key").read_bytes()
     assert main(["enroll", "--fleet", str(fleet), "--vehicles", "3"]) == 2
     assert "already holds a fleet" in capsys.readouterr().err

@@ -8,6 +8,9 @@ from ._arguments import count, help_range, ranged
 from ._common import GRID_STEP, MAX_VEHICLES, SEGMENT_LENGTH, command_parser
 
 _VEHICLES = count("number of vehicles", 1, MAX_VEHICLES)
+_ROUND = count("vehicles per round", 2, 1000)
+_CLIP = ranged("clip", 1e-6, 1e3, "m")
+_COLLUDERS = count("colluders", 0, 999)
 _MIN_SPEED = ranged("slowest speed", 0.5, 60, "m/s")
 
 __all__ = ["NAME", "add_parser", "run"]
@@ -44,6 +47,21 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
                    help=f"segment length (default 100; {help_range(SEGMENT_LENGTH)})")
     p.add_argument("--grid-step", type=GRID_STEP, default=0.05, metavar="M",
                    help=f"step of the distance grid (default 0.05, as estimate; {help_range(GRID_STEP)})")
+    g = p.add_argument_group("fusion (fixed for the fleet: the service does not choose it)")
+    g.add_argument("--aggregation", choices=("clear", "secure"), default="clear",
+                   help="clear: the service sums the inversions it receives; secure: vehicles send the next "
+                        "vehicle's message sealed to the fleet and fuse each segment by secure aggregation, so "
+                        "the service learns only sums (default clear)")
+    g.add_argument("--round-size", type=_ROUND, default=None, metavar="N",
+                   help=f"secure: vehicles invited to a round (default K; at most 2T-C-1; {help_range(_ROUND)})")
+    g.add_argument("--min-inputs", type=_ROUND, default=5, metavar="K",
+                   help=f"secure: fewest inputs whose sum is revealed (default 5; {help_range(_ROUND)})")
+    g.add_argument("--threshold", type=_ROUND, default=None, metavar="T",
+                   help=f"secure: Shamir threshold, T <= K (default K; {help_range(_ROUND)})")
+    g.add_argument("--max-colluders", type=_COLLUDERS, default=0, metavar="C",
+                   help=f"secure: vehicles that may collude with the service, C < T (default 0; {help_range(_COLLUDERS)})")
+    g.add_argument("--clip", type=_CLIP, default=1.0, metavar="M",
+                   help=f"secure: public bound on every elevation in a round, m (default 1; {help_range(_CLIP)})")
     return p
 
 
@@ -60,12 +78,23 @@ def run(args: argparse.Namespace, command_line: str) -> int:
     int
         0.
     """
+    from ..errors import ParameterError
+    from ..network.aggregation import AggregationPolicy
     from ..network.fleetdir import enroll
     from ..network.plan import RoadPlan
     from ..wire.identity import check_id
 
     plan = RoadPlan(fleet_id=check_id("--fleet-id", args.fleet_id), spacing=args.grid_step,
                     segment_length=args.segment_length, min_speed=args.min_speed)
-    ids = enroll(args.fleet, args.vehicles, plan)
-    print(f"enrolled fleet {plan.fleet_id!r} with {len(ids)} vehicles ({ids[0]}..{ids[-1]}) in {args.fleet}")
+    k = args.min_inputs
+    t = k if args.threshold is None else args.threshold
+    try:
+        policy = AggregationPolicy(mode=args.aggregation, round_size=k if args.round_size is None else args.round_size,
+                                   min_inputs=k, threshold=t, max_colluders=args.max_colluders, clip_m=args.clip)
+    except ParameterError as err:
+        raise ParameterError(f"--round-size/--min-inputs/--threshold/--max-colluders: {err}") from None
+    ids = enroll(args.fleet, args.vehicles, plan, policy)
+    how = (f"; secure aggregation, rounds of {policy.round_size} (k={k}, t={t}, c={policy.max_colluders})"
+           if policy.secure else "")
+    print(f"enrolled fleet {plan.fleet_id!r} with {len(ids)} vehicles ({ids[0]}..{ids[-1]}) in {args.fleet}{how}")
     return 0

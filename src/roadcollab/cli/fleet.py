@@ -58,6 +58,7 @@ def run(args: argparse.Namespace, command_line: str) -> int:
     """
 
     from ..errors import ParameterError
+    from ..network.fleetdir import load_aggregation
     from ..network.mqtt_client import parse_broker_url
 
     parse_broker_url(args.broker)
@@ -74,6 +75,21 @@ def run(args: argparse.Namespace, command_line: str) -> int:
 
     if args.concurrent:
         procs = [subprocess.Popen(cmd(k, d)) for k, d in enumerate(args.drive)]
+        codes = [p.wait(timeout=args.timeout + 60) for p in procs]
+    elif load_aggregation(args.fleet).secure:
+        # A round needs its vehicles online together: start the next vehicle once this one's segments are
+        # acknowledged (its line "... contributed"), and keep them all running until their rounds close.
+        procs = []
+        for k, d in enumerate(args.drive):
+            p = subprocess.Popen(cmd(k, d), stdout=subprocess.PIPE, text=True, bufsize=1)
+            procs.append(p)
+            for line in p.stdout:     # ends at the line, or when the vehicle exits
+                print(line, end="", flush=True)
+                if " contributed" in line:
+                    break
+        for p in procs:
+            for line in p.stdout:
+                print(line, end="", flush=True)
         codes = [p.wait(timeout=args.timeout + 60) for p in procs]
     else:
         codes = []

@@ -8,7 +8,11 @@ import signal
 import threading
 from pathlib import Path
 
+from ._arguments import help_range, ranged
 from ._common import command_parser
+
+_ROUND_TIMEOUT = ranged("round timeout", 0.1, 3600, "s")
+_ROUND_WAIT = ranged("round wait", 0.0, 86_400, "s")
 
 __all__ = ["NAME", "add_parser", "run"]
 
@@ -52,6 +56,12 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
     p.add_argument("--map", nargs="?", const="127.0.0.1:8765", default=None, metavar="HOST:PORT",
                    help="serve the live map of --roads (the page 'roadcollab map' writes, redrawn as segments "
                         "finish) on HOST:PORT (default with no value 127.0.0.1:8765, loopback only)")
+    p.add_argument("--round-timeout", type=_ROUND_TIMEOUT, default=20.0, metavar="S",
+                   help="secure aggregation: close a round's phase with the vehicles that answered after S seconds "
+                        f"(default 20; {help_range(_ROUND_TIMEOUT)})")
+    p.add_argument("--round-wait", type=_ROUND_WAIT, default=60.0, metavar="S",
+                   help="secure aggregation: open a round with fewer than the fleet's round size (at least k) when "
+                        f"a vehicle has waited S seconds (default 60; {help_range(_ROUND_WAIT)})")
     p.add_argument("--quiet", action="store_true", help="print only the start and stop lines")
     return p
 
@@ -99,6 +109,30 @@ def _road_outputs(args, store, command_line: str, log, map_at):
     return sync, live, on_fused
 
 
+def _service(args, store, trust, policy, plan, command_line: str, map_at):
+    """The service with its event log, road outputs and (secure aggregation) rounds."""
+    from ..network.service import Service
+
+    def log(line: str) -> None:
+        """One line per event, with the running counts (vehicles seen, segments done, rounds, refusals)."""
+        if not args.quiet:
+            st = store.status()
+            r = st["rounds"]
+            rounds = (f", rounds {r.get('finished', 0)} finished/{r.get('open', 0)} open/{r.get('aborted', 0)} "
+                      f"aborted" if policy.secure else "")
+            print(f"{line}  [{st['vehicles']} vehicles, {st['segments']} segments, {st['contributions']} "
+                  f"contributions{rounds}, {sum(st['refused'].values())} refused]", flush=True)
+
+    sync, live, on_fused = _road_outputs(args, store, command_line, log, map_at)
+    rounds = None
+    if policy.secure:
+        from ..network.rounds import SecureRounds
+
+        rounds = SecureRounds(store, trust, policy, f"rc/{plan.fleet_id}", log=log,
+                              phase_timeout_s=args.round_timeout, round_wait_s=args.round_wait)
+    return Service(store, trust, log=log, on_fused=on_fused, rounds=rounds), sync, live
+
+
 def run(args: argparse.Namespace, command_line: str) -> int:
     """Serve until SIGINT/SIGTERM.
 
@@ -114,10 +148,9 @@ def run(args: argparse.Namespace, command_line: str) -> int:
     """
 
     from ..network.brokers import EmbeddedBroker, parse_listen
-    from ..network.fleetdir import load_login, load_plan, load_trust
+    from ..network.fleetdir import load_aggregation, load_login, load_plan, load_trust
     from ..network.mqtt_client import MqttClient
     from ..network.mqtt_run import run_service
-    from ..network.service import Service
     from ..network.pgstore import open_service_store
 
     if args.map is not None and args.roads is None:
@@ -125,19 +158,16 @@ def run(args: argparse.Namespace, command_line: str) -> int:
 
         raise ParameterError("--map: needs --roads URL (the live map shows the road store)")
     map_at = parse_listen(args.map, "--map") if args.map is not None else None
-    plan, trust = load_plan(args.fleet), load_trust(args.fleet)
+    plan, trust, policy = load_plan(args.fleet), load_trust(args.fleet), load_aggregation(args.fleet)
+    if policy.secure and args.shared:
+        from ..errors import ParameterError
+
+        raise ParameterError("--shared: a secure-aggregation fleet keeps each open round in one service; run one "
+                             "serve for it")
     login = load_login(Path(args.fleet) / "service" / "broker.toml")
     store = open_service_store(args.store, plan)
 
-    def log(line: str) -> None:
-        """One line per event, with the running counts (vehicles seen, segments done, refusals)."""
-        if not args.quiet:
-            st = store.status()
-            print(f"{line}  [{st['vehicles']} vehicles, {st['segments']} segments, {st['contributions']} "
-                  f"contributions, {sum(st['refused'].values())} refused]", flush=True)
-
-    sync, live, on_fused = _road_outputs(args, store, command_line, log, map_at)
-    service = Service(store, trust, log=log, on_fused=on_fused)
+    service, sync, live = _service(args, store, trust, policy, plan, command_line, map_at)
     broker = None
     if args.broker is None:
         host, port = parse_listen(args.listen)
@@ -149,14 +179,16 @@ def run(args: argparse.Namespace, command_line: str) -> int:
     for sig in (signal.SIGINT, signal.SIGTERM):
         signal.signal(sig, lambda *_: stop.set())
     client = MqttClient(url, login, f"rc-service-{plan.fleet_id}" + (f"-{os.getpid()}" if args.shared else ""), on_connect=republish.set)
-    filt = service.topics.from_vehicles
-    client.subscribe(f"$share/{plan.fleet_id}/{filt}" if args.shared else filt)
+    for filt in service.subscriptions:
+        client.subscribe(f"$share/{plan.fleet_id}/{filt}" if args.shared else filt)
     try:
         client.connect()
         st = store.status()
+        how = (f"; secure aggregation, rounds of {policy.round_size} (k={policy.min_inputs}, t={policy.threshold})"
+               if policy.secure else "")
         print(f"serving fleet {plan.fleet_id!r} on {url}: store {args.store} holds {st['contributions']} "
-              f"contributions from {st['vehicles']} vehicles", flush=True)
-        handled = run_service(service, client, stop, republish, log=log)
+              f"contributions from {st['vehicles']} vehicles{how}", flush=True)
+        handled = run_service(service, client, stop, republish)
     finally:
         client.close()
         if live is not None:

@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import argparse
+import os
+import signal
 import threading
 from pathlib import Path
 
@@ -44,6 +46,25 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
     return p
 
 
+def _die_after_shares(rounds) -> None:
+    """Fault injection for the tests (``ROADCOLLAB_TEST_DIE_AFTER=shares``): after dealing its shares in
+    a round the vehicle answers nothing more there, and 1 s after it dealt them in the rounds of all its
+    segments the process kills itself (SIGKILL): the dropout secure aggregation must survive."""
+    inner, dealt = rounds.on_message, set()
+
+    def on_message(topic, payload):
+        if bytes(payload[:40]).find(b'"type":"') >= 0 and any(
+                f'"type":"{k}"'.encode() in bytes(payload[:40]) for k in ("dealt", "survivors", "signatures")):
+            return []
+        out = inner(topic, payload)
+        dealt.update(p.topic.split("/secagg/")[1].split("/")[0] for p in out if "/shares/" in p.topic)
+        if out and len(dealt) == len(rounds.inputs):
+            threading.Timer(1.0, lambda: os.kill(os.getpid(), signal.SIGKILL)).start()
+        return out
+
+    rounds.on_message = on_message
+
+
 def run(args: argparse.Namespace, command_line: str) -> int:
     """Run one vehicle to its last acknowledgement.
 
@@ -63,7 +84,7 @@ def run(args: argparse.Namespace, command_line: str) -> int:
     from ..io.drives import load_drive
     from ..network.agent import VehicleAgent
     from ..network.engine import VehicleEngine
-    from ..network.fleetdir import load_login, load_plan
+    from ..network.fleetdir import load_aggregation, load_login, load_plan
     from ..network.mqtt_client import MqttClient, parse_broker_url
     from ..network.mqtt_run import run_vehicle
     from ..wire.identity import FleetTrust, VehicleIdentity, check_id
@@ -79,22 +100,42 @@ def run(args: argparse.Namespace, command_line: str) -> int:
     drive, cleaning = clean_drive(load_drive(args.drive, limits=file_limits(args)))
     if cleaning.n_spikes:
         print(f"{args.id}: {cleaning.n_spikes} isolated spikes repaired", flush=True)
+    policy = load_aggregation(args.fleet)
+    rounds = relay = None
+    if policy.secure:
+        from ..network.relaykey import RelayKey
+        from ..network.secround_agent import RoundAgent
+        from ..privacy.secagg_store import SessionLedger
+
+        relay = RelayKey.load(folder / "relay.key")
+        # One input per (segment, epoch) across restarts: the ledger lives with the vehicle's identity.
+        rounds = RoundAgent(identity, trust, policy.spec, SessionLedger(folder / "secagg_ledger.sqlite"),
+                            f"rc/{plan.fleet_id}", {})
+        if os.environ.get("ROADCOLLAB_TEST_DIE_AFTER") == "shares":
+            _die_after_shares(rounds)
     agent = VehicleAgent(VehicleEngine(drive, plan, index=int(args.id[1:]) - 1 if args.id[1:].isdigit() else 0),
-                         identity, trust)
+                         identity, trust, rounds=rounds, relay_key=relay)
+
+    def contributed() -> None:
+        if policy.secure:     # 'roadcollab fleet' starts the next vehicle on this line
+            print(f"{args.id}: {len(agent.segments)} segments contributed; in their aggregation rounds", flush=True)
     reconnected = threading.Event()
     client = MqttClient(args.broker, login, f"rc-{plan.fleet_id}-{args.id}", on_connect=reconnected.set)
     try:
         client.connect(timeout=args.timeout)
         reconnected.clear()
-        ok = run_vehicle(agent, client, timeout=args.timeout, reconnected=reconnected)
+        ok = run_vehicle(agent, client, timeout=args.timeout, reconnected=reconnected, on_contributed=contributed)
     finally:
         client.close()
     refused = sorted(s for s, o in agent.outcomes.items() if o == "conflict")
     note = f"; dropped {len(agent.dropped)} waiting messages that did not verify" if agent.dropped else ""
     if not ok:
-        print(f"{args.id}: timeout after {args.timeout:g} s with segments {sorted(agent.pending)} unacknowledged"
-              f"{note}", flush=True)
+        left = (f"segments {sorted(agent.pending)} unacknowledged" if agent.pending or not agent.started else
+                f"no aggregation round closed with its input on segments {agent.rounds_left}")
+        print(f"{args.id}: timeout after {args.timeout:g} s with {left}{note}", flush=True)
         return 3
+    if rounds is not None:
+        note += f"; {len(rounds.closed)} aggregation rounds closed"
     print(f"{args.id}: {len(agent.segments)} segments done ({client.bytes_out} bytes sent"
           f"{', conflicts on ' + str(refused) if refused else ''}){note}", flush=True)
     return 0

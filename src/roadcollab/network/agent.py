@@ -6,15 +6,22 @@ guard: a valid signature of a fleet vehicle on that segment's topic, a well-form
 that segment; anything else is dropped and Algorithm 1 runs without it there) -> runs the engine ->
 publishes one contribution per segment -> done when every segment is acknowledged. Unacknowledged
 messages are sent again by :meth:`VehicleAgent.resend` (the service applies each once).
+
+Under secure aggregation (a :class:`~roadcollab.network.secround_agent.RoundAgent` given as ``rounds``)
+the vehicle also takes part in each of its segments' rounds with its inversion on that segment
+(:func:`~roadcollab.network.aggregation.segment_input`); it is :attr:`~VehicleAgent.done` when every
+segment is acknowledged and a round has closed with its input in it (:attr:`~VehicleAgent.contributed`
+says only the first).
 """
 
 from __future__ import annotations
 
 from ..errors import MessageError, ParameterError
 from ..wire.identity import FleetTrust, VehicleIdentity
+from .aggregation import segment_input
 from .engine import VehicleEngine
 from .messages import Topics, decode_contribution, decode_json, encode_contribution, encode_json, \
-    open_from, seal
+    encode_sealed_relay, open_from, open_sealed_relay, seal
 from .service import Publish, decode_hello_ack
 
 __all__ = ["VehicleAgent"]
@@ -31,10 +38,18 @@ class VehicleAgent:
         Its key and certificate.
     trust : FleetTrust
         The fleet's trust anchor (to check the waiting messages).
+    rounds : RoundAgent, optional
+        Its side of the secure-aggregation rounds (module docstring); default: in the clear.
+    relay_key : RelayKey, optional
+        The fleet's relay key; required with ``rounds`` (the waiting messages are sealed to it).
     """
 
-    def __init__(self, engine: VehicleEngine, identity: VehicleIdentity, trust: FleetTrust) -> None:
-        self.engine, self.identity, self.trust = engine, identity, trust
+    def __init__(self, engine: VehicleEngine, identity: VehicleIdentity, trust: FleetTrust, *, rounds=None,
+                 relay_key=None) -> None:
+        if rounds is not None and relay_key is None:
+            raise ParameterError("secure aggregation needs the fleet's relay key (relay.key in the vehicle folder)")
+        self.engine, self.identity, self.trust, self.rounds = engine, identity, trust, rounds
+        self.relay_key = relay_key
         self.vid = identity.vehicle_id
         self.topics = Topics(engine.plan.fleet_id)
         self.segments = engine.segments
@@ -46,12 +61,24 @@ class VehicleAgent:
     @property
     def subscriptions(self) -> list[str]:
         """Topics to subscribe to before :meth:`start`."""
-        return [self.topics.ack(self.vid)]
+        return [self.topics.ack(self.vid)] + ([self.rounds.subscription] if self.rounds is not None else [])
+
+    @property
+    def contributed(self) -> bool:
+        """Every segment has an outcome from the service."""
+        return self.started and not self.pending and set(self.outcomes) >= set(self.segments)
+
+    @property
+    def rounds_left(self) -> list[int]:
+        """Segments whose round has not yet closed with this vehicle's input (secure aggregation)."""
+        if self.rounds is None:
+            return []
+        return [s for s in sorted(self.rounds.inputs) if not self.rounds.finished(s)]
 
     @property
     def done(self) -> bool:
-        """Every segment has an outcome from the service."""
-        return self.started and not self.pending and set(self.outcomes) >= set(self.segments)
+        """Every segment acknowledged, and (secure aggregation) every round closed with its input."""
+        return self.contributed and not self.rounds_left
 
     def hello(self) -> Publish:
         d = self.engine.drive
@@ -71,7 +98,10 @@ class VehicleAgent:
 
     def _check_waiting(self, s: int, sender: str, envelope: bytes):
         topic = self.topics.segment(sender, s)
-        return decode_contribution(open_from(envelope, self.trust, topic, sender), self.engine.plan, s)
+        body = open_from(envelope, self.trust, topic, sender)
+        if self.rounds is not None:
+            return open_sealed_relay(body, self.relay_key, topic, self.engine.plan, s)
+        return decode_contribution(body, self.engine.plan, s)
 
     def on_message(self, topic: str, payload: bytes) -> list[Publish]:
         """React to a message from the service; what to publish. Malformed replies are dropped.
@@ -81,6 +111,8 @@ class VehicleAgent:
         topic : str
         payload : bytes
         """
+        if self.rounds is not None and topic != self.topics.ack(self.vid):
+            return self.rounds.on_message(topic, payload)
         if topic != self.topics.ack(self.vid):
             return []
         try:
@@ -105,10 +137,13 @@ class VehicleAgent:
             self.outcomes[s] = "accepted"
         out = []
         for c in self.engine.contributions(checked):
+            if self.rounds is not None and c.segment not in self.rounds.inputs:
+                self.rounds.inputs[c.segment] = segment_input(self.engine.plan, c)
             if c.segment in self.outcomes:
                 continue
             t = self.topics.segment(self.vid, c.segment)
-            self.pending[c.segment] = Publish(t, seal(self.identity, t, encode_contribution(c)))
+            body = encode_contribution(c) if self.rounds is None else encode_sealed_relay(c, self.relay_key, t)
+            self.pending[c.segment] = Publish(t, seal(self.identity, t, body))
             out.append(self.pending[c.segment])
         for s in self.segments:                              # covered by fewer than one finite point
             if s not in self.pending and s not in self.outcomes:

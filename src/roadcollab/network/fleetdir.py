@@ -2,9 +2,10 @@
 
 Layout written by :func:`enroll` (``roadcollab enroll``)::
 
-    DIR/fleet.toml                    [plan] of the fleet (RoadPlan)
+    DIR/fleet.toml                    [plan] of the fleet (RoadPlan), [aggregation] (AggregationPolicy)
     DIR/authority/authority.key       Ed25519 authority key (0600) and trust.toml (the trust anchor)
-    DIR/vehicles/vK/                  identity.key (0600), certificate.bin, trust.toml, broker.toml
+    DIR/vehicles/vK/                  identity.key (0600), certificate.bin, trust.toml, broker.toml,
+                                      relay.key (0600, the fleet's relay key: secure aggregation)
     DIR/service/broker.toml           the service's broker login
     DIR/broker/amqtt_passwd           user:argon2 hash (the embedded broker)
     DIR/broker/mosquitto_passwd       user:$7$ PBKDF2-SHA512 hash (Mosquitto's own format)
@@ -12,8 +13,10 @@ Layout written by :func:`enroll` (``roadcollab enroll``)::
     DIR/broker/acl.json               the same rules for the embedded broker
 
 ``broker.toml`` holds ``username`` and ``password`` (mode 0600), so any MQTT client can act as that
-vehicle. ACL: vehicle ``vK`` may publish only under ``rc/F/v/vK/`` and read only ``rc/F/ack/vK`` and the
-waiting messages; the service reads every vehicle topic and writes acks and waiting messages.
+vehicle. ACL: vehicle ``vK`` may publish only under ``rc/F/v/vK/`` and on its own round topics
+``rc/F/secagg/+/+/+/vK``, and read only ``rc/F/ack/vK``, the waiting messages and the round messages
+addressed to it (``rc/F/secagg/+/+/to/vK``); the service reads every vehicle topic and writes acks,
+waiting messages and round messages.
 """
 
 from __future__ import annotations
@@ -28,9 +31,12 @@ from pathlib import Path
 
 from ..errors import FileFormatError, ParameterError
 from ..wire.identity import FleetAuthority, FleetTrust, VehicleIdentity, _read_toml, check_id
+from .aggregation import AggregationPolicy
 from .plan import RoadPlan
+from .relaykey import RelayKey
 
-__all__ = ["Login", "enroll", "load_plan", "load_login", "load_trust", "acl_rules", "SERVICE_USER"]
+__all__ = ["Login", "enroll", "load_plan", "load_aggregation", "load_login", "load_trust", "acl_rules",
+           "SERVICE_USER"]
 
 SERVICE_USER = "service"
 
@@ -74,11 +80,11 @@ def acl_rules(fleet_id: str, vehicles: list[str]) -> dict:
         Vehicle ids.
     """
     root = f"rc/{fleet_id}"
-    pub = {SERVICE_USER: [f"{root}/ack/#", f"{root}/seg/#"]}
+    pub = {SERVICE_USER: [f"{root}/ack/#", f"{root}/seg/#", f"{root}/secagg/+/+/to/+"]}
     sub = {SERVICE_USER: [f"{root}/#", f"$share/{fleet_id}/{root}/#"]}
     for v in vehicles:
-        pub[v] = [f"{root}/v/{v}/#"]
-        sub[v] = [f"{root}/ack/{v}", f"{root}/seg/+/waiting"]
+        pub[v] = [f"{root}/v/{v}/#", f"{root}/secagg/+/+/+/{v}"]
+        sub[v] = [f"{root}/ack/{v}", f"{root}/seg/+/waiting", f"{root}/secagg/+/+/to/{v}"]
     return {"publish": pub, "subscribe": sub}
 
 
@@ -92,7 +98,7 @@ def _mosquitto_acl(rules: dict) -> str:
     return "\n".join(lines)
 
 
-def enroll(folder, n_vehicles: int, plan: RoadPlan) -> list[str]:
+def enroll(folder, n_vehicles: int, plan: RoadPlan, aggregation: AggregationPolicy | None = None) -> list[str]:
     """Create a fleet folder (module docstring) with vehicles ``v1..vN``.
 
     Parameters
@@ -102,6 +108,8 @@ def enroll(folder, n_vehicles: int, plan: RoadPlan) -> list[str]:
     n_vehicles : int
         1..10000.
     plan : RoadPlan
+    aggregation : AggregationPolicy, optional
+        Default: in the clear.
 
     Returns
     -------
@@ -126,16 +134,23 @@ def enroll(folder, n_vehicles: int, plan: RoadPlan) -> list[str]:
     folder.mkdir(parents=True, exist_ok=True)
     auth = FleetAuthority.generate(plan.fleet_id)
     auth.save(folder / "authority")
+    aggregation = AggregationPolicy() if aggregation is None else aggregation
+    if not isinstance(aggregation, AggregationPolicy):
+        raise ParameterError("aggregation must be an AggregationPolicy")
     lines = "\n".join(f"{k} = {json.dumps(v)}" for k, v in plan.to_dict().items())
-    (folder / "fleet.toml").write_text(f"[plan]\n{lines}\n")
+    agg = "\n".join(f"{k} = {json.dumps(v)}" for k, v in aggregation.to_dict().items())
+    (folder / "fleet.toml").write_text(f"[plan]\n{lines}\n\n[aggregation]\n{agg}\n")
     ids = [f"v{k}" for k in range(1, n_vehicles + 1)]
     logins = {SERVICE_USER: secrets.token_urlsafe(24)}
     (folder / "service").mkdir()
+    relay = RelayKey.generate() if aggregation.secure else None
     for v in ids:
         logins[v] = secrets.token_urlsafe(24)
         d = folder / "vehicles" / v
         VehicleIdentity.enroll(auth, v).save(d)
         auth.trust().save(d / "trust.toml")
+        if relay is not None:     # every vehicle, never the service (network/relaykey.py)
+            relay.save(d / "relay.key")
     for user, pw in logins.items():
         d = folder / ("service" if user == SERVICE_USER else f"vehicles/{user}")
         _write_secret(d / "broker.toml", f'username = "{user}"\npassword = "{pw}"\n')
@@ -161,6 +176,21 @@ def load_plan(folder) -> RoadPlan:
     if not path.is_file():
         raise ParameterError(f"--fleet {folder}: no fleet.toml (create the fleet with 'roadcollab enroll')")
     return RoadPlan.from_dict(_read_toml(path).get("plan"), str(path))
+
+
+def load_aggregation(folder) -> AggregationPolicy:
+    """The [aggregation] of ``folder/fleet.toml`` (in the clear when the table is absent: older fleets).
+
+    Parameters
+    ----------
+    folder : str or Path
+        The fleet folder.
+    """
+    path = Path(folder) / "fleet.toml"
+    if not path.is_file():
+        raise ParameterError(f"--fleet {folder}: no fleet.toml (create the fleet with 'roadcollab enroll')")
+    data = _read_toml(path).get("aggregation")
+    return AggregationPolicy() if data is None else AggregationPolicy.from_dict(data, str(path))
 
 
 def load_trust(folder) -> FleetTrust:

@@ -3,7 +3,9 @@
 The same :class:`~roadcollab.network.service.Service` and
 :class:`~roadcollab.network.agent.VehicleAgent` as the networked run, with a
 :class:`~roadcollab.network.transport.MemoryBroker` in place of MQTT; vehicles drive one after another
-(as ``estimate`` takes the drives), each to its last acknowledgement.
+(as ``estimate`` takes the drives), each to its last acknowledgement. Under secure aggregation every
+vehicle stays on the transport until its rounds close (the rounds need their rosters online together);
+a phase times out only when no message moves (``offline`` vehicles receive nothing: killed processes).
 """
 
 from __future__ import annotations
@@ -15,10 +17,15 @@ from ..experiments.config import ExperimentConfig
 from ..experiments.distance_maps import distance_grid
 from ..experiments.fleet_estimation import FleetEstimates
 from ..wire.identity import FleetAuthority, VehicleIdentity
+from ..privacy.secagg_store import SessionLedger
 from .agent import VehicleAgent
+from .aggregation import AggregationPolicy
 from .engine import VehicleEngine
 from .plan import RoadPlan
+from .relaykey import RelayKey
 from .results import results_from_store
+from .rounds import SecureRounds
+from .secround_agent import RoundAgent
 from .service import Service
 from .store import ServiceStore
 from .transport import MemoryBroker
@@ -43,8 +50,29 @@ def _pump(service: Service, svc, agent: VehicleAgent, car, limit: int) -> None:
     raise ParameterError(f"the in-memory run did not settle within {limit} rounds")
 
 
+def _pump_all(service: Service, svc, cars: dict, agents: dict, offline, limit: int) -> None:
+    """Deliver until nothing moves, over every vehicle (``offline`` ones drain their queue unread)."""
+    for _ in range(limit):
+        moved = False
+        while (m := svc.receive(0.0)) is not None:
+            for p in service.handle(*m):
+                svc.publish(p.topic, p.payload, p.retain)
+            moved = True
+        for vid, car in cars.items():
+            while (m := car.receive(0.0)) is not None:
+                moved = True
+                if vid in offline:
+                    continue
+                for p in agents[vid].on_message(*m):
+                    car.publish(p.topic, p.payload, p.retain)
+        if not moved:
+            return
+    raise ParameterError(f"the in-memory run did not settle within {limit} rounds")
+
+
 def run_in_memory(drives, plan: RoadPlan, *, store: ServiceStore | None = None, authority: FleetAuthority | None = None,
-                  on_fused=None) -> tuple[ServiceStore, MemoryBroker]:
+                  on_fused=None, aggregation: AggregationPolicy | None = None, offline=(),
+                  timeouts: int = 50) -> tuple[ServiceStore, MemoryBroker]:
     """Every drive through the service over the in-memory transport, in order.
 
     Parameters
@@ -58,6 +86,12 @@ def run_in_memory(drives, plan: RoadPlan, *, store: ServiceStore | None = None, 
         Default: a throwaway authority (the identities never leave the process).
     on_fused : callable, optional
         The service's hook (:class:`~roadcollab.network.service.Service`), e.g. a ``RoadSync``.
+    aggregation : AggregationPolicy, optional
+        Default: in the clear.
+    offline : iterable of str
+        Secure aggregation: vehicles that vanish once they have contributed (they answer no round message).
+    timeouts : int
+        Secure aggregation: service timeouts at most (each closes every open phase with what arrived).
 
     Returns
     -------
@@ -68,10 +102,17 @@ def run_in_memory(drives, plan: RoadPlan, *, store: ServiceStore | None = None, 
     """
     store = ServiceStore(":memory:", plan) if store is None else store
     authority = FleetAuthority.generate(plan.fleet_id) if authority is None else authority
-    service = Service(store, authority.trust(), on_fused=on_fused)
+    trust = authority.trust()
+    secure = aggregation is not None and aggregation.secure
+    rounds = SecureRounds(store, trust, aggregation, f"rc/{plan.fleet_id}", phase_timeout_s=0.0,
+                          round_wait_s=float("inf")) if secure else None
+    service = Service(store, trust, on_fused=on_fused, rounds=rounds)
     broker = MemoryBroker()
     svc = broker.client()
-    svc.subscribe(service.topics.from_vehicles)
+    for f in service.subscriptions:
+        svc.subscribe(f)
+    if secure:
+        return _run_secure(drives, plan, store, authority, service, broker, svc, aggregation, set(offline), timeouts)
     for j, d in enumerate(drives):
         agent = VehicleAgent(VehicleEngine(d, plan, index=j), VehicleIdentity.enroll(authority, f"v{j + 1}"),
                              authority.trust())
@@ -83,6 +124,35 @@ def run_in_memory(drives, plan: RoadPlan, *, store: ServiceStore | None = None, 
         _pump(service, svc, agent, car, limit=100)
         if not agent.done:
             raise ParameterError(f"vehicle v{j + 1}: segments left unacknowledged {sorted(agent.pending)}")
+    return store, broker
+
+
+def _run_secure(drives, plan, store, authority, service, broker, svc, policy, offline, timeouts):
+    trust = authority.trust()
+    relay = RelayKey.generate()
+    agents, cars = {}, {}
+    for j, d in enumerate(drives):
+        ident = VehicleIdentity.enroll(authority, f"v{j + 1}")
+        rounds = RoundAgent(ident, trust, policy.spec, SessionLedger(), f"rc/{plan.fleet_id}", {})
+        agent = VehicleAgent(VehicleEngine(d, plan, index=j), ident, trust, rounds=rounds, relay_key=relay)
+        car = broker.client()
+        for f in agent.subscriptions:
+            car.subscribe(f)
+        agents[agent.vid], cars[agent.vid] = agent, car
+        for p in agent.start():
+            car.publish(p.topic, p.payload, p.retain)
+        _pump_all(service, svc, cars, agents, set(), limit=1000)
+        if not agent.contributed:
+            raise ParameterError(f"vehicle {agent.vid}: segments left unacknowledged {sorted(agent.pending)}")
+    # Every vehicle has driven: a segment with fewer than round_size free vehicles opens with those left
+    # (at least k) at the next timeout, as a service whose round_wait_s has passed.
+    service.rounds.round_wait_s = 0.0
+    for _ in range(timeouts):   # rounds: each pass delivers everything, then one service timeout
+        _pump_all(service, svc, cars, agents, offline, limit=1000)
+        if all(a.done for v, a in agents.items() if v not in offline) and not service.rounds.active:
+            break
+        for p in service.tick():
+            svc.publish(p.topic, p.payload, p.retain)
     return store, broker
 
 

@@ -14,6 +14,12 @@ not verify on another topic or under another vehicle's certificate. Contribution
 (little-endian)::
 
     "RCSEG1" 0x00 | u32 segment | i64 i0 | u32 n | 3 x (n, 2) float64  (single, inversion, collaborative)
+
+Under secure aggregation a vehicle sends the service only the message for the next vehicle, sealed to
+the fleet's relay key (:mod:`roadcollab.network.relaykey`): the service can neither read the inversion
+nor the vehicle's own estimates (those stay in the vehicle)::
+
+    "RCSEAL1" 0x00 | u32 segment | sealed("RCREL1" 0x00 | u32 segment | i64 i0 | u32 n | (n, 2) float64 inversion)
 """
 
 from __future__ import annotations
@@ -30,9 +36,11 @@ from .engine import ESTIMATES, Contribution
 from .plan import RoadPlan
 
 __all__ = ["Topics", "encode_contribution", "decode_contribution", "seal", "open_from", "encode_waiting",
-           "decode_waiting", "MAX_JSON"]
+           "decode_waiting", "MAX_JSON", "encode_sealed_relay", "sealed_segment", "open_sealed_relay"]
 
 CONTRIB_MAGIC = b"RCSEG1\x00"
+SEALED_MAGIC = b"RCSEAL1\x00"
+RELAY_MAGIC = b"RCREL1\x00"
 _HEAD = struct.Struct("<IqI")
 #: The largest JSON payload accepted (hello, ack), bytes.
 MAX_JSON = 64 * 1024
@@ -142,6 +150,82 @@ def decode_contribution(data: bytes, plan: RoadPlan, segment: int) -> Contributi
     if np.max(np.abs(arr)) > 10.0:
         raise MessageError("contribution: an elevation above 10 m is not a road")
     return Contribution(s, int(i0), arr[0], arr[1], arr[2])
+
+
+def encode_sealed_relay(c: Contribution, relay_key, topic: str) -> bytes:
+    """The secure-aggregation contribution body: ``c``'s inversion sealed to the fleet (module docstring).
+
+    Parameters
+    ----------
+    c : Contribution
+    relay_key : RelayKey
+    topic : str
+        The contribution's topic (bound into the seal).
+    """
+    inner = RELAY_MAGIC + _HEAD.pack(c.segment, c.i0, c.n) + np.ascontiguousarray(c.inversion, dtype="<f8").tobytes()
+    return SEALED_MAGIC + struct.pack("<I", c.segment) + relay_key.seal(topic, inner)
+
+
+def sealed_segment(data: bytes, segment: int) -> None:
+    """Check what the service can of a sealed contribution: its header and the topic's segment.
+
+    Parameters
+    ----------
+    data : bytes
+    segment : int
+
+    Raises
+    ------
+    MessageError
+    """
+    data = bytes(data)
+    if not data.startswith(SEALED_MAGIC) or len(data) < len(SEALED_MAGIC) + 4 + 48:
+        raise MessageError("contribution: expected the RCSEAL1 header of a sealed relay message (the fleet "
+                           "aggregates securely)")
+    (s,) = struct.unpack_from("<I", data, len(SEALED_MAGIC))
+    if s != segment:
+        raise MessageError(f"contribution: for segment {s} on the topic of segment {segment}")
+    if len(data) > 64 * 2 ** 20:
+        raise MessageError("contribution: larger than 64 MiB")
+
+
+def open_sealed_relay(data: bytes, relay_key, topic: str, plan: RoadPlan, segment: int) -> Contribution:
+    """The relayed inversion of a sealed contribution (a vehicle's side), checked as
+    :func:`decode_contribution` checks a clear one.
+
+    Parameters
+    ----------
+    data : bytes
+    relay_key : RelayKey
+    topic : str
+        The topic it was published on.
+    plan : RoadPlan
+    segment : int
+
+    Returns
+    -------
+    Contribution
+        Only ``inversion`` is sent; ``single`` and ``collaborative`` are that same array (a receiver
+        uses the inversion alone).
+
+    Raises
+    ------
+    MessageError
+    """
+    sealed_segment(data, segment)
+    inner = relay_key.open(topic, bytes(data)[len(SEALED_MAGIC) + 4:])
+    if not inner.startswith(RELAY_MAGIC) or len(inner) < len(RELAY_MAGIC) + _HEAD.size:
+        raise MessageError("relay message: expected the RCREL1 header")
+    s, i0, n = _HEAD.unpack_from(inner, len(RELAY_MAGIC))
+    body = inner[len(RELAY_MAGIC) + _HEAD.size:]
+    a, b = plan.segment_range(segment)
+    if s != segment or n < 1 or i0 < a or i0 + n > b or len(body) != n * 16:
+        raise MessageError(f"relay message: grid points {i0}..{i0 + n - 1} of segment {s} do not fit segment "
+                           f"{segment} ({a}..{b - 1}) or the length")
+    arr = np.frombuffer(body, dtype="<f8").reshape(n, 2).astype(float)
+    if not np.all(np.isfinite(arr)) or np.max(np.abs(arr)) > 10.0:
+        raise MessageError("relay message: values must be finite elevations below 10 m")
+    return Contribution(s, int(i0), arr, arr, arr)
 
 
 def seal(identity: VehicleIdentity, topic: str, payload: bytes) -> bytes:

@@ -36,10 +36,15 @@ def run_service(service: Service, client, stop: threading.Event, republish: thre
         again then.
     """
     handled = 0
+    next_tick = time.monotonic() + 1.0
     while not stop.is_set():
         if republish.is_set():
             republish.clear()
             for p in service.on_connect():
+                client.publish(p.topic, p.payload, p.retain)
+        if time.monotonic() >= next_tick:       # timeouts of secure-aggregation rounds
+            next_tick = time.monotonic() + 1.0
+            for p in service.tick():
                 client.publish(p.topic, p.payload, p.retain)
         m = client.receive(idle_s)
         if m is None:
@@ -51,7 +56,7 @@ def run_service(service: Service, client, stop: threading.Event, republish: thre
 
 
 def run_vehicle(agent: VehicleAgent, client, *, timeout: float, resend_s: float = 15.0,
-                reconnected: threading.Event | None = None) -> bool:
+                reconnected: threading.Event | None = None, on_contributed: Callable[[], None] | None = None) -> bool:
     """Run the vehicle's protocol to its last acknowledgement; True if done within ``timeout`` s.
 
     Parameters
@@ -65,6 +70,8 @@ def run_vehicle(agent: VehicleAgent, client, *, timeout: float, resend_s: float 
         without progress (at most 60 s), reset by progress and by a reconnection.
     reconnected : threading.Event, optional
         Set by the client on every reconnection (resend at once).
+    on_contributed : callable, optional
+        Called once when every segment is acknowledged (secure aggregation: the rounds may still run).
     """
     for f in agent.subscriptions:
         client.subscribe(f)
@@ -92,4 +99,7 @@ def run_vehicle(agent: VehicleAgent, client, *, timeout: float, resend_s: float 
             client.publish(p.topic, p.payload, p.retain)
         if (agent.started, len(agent.outcomes)) != before:
             last, wait = time.monotonic(), resend_s
+        if on_contributed is not None and agent.contributed:
+            on_contributed()
+            on_contributed = None
     return agent.done

@@ -4,6 +4,10 @@ The same arrays as :class:`~roadcollab.experiments.fleet_estimation.FleetEstimat
 grid spans every vehicle's covered stretch (``distance_grid`` of all drives), the vehicles are in the
 order of their ids (drive ``k`` is vehicle ``vk``), and ``fused`` is the service's running sums
 (:class:`~roadcollab.network.engine.SegmentSums`), i.e. the average of every inversion at each point.
+
+Under secure aggregation the service holds no vehicle's estimates (the contributions are sealed relay
+messages, the sums come from the rounds): every per-vehicle array is NaN, the grid spans the points the
+rounds covered, and only ``fused`` and ``coverage`` carry numbers.
 """
 
 from __future__ import annotations
@@ -17,7 +21,7 @@ import numpy as np
 
 from ..errors import ParameterError
 from .engine import ESTIMATES
-from .messages import decode_contribution
+from .messages import SEALED_MAGIC, decode_contribution
 from .store import ServiceStore
 
 __all__ = ["NetworkResults", "results_from_store"]
@@ -91,6 +95,8 @@ def results_from_store(store: ServiceStore) -> NetworkResults:
         raise ParameterError(f"--store {store.path}: no contribution has been applied yet")
     vehicles = sorted(store.vehicles(), key=lambda vh: _natural(vh[0]))
     order = {v: k for k, (v, _) in enumerate(vehicles)}
+    if any(d.startswith(SEALED_MAGIC) for _, _, d, _ in rows):
+        return _secure_results(store, vehicles, rows)
     contribs = [(v, decode_contribution(d, plan, s), t) for v, s, d, t in rows]
     i_lo = min(c.i0 for _, c, _ in contribs)
     i_hi = max(c.i0 + c.n for _, c, _ in contribs)
@@ -114,3 +120,28 @@ def results_from_store(store: ServiceStore) -> NetworkResults:
     return NetworkResults(vehicles=vehicles, position=plan.positions(i_lo, i_hi), spacing=plan.spacing,
                           elevation=elev, fused=fused, coverage=coverage,
                           received_s={(v, c.segment): t for v, c, t in contribs})
+
+
+def _secure_results(store: ServiceStore, vehicles: list, rows: list) -> NetworkResults:
+    plan = store.plan
+    sums = store.fused()
+    if not sums:
+        raise ParameterError(f"--store {store.path}: no secure-aggregation round has finished yet")
+    cov = {s: np.flatnonzero(S.count > 0) for s, S in sums.items()}
+    idx = [plan.segment_range(s)[0] + c for s, c in cov.items() if c.size]
+    if not idx:
+        raise ParameterError(f"--store {store.path}: no secure-aggregation round has finished yet")
+    i_lo, i_hi = int(min(i.min() for i in idx)), int(max(i.max() for i in idx)) + 1
+    n, V = i_hi - i_lo, len(vehicles)
+    fused = np.full((n, 2), np.nan)
+    coverage = np.zeros(n, dtype=np.int64)
+    for s, S in sums.items():
+        a, b = plan.segment_range(s)
+        lo, hi = max(a, i_lo), min(b, i_hi)
+        if hi > lo:
+            fused[lo - i_lo:hi - i_lo] = S.fused[lo - a:hi - a]
+            coverage[lo - i_lo:hi - i_lo] = S.count[lo - a:hi - a]
+    elev = {k: np.full((V, n, 2), np.nan) for k in ESTIMATES + ("fused",)}
+    return NetworkResults(vehicles=vehicles, position=plan.positions(i_lo, i_hi), spacing=plan.spacing,
+                          elevation=elev, fused=fused, coverage=coverage,
+                          received_s={(v, s): t for v, s, _, t in rows})

@@ -9,14 +9,17 @@ side, :class:`~roadcollab.network.secround_agent.RoundAgent` a vehicle's;
 :class:`~roadcollab.network.transport.Transport` (a :class:`~roadcollab.network.transport.MemoryBroker`
 in the fast tests).
 
-Topics of round ``(segment, epoch)`` under ``{fleet}/secagg/{segment}/{epoch}``:
+Topics of round ``(segment, epoch)`` under ``{prefix}/secagg/{segment}/{epoch}`` (the service uses the
+fleet's topic root ``rc/{fleet_id}`` as ``prefix``, so the broker's ACL covers them):
 
 - ``.../{kind}/{vid}``, vehicle -> service, ``kind`` in ``advert``, ``shares``, ``masked``, ``sign``,
   ``reveal``; every payload sealed by the vehicle's identity for that topic
   (:func:`~roadcollab.network.messages.seal`), so the service knows its sender;
 - ``.../to/{vid}``, service -> vehicle: ``invite`` (its protocol id), ``roster`` (``U_1``, signed
   adverts), ``dealt`` (the sealed shares other vehicles dealt it and every signed commitment),
-  ``survivors`` (``U_3``), ``signatures`` (the consistency signatures).
+  ``survivors`` (``U_3``), ``signatures`` (the consistency signatures), and ``closed`` to every member
+  of the roster when the round ends (``outcome`` ``finished`` or ``aborted``, ``reason``, ``used``: the
+  protocol ids whose masked input the round consumed).
 
 The sealed shares pass the service (Algorithm of Bonawitz et al.: the server routes them) but are
 encrypted to their recipient with X25519 + AEAD, so the service reads none of them. Roster rule: the
@@ -30,6 +33,11 @@ advertised but dealt no shares aborts the round (every vehicle's masks of round 
 the service opens a new round without it. A message for a finished or aborted round,
 a duplicate, a message of a phase already closed, or one that does not verify is refused, with its
 reason in :attr:`RoundCoordinator.events`; nothing a vehicle sends raises out of ``handle``.
+
+The coordinator holds no secret: its state is a function of the roster, the messages it accepted and
+the timeouts it took, in order (:attr:`RoundCoordinator.journal`). :meth:`RoundCoordinator.replay`
+rebuilds it from that journal, so a service killed mid-round and restarted on its store continues the
+round (:mod:`roadcollab.network.rounds`).
 """
 
 from __future__ import annotations
@@ -99,6 +107,25 @@ class RoundTopics:
     def __init__(self, fleet_id: str, segment: int, epoch: int) -> None:
         self.base = f"{fleet_id}/secagg/{int(segment)}/{int(epoch)}"
 
+    @staticmethod
+    def parse_round(prefix: str, topic: str) -> tuple[int, int, list[str]]:
+        """``(segment, epoch, rest)`` of any topic under ``{prefix}/secagg/``.
+
+        Parameters
+        ----------
+        prefix : str
+        topic : str
+
+        Raises
+        ------
+        MessageError
+        """
+        head = f"{prefix}/secagg/"
+        parts = topic[len(head):].split("/") if topic.startswith(head) else []
+        if len(parts) < 3 or not all(p.isdigit() and len(p) <= 9 for p in parts[:2]):
+            raise MessageError(f"topic {topic!r} is not a round topic under {head}")
+        return int(parts[0]), int(parts[1]), parts[2:]
+
     def up(self, kind: str, vid: str) -> str:
         """Vehicle -> service.
 
@@ -150,6 +177,7 @@ class RoundCoordinator:
     Parameters
     ----------
     fleet_id : str
+        The topic prefix (``rc/{fleet_id}`` on the network).
     segment, epoch : int
         The measurement aggregated: ``session_id(segment, epoch)``.
     spec : SecAggSpec
@@ -163,6 +191,9 @@ class RoundCoordinator:
         ``(kind, reason)``: ``refused``, ``duplicate``, ``aborted``, ``finished``.
     average : (L, 2) ndarray or None
         The revealed sum over ``U_2`` divided by ``|U_2|``, m/s (once finished).
+    journal : list of tuple
+        ``("open", roster)``, ``("msg", topic, payload)`` for every accepted message, ``("advance",)``
+        for every timeout, in order: what :meth:`replay` needs.
     """
 
     def __init__(self, fleet_id: str, segment: int, epoch: int, spec: SecAggSpec, trust: FleetTrust) -> None:
@@ -179,7 +210,55 @@ class RoundCoordinator:
         self.result: VerifiedAggregate | None = None
         self.bytes_in = 0
         self.bytes_out = 0
+        self.journal: list[tuple] = []
 
+    @classmethod
+    def replay(cls, fleet_id: str, segment: int, epoch: int, spec: SecAggSpec, trust: FleetTrust,
+               journal) -> tuple["RoundCoordinator", list[Publish]]:
+        """The coordinator rebuilt from its :attr:`journal`, and the messages of its current phase.
+
+        Parameters
+        ----------
+        fleet_id : str
+        segment, epoch : int
+        spec : SecAggSpec
+        trust : FleetTrust
+        journal : iterable of tuple
+
+        Returns
+        -------
+        RoundCoordinator
+        list of Publish
+            What the last step published (sent again after a restart: vehicles ignore copies).
+        """
+        co = cls(fleet_id, segment, epoch, spec, trust)
+        last: list[Publish] = []
+        for entry in journal:
+            if entry[0] == "open":
+                out = co.open(list(entry[1]))
+            elif entry[0] == "msg":
+                out = co.handle(entry[1], bytes(entry[2]))
+            else:
+                out = co.advance()
+            if out:
+                last = out
+        co.events.clear()
+        return co, last
+
+    @property
+    def roster(self) -> list[str]:
+        """Vehicle ids invited, in protocol-id order."""
+        return sorted(self.pid, key=self.pid.__getitem__)
+
+    @property
+    def used(self) -> list[str]:
+        """Vehicles whose masked input this round received (their measurement of the segment is spent)."""
+        ids = set(self.got["masked"])
+        return [v for v in self.roster if self.pid[v] in ids]
+
+    @property
+    def done(self) -> bool:
+        return self.phase in ("finished", "aborted")
     # -- hooks an attacking service overrides (honest: forward unchanged) --
     def relay_roster(self, vid: str, signed: dict) -> dict:
         return signed
@@ -205,6 +284,7 @@ class RoundCoordinator:
         if len(set(roster)) != len(roster) or not roster:
             raise ParameterError("roster must be a non-empty list of distinct vehicle ids")
         self.pid = {v: i + 1 for i, v in enumerate(roster)}
+        self.journal.append(("open", list(roster)))
         return [self._send(v, {"type": "invite", "id": i, "segment": self.segment, "epoch": self.epoch})
                 for v, i in self.pid.items()]
 
@@ -250,10 +330,11 @@ class RoundCoordinator:
                 return []
             self._check(phase, i, body)
             self.got[phase][i] = body
+            self.journal.append(("msg", topic, bytes(payload)))
         except MessageError as err:
             return self._refuse(f"{topic}: {err}")
         if len(self.got[self.phase]) == len(self._members(self.phase)):
-            return self.advance()
+            return self._advance()
         return []
 
     def _check(self, phase: str, i: int, body: bytes) -> None:
@@ -275,6 +356,12 @@ class RoundCoordinator:
         -------
         list of Publish
         """
+        if self.phase in ("finished", "aborted"):
+            return []
+        self.journal.append(("advance",))
+        return self._advance()
+
+    def _advance(self) -> list[Publish]:
         have = self.got.get(self.phase, {})
         if self.phase in ("finished", "aborted"):
             return []
@@ -312,10 +399,15 @@ class RoundCoordinator:
                     for i in sorted(have)]
         return self._unmask()
 
+    def _closed(self, outcome: str, reason: str) -> list[Publish]:
+        used = sorted(self.got["masked"])
+        return [self._send(v, {"type": "closed", "outcome": outcome, "reason": reason, "used": used})
+                for v in self.roster]
+
     def _abort(self, reason: str) -> list[Publish]:
         self.phase = "aborted"
         self.events.append(("aborted", reason))
-        return []
+        return self._closed("aborted", reason)
 
     def _unmask(self) -> list[Publish]:
         try:
@@ -330,5 +422,6 @@ class RoundCoordinator:
         self.result = agg
         self.average = agg.result.average
         self.phase = "finished"
-        self.events.append(("finished", f"{len(agg.result.survivors)} inputs, dropped {list(agg.result.dropped)}"))
-        return []
+        reason = f"{len(agg.result.survivors)} inputs, dropped {list(agg.result.dropped)}"
+        self.events.append(("finished", reason))
+        return self._closed("finished", reason)

@@ -38,8 +38,12 @@ class RoundAgent:
     ledger : SessionLedger
         Persistent (its fleet folder): one input per (segment, epoch), one signed survivor set per session.
     fleet_id : str
+        The topic prefix (``rc/{fleet_id}`` on the network).
     inputs : dict
-        ``{(segment, epoch): z}`` with ``z`` of shape (L, 2), m/s: what this vehicle measured.
+        ``{(segment, epoch): z}`` or ``{segment: z}`` (any epoch) with ``z`` of shape (L, 2), m/s: what
+        this vehicle measured. A measurement of a segment is given to at most one round: once its masked
+        input was sent in round ``(segment, e)``, invites to ``(segment, e')`` are refused (differencing two
+        rounds would otherwise isolate it), also after a restart (the ledger's record of ``e``).
     root : callable, optional
         ``root(segment, epoch) -> 32 bytes`` of session secrets (tests); default :func:`os.urandom`.
 
@@ -47,6 +51,9 @@ class RoundAgent:
     ----------
     refusals : list of str
         Why it stopped in a round (nothing was sent for that step).
+    closed : dict
+        ``{(segment, epoch): (outcome, used)}`` from the service's ``closed`` notices; ``used`` is
+        True when this vehicle's masked input was part of the round.
     """
 
     def __init__(self, identity: VehicleIdentity, trust: FleetTrust, spec: SecAggSpec, ledger: SessionLedger,
@@ -56,8 +63,38 @@ class RoundAgent:
         self.rounds: dict[tuple[int, int], SecAggVehicle] = {}
         self.dealt: dict[tuple[int, int], tuple[dict, dict]] = {}
         self.refusals: list[str] = []
+        self.closed: dict[tuple[int, int], tuple[str, bool]] = {}
+        self._spent: set[int] = set()
+        self._spent_checked: set[int] = set()
+        self._answers: dict[tuple[tuple[int, int], str], list[Publish]] = {}
         self.bytes_out = 0
 
+    def _input(self, key: tuple[int, int]):
+        if key in self.inputs:
+            return self.inputs[key]
+        s, e = key
+        if s not in self.inputs:
+            return None
+        for k in self.rounds:   # another epoch of this segment already got the masked input
+            if k[0] == s and k != key and (k in self.dealt or self.ledger.contributed(session_id(*k))):
+                raise MessageError(f"invited to round {key}: its measurement of segment {s} went to round {k}")
+        for e2 in range(min(e, 10000)):
+            if self.ledger.contributed(session_id(s, e2)):
+                raise MessageError(f"invited to round {key}: its measurement of segment {s} went to epoch {e2}")
+        return self.inputs[s]
+
+    def finished(self, segment: int) -> bool:
+        """True when a round that took this vehicle's masked input on ``segment`` has closed, or when its
+        ledger says an earlier run of this vehicle already gave it (a restart: that round went on
+        without this process)."""
+        if any(k[0] == segment and used for k, (_, used) in self.closed.items()):
+            return True
+        if segment not in self._spent_checked:
+            self._spent_checked.add(segment)
+            if not any(k[0] == segment for k in self.rounds) and \
+                    any(self.ledger.contributed(session_id(segment, e)) for e in range(64)):
+                self._spent.add(segment)
+        return segment in self._spent
     @property
     def subscription(self) -> str:
         """Topic filter of every round's messages to this vehicle."""
@@ -77,11 +114,14 @@ class RoundAgent:
         topic : str
         payload : bytes
         """
-        parts = topic.split("/")
-        if len(parts) != 6 or parts[1] != "secagg" or parts[4:] != ["to", self.vid]:
+        try:
+            s, e, rest = RoundTopics.parse_round(self.fleet_id, topic)
+        except MessageError:
+            return []
+        if rest != ["to", self.vid]:
             return []
         try:
-            key = (int(parts[2]), int(parts[3]))
+            key = (s, e)
             msg = _json(payload, "round message")
             return self._step(key, msg)
         except (MessageError, ParameterError, ValueError) as err:
@@ -90,8 +130,22 @@ class RoundAgent:
 
     def _step(self, key: tuple[int, int], msg: dict) -> list[Publish]:
         kind = msg.get("type")
+        if (key, kind) in self._answers:       # a request repeated (a restarted service): the first answer again
+            return list(self._answers[(key, kind)])
+        out = self._answer(key, kind, msg)
+        if kind != "closed":
+            self._answers[(key, str(kind))] = out
+        return out
+
+    def _answer(self, key: tuple[int, int], kind, msg: dict) -> list[Publish]:
+        if kind == "closed":
+            if key in self.rounds and key not in self.closed:
+                used = msg.get("used")
+                mine = isinstance(used, list) and self.rounds[key].vehicle in used and key in self.dealt
+                self.closed[key] = (str(msg.get("outcome")), bool(mine))
+            return []
         if kind == "invite":
-            if key not in self.inputs:
+            if self._input(key) is None:
                 raise MessageError(f"invited to round {key} of a segment it has no measurement of")
             if key in self.rounds:
                 raise MessageError(f"a second invite to round {key} (ignored)")
@@ -112,7 +166,7 @@ class RoundAgent:
                 raise MessageError(f"dealt shares of round {key} again (ignored)")
             self.dealt[key] = (_int_map(msg.get("sealed"), "dealt.sealed"),
                                _int_map(msg.get("commitments"), "dealt.commitments"))
-            return self._send(key, "masked", encode(v.mask_input(self.inputs[key], key)))
+            return self._send(key, "masked", encode(v.mask_input(self._input(key), key)))
         if kind == "survivors":
             ids = msg.get("ids")
             if not isinstance(ids, list) or not all(isinstance(i, int) for i in ids):

@@ -10,12 +10,16 @@ from __future__ import annotations
 
 import struct
 from dataclasses import dataclass
-from typing import Callable
+from typing import TYPE_CHECKING, Callable
 
 from ..errors import MessageError, ParameterError
 from ..wire.identity import FleetTrust
-from .messages import Topics, decode_contribution, decode_json, encode_json, encode_waiting, open_from
+from .messages import Topics, decode_contribution, decode_json, encode_json, encode_waiting, open_from, \
+    sealed_segment
 from .store import ServiceStore
+
+if TYPE_CHECKING:
+    from .rounds import SecureRounds
 
 __all__ = ["Publish", "Service", "encode_hello_ack", "decode_hello_ack"]
 
@@ -89,19 +93,40 @@ class Service:
     on_fused : callable, optional
         Called with ``(segment, store)`` after a contribution changed that segment's fused sums (e.g.
         :class:`roadcollab.network.roadsync.RoadSync`, which writes the road store).
+    rounds : SecureRounds, optional
+        Secure aggregation (:mod:`roadcollab.network.rounds`): contributions then add nothing to the
+        fused sums themselves; each segment's sums come from its rounds. Default: in the clear.
     """
 
     def __init__(self, store: ServiceStore, trust: FleetTrust, *, log: Callable[[str], None] | None = None,
-                 on_fused: Callable[[int, ServiceStore], None] | None = None) -> None:
+                 on_fused: Callable[[int, ServiceStore], None] | None = None,
+                 rounds: "SecureRounds | None" = None) -> None:
         self.store, self.trust, self.plan = store, trust, store.plan
         self.topics = Topics(self.plan.fleet_id)
         self._log = log or (lambda line: None)
         self.on_fused = on_fused
+        self.rounds = rounds
+        if rounds is not None and rounds.on_fused is None:
+            rounds.on_fused = on_fused
+
+    @property
+    def subscriptions(self) -> list[str]:
+        """Topic filters the service reads."""
+        return [self.topics.from_vehicles] + ([self.rounds.subscription] if self.rounds is not None else [])
 
     def on_connect(self) -> list[Publish]:
-        """The retained waiting messages again (a restarted broker may have lost them)."""
-        return [Publish(self.topics.waiting(s), encode_waiting(v, env), retain=True)
-                for s, v, env in self.store.latest()]
+        """The retained waiting messages again (a restarted broker may have lost them), and the current
+        phase of every round a restarted service continues."""
+        out = [Publish(self.topics.waiting(s), encode_waiting(v, env), retain=True)
+               for s, v, env in self.store.latest()]
+        if self.rounds is not None:
+            out += self.rounds.resend
+            self.rounds.resend = []
+        return out
+
+    def tick(self) -> list[Publish]:
+        """Timeouts (secure aggregation's phases and waiting rosters); call it about once a second."""
+        return [] if self.rounds is None else self.rounds.tick()
 
     def _refuse(self, reason: str, vid: str | None, topic: str) -> list[Publish]:
         self.store.log("refused", reason, vid=vid, topic=topic)
@@ -122,6 +147,8 @@ class Service:
             Empty for a refused message (the reason is in the store's events).
         """
         vid = None
+        if self.rounds is not None and self.rounds.owns(topic):
+            return self.rounds.handle(topic, payload)
         try:
             vid, kind, s = self.topics.parse_vehicle(topic)
             body = open_from(payload, self.trust, topic, vid)
@@ -151,8 +178,11 @@ class Service:
             raise MessageError(f"a contribution from {vid} before its hello")
         if s not in hello.get("segments", []):
             raise MessageError(f"segment {s} is not among the segments {vid} announced")
-        c = decode_contribution(body, self.plan, s)
-        outcome = self.store.add_contribution(vid, c, body, envelope)
+        if self.rounds is not None:      # sealed to the fleet: the service checks only what it can read
+            sealed_segment(body, s)
+            outcome = self.store.add_sealed(vid, s, body, envelope)
+        else:
+            outcome = self.store.add_contribution(vid, decode_contribution(body, self.plan, s), body, envelope)
         ack = Publish(self.topics.ack(vid), encode_json({"type": "segment", "segment": s, "outcome": outcome}))
         if outcome == "conflict":
             self._refuse(f"segment {s}: {vid} already contributed other values (kept the first)", vid, topic)
@@ -161,6 +191,9 @@ class Service:
             self.store.log("duplicate", f"segment {s} from {vid} again (applied once)", vid=vid, topic=topic)
             return [ack]
         self._log(f"segment {s}: accepted {vid}")
+        out = [ack, Publish(self.topics.waiting(s), encode_waiting(vid, envelope), retain=True)]
+        if self.rounds is not None:
+            return out + self.rounds.maybe_open(s)
         if self.on_fused is not None:
             self.on_fused(s, self.store)
-        return [ack, Publish(self.topics.waiting(s), encode_waiting(vid, envelope), retain=True)]
+        return out

@@ -6,7 +6,10 @@ message is recognised by its digest and applied once.
 
 Tables: ``meta`` (the plan), ``vehicles`` (first-seen order, the drive summary), ``contributions`` (one
 row per vehicle and segment, the contribution as received), ``waiting`` (the envelope waiting at each
-segment), ``fused`` (running sums of the inversions per segment) and ``events`` (refusals and notes).
+segment), ``fused`` (running sums of the inversions per segment), ``events`` (refusals and notes),
+and for secure aggregation ``rounds`` (one row per round: roster, phase, who was used or silent) and
+``round_journal`` (what each open round's coordinator accepted, in order: it holds no secret, and a
+restarted service replays it, :meth:`RoundCoordinator.replay <roadcollab.network.secround.RoundCoordinator.replay>`).
 """
 
 from __future__ import annotations
@@ -38,6 +41,11 @@ CREATE TABLE IF NOT EXISTS fused (segment INTEGER PRIMARY KEY, total BLOB NOT NU
                                   n_vehicles INTEGER NOT NULL, updated_s REAL NOT NULL);
 CREATE TABLE IF NOT EXISTS events (id INTEGER PRIMARY KEY AUTOINCREMENT, t REAL NOT NULL, kind TEXT NOT NULL,
                                    vid TEXT, topic TEXT, reason TEXT NOT NULL);
+CREATE TABLE IF NOT EXISTS rounds (segment INTEGER NOT NULL, epoch INTEGER NOT NULL, roster TEXT NOT NULL,
+                                   phase TEXT NOT NULL, opened_s REAL NOT NULL, closed_s REAL, used TEXT,
+                                   silent TEXT, reason TEXT, PRIMARY KEY (segment, epoch));
+CREATE TABLE IF NOT EXISTS round_journal (id INTEGER PRIMARY KEY AUTOINCREMENT, segment INTEGER NOT NULL,
+                                          epoch INTEGER NOT NULL, kind TEXT NOT NULL, topic TEXT, payload BLOB);
 """
 
 
@@ -130,7 +138,7 @@ class ServiceStore:
         return [(v, json.loads(h)) for v, h in self.db.execute("SELECT vid, hello FROM vehicles ORDER BY order_no")]
 
     # -- contributions ---------------------------------------------------------------------------
-    def add_contribution(self, vid: str, c: Contribution, data: bytes, envelope: bytes) -> str:
+    def add_contribution(self, vid: str, c: Contribution, data: bytes, envelope: bytes, *, fuse: bool = True) -> str:
         """Apply one contribution once: ``"accepted"``, ``"duplicate"`` (the same bytes again) or
         ``"conflict"`` (another contribution of this vehicle on this segment is already applied).
 
@@ -144,6 +152,9 @@ class ServiceStore:
             Its wire form (digest).
         envelope : bytes
             The signed envelope as received (forwarded as the waiting message).
+        fuse : bool
+            Add its inversion to the segment's running sums (False under secure aggregation: the sums
+            come from the rounds, :meth:`close_round`).
         """
         digest = hashlib.sha256(data).hexdigest()
         with self._tx():
@@ -155,12 +166,131 @@ class ServiceStore:
             now = time.time()
             self.db.execute("INSERT INTO contributions VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?)",
                             (c.segment, vid, seq, c.i0, c.n, data, envelope, digest, now))
-            sums = self._sums(c.segment).add(self.plan, c)
-            self.db.execute("INSERT OR REPLACE INTO fused VALUES (?, ?, ?, ?, ?)",
-                            (c.segment, sums.total.tobytes(), sums.count.tobytes(),
-                             int(self.db.execute("SELECT COUNT(*) FROM contributions WHERE segment = ?",
-                                                 (c.segment,)).fetchone()[0]), now))
+            if fuse:
+                sums = self._sums(c.segment).add(self.plan, c)
+                self._write_sums(sums, int(self.db.execute("SELECT COUNT(*) FROM contributions WHERE segment = ?",
+                                                           (c.segment,)).fetchone()[0]), now)
         return "accepted"
+
+    def add_sealed(self, vid: str, segment: int, data: bytes, envelope: bytes) -> str:
+        """Record a sealed contribution (secure aggregation) once; outcomes as :meth:`add_contribution`.
+
+        Parameters
+        ----------
+        vid : str
+        segment : int
+        data : bytes
+            Its body (the service cannot read the sealed inversion).
+        envelope : bytes
+        """
+        digest = hashlib.sha256(data).hexdigest()
+        with self._tx():
+            row = self.db.execute("SELECT digest FROM contributions WHERE segment = ? AND vid = ?",
+                                  (segment, vid)).fetchone()
+            if row is not None:
+                return "duplicate" if row[0] == digest else "conflict"
+            seq = self.db.execute("SELECT COALESCE(MAX(seq), 0) + 1 FROM contributions").fetchone()[0]
+            self.db.execute("INSERT INTO contributions VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?)",
+                            (segment, vid, seq, 0, 0, data, envelope, digest, time.time()))
+        return "accepted"
+
+    def _write_sums(self, sums: SegmentSums, n_vehicles: int, now: float) -> None:
+        self.db.execute("INSERT OR REPLACE INTO fused VALUES (?, ?, ?, ?, ?)",
+                        (sums.segment, sums.total.tobytes(), sums.count.tobytes(), n_vehicles, now))
+
+    def contributors(self, segment: int) -> list[tuple[str, float]]:
+        """``(vid, received_s)`` of every contribution on ``segment``, in arrival order.
+
+        Parameters
+        ----------
+        segment : int
+        """
+        return [(v, t) for v, t in self.db.execute(
+            "SELECT vid, received_s FROM contributions WHERE segment = ? ORDER BY seq", (segment,))]
+
+    def contributed_segments(self) -> list[int]:
+        """Segments with at least one contribution."""
+        return [s for (s,) in self.db.execute("SELECT DISTINCT segment FROM contributions ORDER BY segment")]
+
+    # -- secure-aggregation rounds ---------------------------------------------------------------
+    def open_round(self, segment: int, epoch: int, roster: list[str]) -> None:
+        """Record a new round and its roster (the first entry of its journal).
+
+        Parameters
+        ----------
+        segment, epoch : int
+        roster : list of str
+        """
+        with self._tx():
+            self.db.execute("INSERT INTO rounds (segment, epoch, roster, phase, opened_s) VALUES (?, ?, ?, ?, ?)",
+                            (segment, epoch, json.dumps(list(roster)), "adverts", time.time()))
+            self.db.execute("INSERT INTO round_journal (segment, epoch, kind, topic, payload) VALUES (?, ?, ?, ?, ?)",
+                            (segment, epoch, "open", json.dumps(list(roster)), b""))
+
+    def journal_add(self, segment: int, epoch: int, entries, phase: str) -> None:
+        """Append coordinator journal entries (``("msg", topic, payload)`` or ``("advance",)``).
+
+        Parameters
+        ----------
+        segment, epoch : int
+        entries : iterable of tuple
+        phase : str
+            The round's phase after them.
+        """
+        with self._tx():
+            for e in entries:
+                self.db.execute("INSERT INTO round_journal (segment, epoch, kind, topic, payload) "
+                                "VALUES (?, ?, ?, ?, ?)", (segment, epoch, e[0], e[1] if len(e) > 1 else None,
+                                                           bytes(e[2]) if len(e) > 2 else b""))
+            self.db.execute("UPDATE rounds SET phase = ? WHERE segment = ? AND epoch = ?", (phase, segment, epoch))
+
+    def journal(self, segment: int, epoch: int) -> list[tuple]:
+        """The journal of round ``(segment, epoch)``, as :meth:`RoundCoordinator.replay` takes it."""
+        out: list[tuple] = []
+        for kind, topic, payload in self.db.execute(
+                "SELECT kind, topic, payload FROM round_journal WHERE segment = ? AND epoch = ? ORDER BY id",
+                (segment, epoch)):
+            out.append(("open", json.loads(topic)) if kind == "open" else
+                       ("msg", topic, bytes(payload)) if kind == "msg" else ("advance",))
+        return out
+
+    def close_round(self, segment: int, epoch: int, phase: str, *, used: list[str], silent: list[str], reason: str,
+                    total: np.ndarray | None = None, count: np.ndarray | None = None) -> None:
+        """End a round; a finished round's sum is added to the segment's fused sums in the same transaction.
+
+        Parameters
+        ----------
+        segment, epoch : int
+        phase : str
+            ``finished`` or ``aborted``.
+        used, silent : list of str
+            Vehicles whose masked input it consumed; vehicles that never answered.
+        reason : str
+        total : (m, 2) ndarray, optional
+        count : (m,) ndarray, optional
+            The round's sums (:func:`~roadcollab.network.aggregation.sums_from_total`), when finished.
+        """
+        now = time.time()
+        with self._tx():
+            self.db.execute("UPDATE rounds SET phase = ?, closed_s = ?, used = ?, silent = ?, reason = ? "
+                            "WHERE segment = ? AND epoch = ?",
+                            (phase, now, json.dumps(used), json.dumps(silent), reason, segment, epoch))
+            self.db.execute("DELETE FROM round_journal WHERE segment = ? AND epoch = ?", (segment, epoch))
+            if total is not None and count is not None:
+                old = self._sums(segment)
+                sums = SegmentSums(segment, old.total + total, old.count + count)
+                row = self.db.execute("SELECT n_vehicles FROM fused WHERE segment = ?", (segment,)).fetchone()
+                self._write_sums(sums, (0 if row is None else int(row[0])) + len(used), now)
+
+    def rounds(self, segment: int | None = None) -> list[dict]:
+        """Every round (of ``segment``), oldest first: ``segment, epoch, roster, phase, opened_s, closed_s,
+        used, silent, reason``."""
+        q = "SELECT segment, epoch, roster, phase, opened_s, closed_s, used, silent, reason FROM rounds"
+        rows = self.db.execute(q + (" WHERE segment = ?" if segment is not None else "") +
+                               " ORDER BY segment, epoch", (segment,) if segment is not None else ())
+        return [{"segment": s, "epoch": e, "roster": json.loads(r), "phase": p, "opened_s": o, "closed_s": c,
+                 "used": json.loads(u) if u else [], "silent": json.loads(si) if si else [], "reason": why}
+                for s, e, r, p, o, c, u, si, why in rows]
 
     def _sums(self, segment: int) -> SegmentSums:
         row = self.db.execute("SELECT total, count FROM fused WHERE segment = ?", (segment,)).fetchone()
@@ -224,7 +354,11 @@ class ServiceStore:
         for (reason,) in self.db.execute("SELECT reason FROM events WHERE kind = 'refused'"):
             key = reason.split(":")[0][:80]
             refused[key] = refused.get(key, 0) + 1
+        rounds: dict = {}
+        for (phase,) in self.db.execute("SELECT phase FROM rounds"):
+            key = phase if phase in ("finished", "aborted") else "open"
+            rounds[key] = rounds.get(key, 0) + 1
         return {"vehicles": one("SELECT COUNT(*) FROM vehicles"), "segments": one("SELECT COUNT(*) FROM fused"),
                 "contributions": one("SELECT COUNT(*) FROM contributions"),
                 "duplicates": one("SELECT COUNT(*) FROM events WHERE kind = 'duplicate'"),
-                "refused": refused}
+                "refused": refused, "rounds": rounds}

@@ -9,6 +9,8 @@
 
 from __future__ import annotations
 
+import numpy as np
+
 from pathlib import Path
 
 
@@ -56,6 +58,11 @@ def write_network_results(r: NetworkResults, out, *, command: str, segment_lengt
                          r.coverage)
     view = r.fleet_view()
     notes = []
+    if V and not np.isfinite(r.elevation["inversion"]).any():
+        notes.append("The fleet fuses by secure aggregation: the service holds only each round's sum, so the "
+                     "fused elevation and its coverage are known, and every vehicle's own estimate "
+                     "(road_estimates.csv, the last vehicle's collaborative columns of final_estimate.csv) is "
+                     "blank.")
     iri, iri_note = fused_iri(view, segment_length)
     if iri_note:
         notes.append(iri_note)

@@ -1,0 +1,217 @@
+"""The service's secure-aggregation rounds: when each opens, who is invited, what its sum does.
+
+Under ``[aggregation] mode = "secure"`` (:class:`~roadcollab.network.aggregation.AggregationPolicy`) the
+service adds no inversion to a segment's fused sums itself; every sum comes from a round of
+:class:`~roadcollab.network.secround.RoundCoordinator` over the vehicles that passed the segment.
+
+Roster rule (a count rule, the same for every segment): the round of segment ``s`` opens as soon as
+``round_size`` vehicles that contributed to ``s`` are free, i.e. not in an open round of ``s``, not
+*used* by a closed one (their masked input went into it: a vehicle gives one measurement of a segment
+to one round, so two rounds have nothing to difference) and not *silent* in an aborted one (invited,
+never answered: gone). The first ``round_size`` free vehicles in arrival order are invited. When fewer
+are free, a round of at least ``k = min_inputs`` opens once the longest-waiting free vehicle has waited
+``round_wait_s``. One round per segment is open at a time; epochs count the rounds of a segment.
+
+Each phase closes when every expected message has arrived, or after ``phase_timeout_s`` with what
+arrived (:meth:`RoundCoordinator.advance`): a vehicle that died after dealing its shares is left
+behind and its masks removed if ``t`` vehicles reveal (Bonawitz et al. 2017 dropout recovery).
+
+Every accepted message and timeout is journalled in the store (the coordinator holds no secret), so a
+service killed mid-round and restarted on its store replays the round and sends its current phase's
+messages again; vehicles answer a repeated request with their first answer.
+"""
+
+from __future__ import annotations
+
+import time
+from typing import Callable
+
+from ..errors import MessageError, ParameterError
+from ..wire.identity import FleetTrust
+from .aggregation import AggregationPolicy, sums_from_total
+from .secround import RoundCoordinator, RoundTopics
+from .service import Publish
+from .store import ServiceStore
+
+__all__ = ["SecureRounds"]
+
+
+class SecureRounds:
+    """Rounds of every segment on one service store.
+
+    Parameters
+    ----------
+    store : ServiceStore
+    trust : FleetTrust
+    policy : AggregationPolicy
+        ``mode`` must be ``secure``.
+    prefix : str
+        Topic root of the fleet (``rc/{fleet_id}``).
+    log : callable, optional
+        One line per event.
+    on_fused : callable, optional
+        ``(segment, store)`` after a round's sum was added (as :class:`~roadcollab.network.service.Service`).
+    phase_timeout_s, round_wait_s : float
+        Module docstring.
+    clock : callable
+        Wall-clock seconds (tests).
+    """
+
+    def __init__(self, store: ServiceStore, trust: FleetTrust, policy: AggregationPolicy, prefix: str, *,
+                 log: Callable[[str], None] | None = None, on_fused=None, phase_timeout_s: float = 20.0,
+                 round_wait_s: float = 60.0, clock: Callable[[], float] = time.time) -> None:
+        if not isinstance(policy, AggregationPolicy) or not policy.secure:
+            raise ParameterError("SecureRounds needs an AggregationPolicy with mode 'secure'")
+        self.store, self.trust, self.policy, self.prefix = store, trust, policy, prefix
+        self.spec = policy.spec
+        self._log = log or (lambda line: None)
+        self.on_fused = on_fused
+        self.phase_timeout_s, self.round_wait_s, self.clock = float(phase_timeout_s), float(round_wait_s), clock
+        self.active: dict[tuple[int, int], RoundCoordinator] = {}
+        self.phase_since: dict[tuple[int, int], float] = {}
+        self.resend: list[Publish] = []
+        for r in store.rounds():                   # a restarted service continues its open rounds
+            if r["phase"] in ("finished", "aborted"):
+                continue
+            key = (r["segment"], r["epoch"])
+            co, last = RoundCoordinator.replay(prefix, *key, self.spec, trust, store.journal(*key))
+            self.active[key] = co
+            self.phase_since[key] = clock()
+            self.resend += last
+            if co.done:                             # killed between its last message and its close
+                self.resend += self._close(key, co)
+
+    @property
+    def subscription(self) -> str:
+        """The service's filter of every round message from the vehicles."""
+        return f"{self.prefix}/secagg/+/+/+/+"
+
+    def owns(self, topic: str) -> bool:
+        """True for a round topic of this fleet."""
+        return topic.startswith(f"{self.prefix}/secagg/")
+
+    # -- rosters -----------------------------------------------------------------------------------
+    def free(self, segment: int) -> list[tuple[str, float]]:
+        """``(vid, since_s)`` of the vehicles a new round of ``segment`` may invite, in arrival order.
+
+        Parameters
+        ----------
+        segment : int
+        """
+        busy: set[str] = set()
+        since: dict[str, float] = {}
+        for r in self.store.rounds(segment):
+            if r["phase"] not in ("finished", "aborted"):
+                busy |= set(r["roster"])
+            else:
+                busy |= set(r["used"]) | set(r["silent"])
+                for v in r["roster"]:                # free again after an aborted round: waits anew
+                    since[v] = max(since.get(v, 0.0), r["closed_s"] or 0.0)
+        return [(v, max(t, since.get(v, t))) for v, t in self.store.contributors(segment) if v not in busy]
+
+    def _epoch(self, segment: int) -> int:
+        rs = self.store.rounds(segment)
+        return 1 + max(r["epoch"] for r in rs) if rs else 0
+
+    def maybe_open(self, segment: int) -> list[Publish]:
+        """Open the next round of ``segment`` if the roster rule allows (module docstring)."""
+        if any(k[0] == segment for k in self.active):
+            return []
+        free = self.free(segment)
+        n = self.policy.round_size
+        waited = self.clock() - min((t for _, t in free), default=self.clock())
+        if len(free) < n and not (len(free) >= self.spec.min_inputs and waited >= self.round_wait_s):
+            return []
+        roster = [v for v, _ in free[:n]]
+        key = (segment, self._epoch(segment))
+        co = RoundCoordinator(self.prefix, *key, self.spec, self.trust)
+        out = co.open(roster)
+        self.store.open_round(*key, roster)
+        co.journal.clear()                          # the store's open entry stands for it
+        self.active[key] = co
+        self.phase_since[key] = self.clock()
+        self._log(f"round {key[0]}/{key[1]}: opened with {len(roster)} vehicles {roster}")
+        return out
+
+    # -- messages ------------------------------------------------------------------------------------
+    def handle(self, topic: str, payload: bytes) -> list[Publish]:
+        """Apply one round message from a vehicle; the replies (refusals go to the store's events).
+
+        Parameters
+        ----------
+        topic : str
+        payload : bytes
+        """
+        try:
+            s, e, rest = RoundTopics.parse_round(self.prefix, topic)
+        except MessageError as err:
+            self.store.log("refused", str(err), topic=topic)
+            return []
+        if rest[:1] == ["to"]:
+            return []                                 # the service's own messages
+        key = (s, e)
+        co = self.active.get(key)
+        if co is None:
+            known = [r for r in self.store.rounds(s) if r["epoch"] == e]
+            why = f"round {s}/{e} is {known[0]['phase']}" if known else f"no round {s}/{e} was opened"
+            self.store.log("refused", f"{topic}: {why}", vid=rest[-1] if rest else None, topic=topic)
+            return []
+        return self._step(key, co, co.handle(topic, bytes(payload)))
+
+    def _step(self, key, co: RoundCoordinator, out: list[Publish]) -> list[Publish]:
+        for kind, reason in co.events:
+            if kind in ("refused", "duplicate"):
+                self.store.log(kind, reason, topic=f"{self.prefix}/secagg/{key[0]}/{key[1]}")
+        co.events[:] = [ev for ev in co.events if ev[0] not in ("refused", "duplicate")]
+        if co.journal:
+            self.store.journal_add(*key, co.journal, co.phase)
+            co.journal.clear()
+            self.phase_since[key] = self.clock()
+        if co.done:
+            out = out + self._close(key, co)
+        return out
+
+    def _close(self, key, co: RoundCoordinator) -> list[Publish]:
+        del self.active[key]
+        self.phase_since.pop(key, None)
+        answered = {i for i in co.got["adverts"]}
+        silent = [v for v in co.roster if co.pid[v] not in answered]
+        reason = next((r for k, r in reversed(co.events) if k in ("finished", "aborted")), co.phase)
+        if co.phase == "finished" and co.result is not None:
+            try:
+                total, count = sums_from_total(self.store.plan, co.result.result.total)
+            except ParameterError as err:
+                self.store.close_round(*key, "aborted", used=co.used, silent=silent, reason=str(err))
+                self._log(f"round {key[0]}/{key[1]}: sum refused ({err})")
+                return self.maybe_open(key[0])
+            self.store.close_round(*key, "finished", used=co.used, silent=silent, reason=reason, total=total,
+                                   count=count)
+            self._log(f"round {key[0]}/{key[1]}: finished, {reason}")
+            if self.on_fused is not None:
+                self.on_fused(key[0], self.store)
+        else:
+            self.store.close_round(*key, "aborted", used=co.used, silent=silent, reason=reason)
+            self._log(f"round {key[0]}/{key[1]}: aborted ({reason})")
+        return self.maybe_open(key[0])
+
+    def tick(self) -> list[Publish]:
+        """Phase timeouts and waiting rosters; call it about once a second.
+
+        Returns
+        -------
+        list of Publish
+        """
+        out: list[Publish] = []
+        now = self.clock()
+        for key, co in list(self.active.items()):
+            if now - self.phase_since.get(key, now) >= self.phase_timeout_s:
+                self._log(f"round {key[0]}/{key[1]}: phase {co.phase} timed out")
+                out += self._step(key, co, co.advance())
+        if self.round_wait_s >= 0:
+            for s in self._waiting_segments():
+                out += self.maybe_open(s)
+        return out
+
+    def _waiting_segments(self) -> list[int]:
+        seen = {r["segment"] for r in self.store.rounds() if r["phase"] not in ("finished", "aborted")}
+        return [s for s in self.store.contributed_segments() if s not in seen]
