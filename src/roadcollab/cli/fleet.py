@@ -79,18 +79,18 @@ def run(args: argparse.Namespace, command_line: str) -> int:
     elif load_aggregation(args.fleet).secure:
         # A round needs its vehicles online together: start the next vehicle once this one's segments are
         # acknowledged (its line "... contributed"), and keep them all running until their rounds close.
-        procs = []
+        piped: list[subprocess.Popen[str]] = []
         for k, d in enumerate(args.drive):
-            p = subprocess.Popen(cmd(k, d), stdout=subprocess.PIPE, text=True, bufsize=1)
-            procs.append(p)
-            for line in p.stdout:     # ends at the line, or when the vehicle exits
+            q = subprocess.Popen(cmd(k, d), stdout=subprocess.PIPE, text=True, bufsize=1)
+            piped.append(q)
+            for line in q.stdout or ():     # ends at the line, or when the vehicle exits
                 print(line, end="", flush=True)
                 if " contributed" in line:
                     break
-        for p in procs:
-            for line in p.stdout:
+        for q in piped:
+            for line in q.stdout or ():
                 print(line, end="", flush=True)
-        codes = [p.wait(timeout=args.timeout + 60) for p in procs]
+        codes = [q.wait(timeout=args.timeout + 60) for q in piped]
     else:
         codes = []
         for k, d in enumerate(args.drive):

@@ -103,15 +103,16 @@ def run_in_memory(drives, plan: RoadPlan, *, store: ServiceStore | None = None, 
     store = ServiceStore(":memory:", plan) if store is None else store
     authority = FleetAuthority.generate(plan.fleet_id) if authority is None else authority
     trust = authority.trust()
-    secure = aggregation is not None and aggregation.secure
-    rounds = SecureRounds(store, trust, aggregation, f"rc/{plan.fleet_id}", phase_timeout_s=0.0,
-                          round_wait_s=float("inf")) if secure else None
+    rounds = None
+    if aggregation is not None and aggregation.secure:
+        rounds = SecureRounds(store, trust, aggregation, f"rc/{plan.fleet_id}", phase_timeout_s=0.0,
+                              round_wait_s=float("inf"))
     service = Service(store, trust, on_fused=on_fused, rounds=rounds)
     broker = MemoryBroker()
     svc = broker.client()
     for f in service.subscriptions:
         svc.subscribe(f)
-    if secure:
+    if rounds is not None:
         return _run_secure(drives, plan, store, authority, service, broker, svc, aggregation, set(offline), timeouts)
     for j, d in enumerate(drives):
         agent = VehicleAgent(VehicleEngine(d, plan, index=j), VehicleIdentity.enroll(authority, f"v{j + 1}"),

@@ -158,7 +158,7 @@ class SecureRounds:
             return []
         return self._step(key, co, co.handle(topic, bytes(payload)))
 
-    def _step(self, key, co: RoundCoordinator, out: list[Publish]) -> list[Publish]:
+    def _step(self, key: tuple[int, int], co: RoundCoordinator, out: list[Publish]) -> list[Publish]:
         for kind, reason in co.events:
             if kind in ("refused", "duplicate"):
                 self.store.log(kind, reason, topic=f"{self.prefix}/secagg/{key[0]}/{key[1]}")
@@ -171,7 +171,7 @@ class SecureRounds:
             out = out + self._close(key, co)
         return out
 
-    def _close(self, key, co: RoundCoordinator) -> list[Publish]:
+    def _close(self, key: tuple[int, int], co: RoundCoordinator) -> list[Publish]:
         del self.active[key]
         self.phase_since.pop(key, None)
         answered = {i for i in co.got["adverts"]}

@@ -243,6 +243,7 @@ class RoundCoordinator:
             if out:
                 last = out
         co.events.clear()
+        co.journal.clear()             # already in the store
         return co, last
 
     @property

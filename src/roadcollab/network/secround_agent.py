@@ -129,12 +129,12 @@ class RoundAgent:
             return []
 
     def _step(self, key: tuple[int, int], msg: dict) -> list[Publish]:
-        kind = msg.get("type")
+        kind = str(msg.get("type"))
         if (key, kind) in self._answers:       # a request repeated (a restarted service): the first answer again
             return list(self._answers[(key, kind)])
         out = self._answer(key, kind, msg)
         if kind != "closed":
-            self._answers[(key, str(kind))] = out
+            self._answers[(key, kind)] = out
         return out
 
     def _answer(self, key: tuple[int, int], kind, msg: dict) -> list[Publish]:
