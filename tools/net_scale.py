@@ -14,6 +14,10 @@ All agents start at once. Measured per fleet size:
 * bytes on the wire per vehicle-segment (MQTT topic + payload, both directions, counted by the clients);
 * memory per agent: (peak RSS of a worker - its RSS before its agents start) / agents in it.
 
+With ``--aggregation secure`` the fleet is enrolled for secure aggregation (rounds of ``--round-size``,
+``k = t = round size``): every agent also takes part in its segments' rounds, and the latency runs from
+publishing a contribution to the store's close of the round that holds its input (``rounds.closed_s``).
+
 Prints a Markdown table (``docs/network.md`` holds the measured one).
 """
 
@@ -35,12 +39,15 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
 
 
-def _worker(fleet: str, url: str, jobs: list, drives: list, out: str) -> None:
+def _worker(fleet: str, url: str, jobs: list, drives: list, out: str, secure: bool = False) -> None:
     """Run the agents ``jobs`` = [(vid, drive index)] as threads; write their publish times and bytes."""
     from roadcollab.io.drives import load_drive
     from roadcollab.network.agent import VehicleAgent
     from roadcollab.network.engine import VehicleEngine
-    from roadcollab.network.fleetdir import load_login, load_plan
+    from roadcollab.network.fleetdir import load_aggregation, load_login, load_plan
+    from roadcollab.network.relaykey import RelayKey
+    from roadcollab.network.secround_agent import RoundAgent
+    from roadcollab.privacy.secagg_store import SessionLedger
     from roadcollab.network.mqtt_client import MqttClient
     from roadcollab.network.mqtt_run import run_vehicle
     from roadcollab.wire.identity import FleetTrust, VehicleIdentity
@@ -66,7 +73,12 @@ def _worker(fleet: str, url: str, jobs: list, drives: list, out: str) -> None:
 
     def run(vid, k):
         folder = Path(fleet) / "vehicles" / vid
-        agent = VehicleAgent(engines[k], VehicleIdentity.load(folder), FleetTrust.load(folder / "trust.toml"))
+        ident, trust = VehicleIdentity.load(folder), FleetTrust.load(folder / "trust.toml")
+        kw = {}
+        if secure:
+            kw = {"rounds": RoundAgent(ident, trust, load_aggregation(fleet).spec, SessionLedger(),
+                                       f"rc/{plan.fleet_id}", {}), "relay_key": RelayKey.load(folder / "relay.key")}
+        agent = VehicleAgent(engines[k], ident, trust, **kw)
         c = Timed(MqttClient(url, load_login(folder / "broker.toml"), f"scale-{vid}").connect(timeout=120))
         ok = run_vehicle(agent, c, timeout=600)
         c.close()
@@ -82,12 +94,13 @@ def _worker(fleet: str, url: str, jobs: list, drives: list, out: str) -> None:
     Path(out).write_text(json.dumps({"agents": results, "rss_base_kb": base, "rss_peak_kb": peak}))
 
 
-def measure(n: int, procs: int, broker: str, drives: list, root: Path, vmin: float) -> dict:
+def measure(n: int, procs: int, broker: str, drives: list, root: Path, vmin: float, round_size: int = 0) -> dict:
     from netkit import free_port, rc, start_amqtt, start_mosquitto, start_serve, stop
 
     fleet = root / f"fleet{n}"
+    sec = ("--aggregation", "secure", "--min-inputs", round_size, "--round-size", round_size) if round_size else ()
     rc("enroll", "--fleet", fleet, "--vehicles", n, "--fleet-id", "s", "--min-speed", repr(vmin),
-       "--segment-length", 10)
+       "--segment-length", 10, *sec)
     port = free_port()
     url = f"mqtt://127.0.0.1:{port}"
     b = (start_amqtt(fleet, port, root / f"b{n}.log") if broker == "amqtt"
@@ -100,8 +113,8 @@ def measure(n: int, procs: int, broker: str, drives: list, root: Path, vmin: flo
     ctx = mp.get_context("spawn")
     outs = [root / f"w{n}-{p}.json" for p in range(procs)]
     t0 = time.time()
-    ws = [ctx.Process(target=_worker, args=(str(fleet), url, jobs[p], drives, str(outs[p]))) for p in range(procs)
-          if jobs[p]]
+    ws = [ctx.Process(target=_worker, args=(str(fleet), url, jobs[p], drives, str(outs[p]), bool(round_size)))
+          for p in range(procs) if jobs[p]]
     for w in ws:
         w.start()
     for w in ws:
@@ -112,6 +125,11 @@ def measure(n: int, procs: int, broker: str, drives: list, root: Path, vmin: flo
     stop(b)
     with sqlite3.connect(store) as db:
         applied = {(v, s): t for v, s, t in db.execute("SELECT vid, segment, received_s FROM contributions")}
+        if round_size:    # a vehicle's input is in the fused sums when the round that used it closed
+            applied = {}
+            for s, used, closed in db.execute("SELECT segment, used, closed_s FROM rounds WHERE phase = 'finished'"):
+                for v in json.loads(used):
+                    applied[(v, s)] = closed
     agents, mem = {}, []
     for p, o in enumerate(outs):
         if not o.exists():
@@ -139,6 +157,8 @@ def main(argv=None) -> int:
     p.add_argument("--procs", type=int, default=4)
     p.add_argument("--broker", choices=["mosquitto", "amqtt"], default="mosquitto")
     p.add_argument("--keep", action="store_true", help="keep the temporary folder")
+    p.add_argument("--aggregation", choices=["clear", "secure"], default="clear")
+    p.add_argument("--round-size", type=int, default=5, help="secure: vehicles per round (k = t = this)")
     args = p.parse_args(argv)
     from netkit import write_drives
     from roadcollab.io.drives import load_drives
@@ -147,7 +167,8 @@ def main(argv=None) -> int:
     try:
         drives, _ = write_drives(root / "drives")
         vmin = min(float(d.speeds().min()) for d in load_drives(drives))
-        rows = [measure(n, args.procs, args.broker, drives, root, vmin) for n in args.vehicles]
+        rs = args.round_size if args.aggregation == "secure" else 0
+        rows = [measure(n, args.procs, args.broker, drives, root, vmin, rs) for n in args.vehicles]
     finally:
         if not args.keep:
             shutil.rmtree(root, ignore_errors=True)

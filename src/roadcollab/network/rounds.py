@@ -55,11 +55,15 @@ class SecureRounds:
         Module docstring.
     clock : callable
         Wall-clock seconds (tests).
+    coordinator : type, optional
+        The :class:`~roadcollab.network.secround.RoundCoordinator` class of every round (a subclass plays a
+        deviating service in the attack tests).
     """
 
     def __init__(self, store: ServiceStore, trust: FleetTrust, policy: AggregationPolicy, prefix: str, *,
                  log: Callable[[str], None] | None = None, on_fused=None, phase_timeout_s: float = 20.0,
-                 round_wait_s: float = 60.0, clock: Callable[[], float] = time.time) -> None:
+                 round_wait_s: float = 60.0, clock: Callable[[], float] = time.time,
+                 coordinator: type[RoundCoordinator] = RoundCoordinator) -> None:
         if not isinstance(policy, AggregationPolicy) or not policy.secure:
             raise ParameterError("SecureRounds needs an AggregationPolicy with mode 'secure'")
         self.store, self.trust, self.policy, self.prefix = store, trust, policy, prefix
@@ -67,6 +71,7 @@ class SecureRounds:
         self._log = log or (lambda line: None)
         self.on_fused = on_fused
         self.phase_timeout_s, self.round_wait_s, self.clock = float(phase_timeout_s), float(round_wait_s), clock
+        self.coordinator = coordinator
         self.active: dict[tuple[int, int], RoundCoordinator] = {}
         self.phase_since: dict[tuple[int, int], float] = {}
         self.resend: list[Publish] = []
@@ -74,7 +79,7 @@ class SecureRounds:
             if r["phase"] in ("finished", "aborted"):
                 continue
             key = (r["segment"], r["epoch"])
-            co, last = RoundCoordinator.replay(prefix, *key, self.spec, trust, store.journal(*key))
+            co, last = coordinator.replay(prefix, *key, self.spec, trust, store.journal(*key))
             self.active[key] = co
             self.phase_since[key] = clock()
             self.resend += last
@@ -124,7 +129,17 @@ class SecureRounds:
             return []
         roster = [v for v, _ in free[:n]]
         key = (segment, self._epoch(segment))
-        co = RoundCoordinator(self.prefix, *key, self.spec, self.trust)
+        return self.open_round(key, roster)
+
+    def open_round(self, key: tuple[int, int], roster: list[str]) -> list[Publish]:
+        """Open round ``key = (segment, epoch)`` with ``roster`` (what :meth:`maybe_open` decided).
+
+        Parameters
+        ----------
+        key : (int, int)
+        roster : list of str
+        """
+        co = self.coordinator(self.prefix, *key, self.spec, self.trust)
         out = co.open(roster)
         self.store.open_round(*key, roster)
         co.journal.clear()                          # the store's open entry stands for it
