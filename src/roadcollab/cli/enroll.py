@@ -44,6 +44,12 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
                    help=f"segment length (default 100; {help_range(SEGMENT_LENGTH)})")
     p.add_argument("--grid-step", type=GRID_STEP, default=0.05, metavar="M",
                    help=f"step of the distance grid (default 0.05, as estimate; {help_range(GRID_STEP)})")
+    p.add_argument("--network", metavar="FILE", default=None,
+                   help="road network GeoJSON (as 'roadcollab map --network'), copied into the fleet: with "
+                        "--road-id, the vehicles place their GPS drives on that road and 'serve --roads' writes "
+                        "its segments' geometry (default: no road, the drives' own distance axis)")
+    p.add_argument("--road-id", metavar="ID", default=None,
+                   help="the road of --network the fleet surveys, in its forward direction")
     return p
 
 
@@ -60,12 +66,26 @@ def run(args: argparse.Namespace, command_line: str) -> int:
     int
         0.
     """
+    from ..errors import ParameterError
     from ..network.fleetdir import enroll
     from ..network.plan import RoadPlan
     from ..wire.identity import check_id
 
+    if (args.network is None) != (args.road_id is None):
+        raise ParameterError("--network and --road-id go together (the fleet's road in its network)")
+    road: dict = {}
+    network = None
+    if args.network is not None:
+        from ..geo.network import read_network
+        from ..network.fleetroad import check_road, file_sha256
+
+        check_road(read_network(args.network), args.road_id, "--road-id")
+        with open(args.network, "rb") as fh:
+            network = fh.read()
+        road = {"road_id": args.road_id, "road_sha256": file_sha256(args.network)}
     plan = RoadPlan(fleet_id=check_id("--fleet-id", args.fleet_id), spacing=args.grid_step,
-                    segment_length=args.segment_length, min_speed=args.min_speed)
-    ids = enroll(args.fleet, args.vehicles, plan)
-    print(f"enrolled fleet {plan.fleet_id!r} with {len(ids)} vehicles ({ids[0]}..{ids[-1]}) in {args.fleet}")
+                    segment_length=args.segment_length, min_speed=args.min_speed, **road)
+    ids = enroll(args.fleet, args.vehicles, plan, network=network)
+    on = f" on road {plan.road_id!r} of {args.network}" if plan.road_id else ""
+    print(f"enrolled fleet {plan.fleet_id!r} with {len(ids)} vehicles ({ids[0]}..{ids[-1]}) in {args.fleet}{on}")
     return 0

@@ -73,13 +73,15 @@ def _road_outputs(args, store, command_line: str, log, map_at):
     """
     if args.roads is None:
         return None, None, None
+    from ..network.fleetroad import FleetRoad
     from ..network.livemap import LiveMap
     from ..network.roadsync import RoadSync
     from ..store import RoadStore
 
     sync = live = None
     try:
-        sync = RoadSync(RoadStore.open(args.roads), store, source=command_line, min_interval_s=1.0)
+        road = FleetRoad.load(args.fleet, store.plan)        # a fleet on a road: segments with their geometry
+        sync = RoadSync(RoadStore.open(args.roads), store, source=command_line, min_interval_s=1.0, road=road)
         if map_at is not None:
             live = LiveMap(args.roads, *map_at).start()
             print(f"live map of {args.roads} on {live.url}", flush=True)

@@ -44,6 +44,14 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
     return p
 
 
+def _place_on_road(fleet, plan, drive):
+    """``(drive on the fleet's road, hello fields)`` for a fleet on a road, else None (network/fleetroad.py)."""
+    from ..network.fleetroad import FleetRoad
+
+    road = FleetRoad.load(fleet, plan)
+    return None if road is None else road.place(drive)
+
+
 def run(args: argparse.Namespace, command_line: str) -> int:
     """Run one vehicle to its last acknowledgement.
 
@@ -79,8 +87,11 @@ def run(args: argparse.Namespace, command_line: str) -> int:
     drive, cleaning = clean_drive(load_drive(args.drive, limits=file_limits(args)))
     if cleaning.n_spikes:
         print(f"{args.id}: {cleaning.n_spikes} isolated spikes repaired", flush=True)
+    road_fields = _place_on_road(args.fleet, plan, drive)
+    if road_fields is not None:
+        drive, road_fields = road_fields
     agent = VehicleAgent(VehicleEngine(drive, plan, index=int(args.id[1:]) - 1 if args.id[1:].isdigit() else 0),
-                         identity, trust)
+                         identity, trust, hello_extra=road_fields)
     reconnected = threading.Event()
     client = MqttClient(args.broker, login, f"rc-{plan.fleet_id}-{args.id}", on_connect=reconnected.set)
     try:

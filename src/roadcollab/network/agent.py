@@ -31,10 +31,15 @@ class VehicleAgent:
         Its key and certificate.
     trust : FleetTrust
         The fleet's trust anchor (to check the waiting messages).
+    hello_extra : dict, optional
+        More hello fields (a fleet on a road: :func:`roadcollab.network.fleetroad.hello_fields`); they
+        never replace the fields the agent writes.
     """
 
-    def __init__(self, engine: VehicleEngine, identity: VehicleIdentity, trust: FleetTrust) -> None:
+    def __init__(self, engine: VehicleEngine, identity: VehicleIdentity, trust: FleetTrust, *,
+                 hello_extra: dict | None = None) -> None:
         self.engine, self.identity, self.trust = engine, identity, trust
+        self.hello_extra = dict(hello_extra or {})
         self.vid = identity.vehicle_id
         self.topics = Topics(engine.plan.fleet_id)
         self.segments = engine.segments
@@ -55,7 +60,7 @@ class VehicleAgent:
 
     def hello(self) -> Publish:
         d = self.engine.drive
-        body = encode_json({"segments": self.segments, "speed_mps": float(d.speed), "csv": d.csv_path.name,
+        body = encode_json({**self.hello_extra, "segments": self.segments, "speed_mps": float(d.speed), "csv": d.csv_path.name,
                             "n_samples": int(d.n_samples), "start_m": float(d.positions[0]),
                             "end_m": float(d.positions[-1])})
         topic = self.topics.hello(self.vid)

@@ -44,7 +44,7 @@ def _pump(service: Service, svc, agent: VehicleAgent, car, limit: int) -> None:
 
 
 def run_in_memory(drives, plan: RoadPlan, *, store: ServiceStore | None = None, authority: FleetAuthority | None = None,
-                  on_fused=None) -> tuple[ServiceStore, MemoryBroker]:
+                  on_fused=None, road=None) -> tuple[ServiceStore, MemoryBroker]:
     """Every drive through the service over the in-memory transport, in order.
 
     Parameters
@@ -58,6 +58,9 @@ def run_in_memory(drives, plan: RoadPlan, *, store: ServiceStore | None = None, 
         Default: a throwaway authority (the identities never leave the process).
     on_fused : callable, optional
         The service's hook (:class:`~roadcollab.network.service.Service`), e.g. a ``RoadSync``.
+    road : FleetRoad, optional
+        The fleet's road (``plan.road_id``): each vehicle places its GPS drive on it first
+        (:meth:`~roadcollab.network.fleetroad.FleetRoad.place`), as ``roadcollab vehicle`` does.
 
     Returns
     -------
@@ -73,8 +76,11 @@ def run_in_memory(drives, plan: RoadPlan, *, store: ServiceStore | None = None, 
     svc = broker.client()
     svc.subscribe(service.topics.from_vehicles)
     for j, d in enumerate(drives):
+        extra = None
+        if road is not None:
+            d, extra = road.place(d)
         agent = VehicleAgent(VehicleEngine(d, plan, index=j), VehicleIdentity.enroll(authority, f"v{j + 1}"),
-                             authority.trust())
+                             authority.trust(), hello_extra=extra)
         car = broker.client()
         for f in agent.subscriptions:
             car.subscribe(f)

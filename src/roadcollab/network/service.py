@@ -14,6 +14,7 @@ from typing import Callable
 
 from ..errors import MessageError, ParameterError
 from ..wire.identity import FleetTrust
+from .fleetroad import check_hello
 from .messages import Topics, decode_contribution, decode_json, encode_json, encode_waiting, open_from
 from .store import ServiceStore
 
@@ -136,6 +137,7 @@ class Service:
         if not isinstance(segs, list) or not all(isinstance(s, int) and 0 <= s < 10 ** 9 for s in segs) \
                 or len(segs) > 100000:
             raise MessageError("hello: 'segments' must be a list of segment numbers")
+        check_hello(self.plan, hello)                 # a fleet on a road: the hello is on it
         order = self.store.add_vehicle(vid, hello)
         waiting = {}
         for s in segs:

@@ -1,0 +1,171 @@
+"""GPS drives through the networked fleet onto the map (network/fleetroad.py, RoadSync's geometry).
+
+A small network from ``simulate-drives --gps --network``: ``main`` (350 m, with a bend) and ``side``, a
+road 10 m beside it; three drives on each. The fleet surveys ``main``. Compared with what
+``roadcollab map`` writes for the same drives: the segment geometries (the same function on the same
+network file: equal to 1e-9 degrees, about 0.1 mm) and the anomalies (within 2 m, great-circle).
+"""
+
+import json
+
+import numpy as np
+import pytest
+
+from roadcollab.cli.main import main
+from roadcollab.errors import ParameterError
+from roadcollab.geo.projection import LocalProjection, geodesic_m
+from roadcollab.io.drive_clean import clean_drive
+from roadcollab.io.drives import load_drives
+from roadcollab.network.fleetroad import ROAD_FILE, FleetRoad, file_sha256
+from roadcollab.network.fleetdir import load_plan
+from roadcollab.network.livemap import _content
+from roadcollab.network.memory import run_in_memory
+from roadcollab.network.plan import RoadPlan
+from roadcollab.network.roadsync import RoadSync
+from roadcollab.network.store import ServiceStore
+from roadcollab.store import RoadStore
+
+ORIGIN = LocalProjection(48.137, 11.575)
+
+
+def _line(pts):
+    xy = np.array(pts, float)
+    lon, lat = ORIGIN.to_lonlat(xy[:, 0], xy[:, 1])
+    return [[float(a), float(b)] for a, b in zip(lon, lat)]
+
+
+@pytest.fixture(scope="module")
+def sim(tmp_path_factory):
+    """``(folder, main's drive paths, side's drive paths, network path)`` of the simulated drives."""
+    root = tmp_path_factory.mktemp("gpsnet")
+    net = root / "net.geojson"
+    net.write_text(json.dumps({"type": "FeatureCollection", "features": [
+        {"type": "Feature", "properties": {"road_id": "main"},
+         "geometry": {"type": "LineString", "coordinates": _line([(0, 0), (200, 0), (350, 20)])}},
+        {"type": "Feature", "properties": {"road_id": "side"},
+         "geometry": {"type": "LineString", "coordinates": _line([(0, 10), (350, 10)])}}]}))
+    assert main(["simulate-drives", "--gps", "--network", str(net), "--vehicles", "3", "--out", str(root / "sim")]) == 0
+    paths = [str(root / "sim" / f"drive{j}.csv") for j in range(1, 7)]
+    return root, paths[:3], paths[3:], root / "sim" / "network.geojson"
+
+
+def _network_run(root, paths, network, name):
+    """The fleet on ``main`` in memory with a RoadSync: ``(road store path, placed drives' hellos)``."""
+    from roadcollab.geo.network import read_network
+
+    road = FleetRoad(read_network(network), "main")
+    drives = [clean_drive(d)[0] for d in load_drives(paths)]
+    vmin = min(float(road.place(d)[0].speeds().min()) for d in drives)
+    plan = RoadPlan(fleet_id="t", min_speed=vmin, road_id="main", road_sha256=file_sha256(network))
+    svc = ServiceStore(root / f"{name}-s.sqlite", plan)
+    url = root / f"{name}-roads.sqlite"
+    with RoadStore.open(url) as roads:
+        sync = RoadSync(roads, svc, road=road)
+        run_in_memory(drives, plan, store=svc, on_fused=sync, road=road)
+        sync.flush()
+    hellos = dict(svc.vehicles())
+    svc.close()
+    return url, hellos
+
+
+def test_networked_segments_and_anomalies_land_where_map_puts_them(sim):
+    root, on_main, on_side, network = sim
+    url, hellos = _network_run(root, on_main, network, "net")
+    assert sorted(hellos) == ["v1", "v2", "v3"]
+    for h in hellos.values():                              # the hello carries the placement
+        assert h["road_id"] == "main" and h["road_direction"] == 1 and h["gps_fixes"] >= 50
+        assert abs(h["road_offset_m"]) < 5.0 and 0.0 < h["road_offset_std_m"] < 1.0
+    assert main(["map", *sum((["--drive", p] for p in on_main + on_side), []), "--network", str(network),
+                 "--store", str(root / "map-roads.sqlite"), "--out", str(root / "map-out"), "--bootstrap", "0"]) == 0
+    with RoadStore.open(url) as s:
+        net_segs, net_an = s.segments(), s.anomalies()
+    with RoadStore.open(root / "map-roads.sqlite") as s:
+        map_segs = {(m.road_id, m.direction, m.from_m, m.to_m): m for m in s.segments()}
+        map_an = [a for a in s.anomalies() if a.road_id == "main"]
+    assert net_segs and all(s.road_id == "main" and s.direction == 1 for s in net_segs)
+    common = 0
+    for s in net_segs:
+        assert s.lonlat.shape[0] >= 2 and s.n_vehicles == 3
+        m = map_segs.get((s.road_id, s.direction, s.from_m, s.to_m))
+        if m is not None:
+            common += 1
+            assert s.lonlat.shape == m.lonlat.shape
+            assert np.abs(s.lonlat - m.lonlat).max() <= 1e-9
+    assert common >= 2                                   # map has 100-200 and 200-300 (it drops 30 m at record ends)
+    assert map_an and net_an
+    # every anomaly map finds on main, the networked fleet finds within 2 m (great-circle) with the same kind
+    for a in map_an:
+        d = [float(geodesic_m(a.lon, a.lat, b.lon, b.lat)) for b in net_an if b.kind == a.kind]
+        assert d and min(d) <= 2.0, (a, d)
+    # and every pothole of the networked fleet is one of map's (within 2 m)
+    for b in net_an:
+        if b.kind == "pothole":
+            d = [float(geodesic_m(a.lon, a.lat, b.lon, b.lat)) for a in map_an if a.kind == "pothole"]
+            assert d and min(d) <= 2.0, (b, d)
+    # the anomaly's lon/lat is its measure on the road
+    from roadcollab.geo.network import read_network
+
+    road = FleetRoad(read_network(network), "main")
+    for b in net_an:
+        assert float(geodesic_m(*road.lonlat(b.measure_m), b.lon, b.lat)) < 1e-3
+    # the live map draws every networked segment and anomaly
+    live = _content(url)
+    assert len(live["segments"]["features"]) == len(net_segs)
+    assert len(live["anomalies"]["features"]) == len(net_an)
+
+
+def test_a_drive_on_the_parallel_road_or_without_gps_is_refused(sim):
+    from roadcollab.geo.network import read_network
+
+    root, on_main, on_side, network = sim
+    road = FleetRoad(read_network(network), "main")
+    d = clean_drive(load_drives(on_side[:1])[0])[0]
+    with pytest.raises(ParameterError, match=r"do not follow road 'main' forward .*matched: side\+1"):
+        road.place(d)
+    with pytest.raises(ParameterError, match="expected lat_deg, lon_deg"):
+        import dataclasses
+
+        road.place(dataclasses.replace(d, gps=None))
+
+
+def test_the_service_refuses_a_hello_off_the_fleets_road(sim):
+    root, on_main, _, network = sim
+    drives = [clean_drive(d)[0] for d in load_drives(on_main[:1])]
+    plan = RoadPlan(fleet_id="t", min_speed=10.0, road_id="main", road_sha256=file_sha256(network))
+    svc = ServiceStore(":memory:", plan)
+    with pytest.raises(ParameterError, match="unacknowledged"):
+        run_in_memory(drives, plan, store=svc)             # not placed: its hello has no road
+    (reason,) = [e for e in svc.events("refused")]
+    assert "surveys road 'main' forward" in str(reason)
+
+
+def test_enroll_copies_the_network_and_every_party_checks_it(sim, tmp_path, capsys):
+    _, _, _, network = sim
+    assert main(["enroll", "--fleet", str(tmp_path / "f"), "--vehicles", "2", "--network", str(network),
+                 "--road-id", "main"]) == 0
+    assert "on road 'main'" in capsys.readouterr().out
+    plan = load_plan(tmp_path / "f")
+    assert plan.road_id == "main" and plan.road_sha256 == file_sha256(network)
+    assert (tmp_path / "f" / ROAD_FILE).read_bytes() == network.read_bytes()
+    assert FleetRoad.load(tmp_path / "f", plan).road_id == "main"
+    (tmp_path / "f" / ROAD_FILE).write_text(network.read_text().replace("main", "mainx"))
+    with pytest.raises(Exception, match="not the network fleet 't'|not the network fleet 'fleet'"):
+        FleetRoad.load(tmp_path / "f", plan)
+    assert main(["enroll", "--fleet", str(tmp_path / "g"), "--vehicles", "2", "--network", str(network),
+                 "--road-id", "nope"]) == 2
+    err = capsys.readouterr().err
+    assert "--road-id: no road 'nope'" in err and err.count("\n") == 1
+    assert main(["enroll", "--fleet", str(tmp_path / "h"), "--vehicles", "2", "--road-id", "main"]) == 2
+    assert "--network and --road-id go together" in capsys.readouterr().err
+    assert not (tmp_path / "g").exists() and not (tmp_path / "h").exists()
+
+
+def test_a_fleet_without_a_road_keeps_its_plan_table():
+    assert "road_id" not in RoadPlan().to_dict()
+    assert RoadPlan.from_dict(RoadPlan().to_dict(), "x") == RoadPlan()
+    p = RoadPlan(road_id="main", road_sha256="ab" * 32)
+    assert RoadPlan.from_dict(p.to_dict(), "x") == p
+    with pytest.raises(ParameterError, match="go together"):
+        RoadPlan(road_id="main")
+    with pytest.raises(ParameterError, match="road_id must be a string"):
+        RoadPlan.from_dict({"road_id": 3, "road_sha256": "x"}, "x")
