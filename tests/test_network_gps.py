@@ -112,6 +112,19 @@ def test_networked_segments_and_anomalies_land_where_map_puts_them(sim):
     live = _content(url)
     assert len(live["segments"]["features"]) == len(net_segs)
     assert len(live["anomalies"]["features"]) == len(net_an)
+    # roadcollab map on the same store (the drives on side) writes the networked segments into its GeoJSON
+    # and GeoPackage with their geometry
+    import pyogrio
+
+    assert main(["map", *sum((["--drive", p] for p in on_side), []), "--network", str(network), "--store", str(url),
+                 "--out", str(root / "net-map"), "--bootstrap", "0"]) == 0
+    fc = json.loads((root / "net-map" / "segments.geojson").read_text())
+    mains = [f for f in fc["features"] if f["properties"]["road_id"] == "main"]
+    assert len(mains) == len(net_segs) and len(fc["features"]) > len(net_segs)
+    for f in mains:
+        s = next(x for x in net_segs if x.from_m == f["properties"]["from_m"])
+        assert np.abs(np.array(f["geometry"]["coordinates"]) - s.lonlat).max() <= 5e-8   # rounded to 1e-7 deg
+    assert pyogrio.read_info(root / "net-map" / "roads.gpkg", layer="segments")["features"] == len(fc["features"])
 
 
 def test_a_drive_on_the_parallel_road_or_without_gps_is_refused(sim):
@@ -169,3 +182,53 @@ def test_a_fleet_without_a_road_keeps_its_plan_table():
         RoadPlan(road_id="main")
     with pytest.raises(ParameterError, match="road_id must be a string"):
         RoadPlan.from_dict({"road_id": 3, "road_sha256": "x"}, "x")
+
+
+@pytest.mark.slow
+def test_enroll_serve_fleet_over_mqtt_on_a_road(sim, tmp_path):
+    """``enroll --network --road-id``, ``serve --roads --map`` with its embedded broker, ``fleet`` with three
+    GPS drives on ``main``: the road store holds the in-memory run's segments (IRI and geometry), the live
+    map's data has every one; a vehicle on the parallel road is refused with one line."""
+    import urllib.request
+
+    from netkit import free_port, rc, start_serve, stop
+
+    root, on_main, on_side, network = sim
+    rc("enroll", "--fleet", tmp_path / "fleet", "--vehicles", 4, "--fleet-id", "t", "--min-speed", 12,
+       "--network", network, "--road-id", "main")
+    port, web = free_port(), free_port()
+    serve = start_serve(tmp_path / "fleet", tmp_path / "s.sqlite", tmp_path / "serve.log", listen=port,
+                        extra=["--roads", tmp_path / "roads.sqlite", "--map", f"127.0.0.1:{web}"])
+    try:
+        rc("fleet", "--fleet", tmp_path / "fleet", *sum((["--drive", d] for d in on_main), []), "--broker",
+           f"mqtt://127.0.0.1:{port}", "--timeout", 120, timeout=240)
+        with urllib.request.urlopen(f"http://127.0.0.1:{web}/data.json", timeout=10) as r:
+            served = json.loads(r.read())
+        with RoadStore.open(tmp_path / "roads.sqlite") as s:         # the store at the same moment
+            n_seg_now, n_an_now = len(s.segments()), len(s.anomalies())
+        off = rc("vehicle", "--fleet", tmp_path / "fleet", "--id", "v4", "--drive", on_side[0], "--broker",
+                 f"mqtt://127.0.0.1:{port}", "--timeout", 30, check=False)
+    finally:
+        assert stop(serve) == 0
+    assert off.returncode == 2 and "matched: side+1" in off.stderr and off.stderr.count("\n") == 1
+    with RoadStore.open(tmp_path / "roads.sqlite") as s:
+        segs = {(x.from_m, x.to_m): x for x in s.segments()}
+        n_an = len(s.anomalies())
+    # what the live map served while serving: every segment and anomaly the store held then
+    assert len(served["segments"]["features"]) == n_seg_now >= 3
+    assert len(served["anomalies"]["features"]) == n_an_now > 0 and n_an > 0
+    # the in-memory run of the same drives with the same plan: the same segments, IRI and geometry
+    from roadcollab.geo.network import read_network
+
+    road = FleetRoad(read_network(network), "main")
+    drives = [clean_drive(d)[0] for d in load_drives(on_main)]
+    svc = ServiceStore(":memory:", load_plan(tmp_path / "fleet"))
+    with RoadStore.open(tmp_path / "mem.sqlite") as roads:
+        sync = RoadSync(roads, svc, road=road)
+        run_in_memory(drives, svc.plan, store=svc, on_fused=sync, road=road)
+        sync.flush()
+        mem = {(x.from_m, x.to_m): x for x in roads.segments()}
+    assert mem.keys() == segs.keys()
+    for k, x in segs.items():
+        assert np.isclose(x.iri_m_per_km, mem[k].iri_m_per_km, rtol=1e-9) and x.n_vehicles == 3
+        assert np.abs(x.lonlat - mem[k].lonlat).max() <= 1e-9
