@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import threading
+from functools import partial
 from pathlib import Path
 
 from ._arguments import help_range, ranged
@@ -87,11 +88,15 @@ def run(args: argparse.Namespace, command_line: str) -> int:
     drive, cleaning = clean_drive(load_drive(args.drive, limits=file_limits(args)))
     if cleaning.n_spikes:
         print(f"{args.id}: {cleaning.n_spikes} isolated spikes repaired", flush=True)
-    road_fields = _place_on_road(args.fleet, plan, drive)
+    index = int(args.id[1:]) - 1 if args.id[1:].isdigit() else 0
+    road_fields, realign = _place_on_road(args.fleet, plan, drive), None
     if road_fields is not None:
+        from ..network.fleetroad import align_to_waiting
+
         drive, road_fields = road_fields
-    agent = VehicleAgent(VehicleEngine(drive, plan, index=int(args.id[1:]) - 1 if args.id[1:].isdigit() else 0),
-                         identity, trust, hello_extra=road_fields)
+        realign = partial(align_to_waiting, index=index)
+    agent = VehicleAgent(VehicleEngine(drive, plan, index=index), identity, trust, hello_extra=road_fields,
+                         realign=realign)
     reconnected = threading.Event()
     client = MqttClient(args.broker, login, f"rc-{plan.fleet_id}-{args.id}", on_connect=reconnected.set)
     try:

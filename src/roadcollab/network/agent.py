@@ -34,12 +34,18 @@ class VehicleAgent:
     hello_extra : dict, optional
         More hello fields (a fleet on a road: :func:`roadcollab.network.fleetroad.hello_fields`); they
         never replace the fields the agent writes.
+    realign : callable, optional
+        ``realign(engine, checked) -> engine``: the engine again with its positions corrected against the
+        checked waiting contributions, before it computes its own (a fleet on a road:
+        :func:`roadcollab.network.fleetroad.align_to_waiting`); contributions on segments the hello did not
+        announce are then not sent.
     """
 
     def __init__(self, engine: VehicleEngine, identity: VehicleIdentity, trust: FleetTrust, *,
-                 hello_extra: dict | None = None) -> None:
+                 hello_extra: dict | None = None, realign=None) -> None:
         self.engine, self.identity, self.trust = engine, identity, trust
         self.hello_extra = dict(hello_extra or {})
+        self.realign = realign
         self.vid = identity.vehicle_id
         self.topics = Topics(engine.plan.fleet_id)
         self.segments = engine.segments
@@ -108,9 +114,11 @@ class VehicleAgent:
         self.started = True
         for s in done:
             self.outcomes[s] = "accepted"
+        if self.realign is not None and checked:
+            self.engine = self.realign(self.engine, checked)
         out = []
         for c in self.engine.contributions(checked):
-            if c.segment in self.outcomes:
+            if c.segment in self.outcomes or c.segment not in self.segments:
                 continue
             t = self.topics.segment(self.vid, c.segment)
             self.pending[c.segment] = Publish(t, seal(self.identity, t, encode_contribution(c)))

@@ -43,15 +43,21 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import FileFormatError, MessageError, ParameterError
+from ..experiments.distance_maps import estimate_offset
 from ..geo.matching import lonlat_at, road_passes
 from ..geo.network import RoadNetwork, read_network
 from ..geo.segments import segment_bounds, segment_lonlat
 from ..io.drives import Drive
 from ..models.iri import IRISegments, iri
+from .engine import VehicleEngine
 from .fleetdir import ROAD_FILE
 from .plan import RoadPlan
 
-__all__ = ["ROAD_FILE", "FleetRoad", "file_sha256", "check_road", "road_iri", "hello_fields", "check_hello"]
+__all__ = ["ROAD_FILE", "MAX_OFFSET", "FleetRoad", "file_sha256", "check_road", "road_iri", "hello_fields",
+           "check_hello", "align_to_waiting"]
+
+#: Largest correction of a vehicle's GPS offset by cross-correlation, m (``roadcollab map``'s ``max_offset``).
+MAX_OFFSET = 5.0
 
 
 def file_sha256(path) -> str:
@@ -286,3 +292,49 @@ def road_iri(position: np.ndarray, fused: np.ndarray, spacing: float, bounds: li
         return None
     start, end, left, right = (np.array(c, dtype=float) for c in zip(*rows))
     return IRISegments(start, end, left, right, tracks=2)
+
+
+def align_to_waiting(engine: VehicleEngine, waiting: dict, *, index: int = 0, max_offset: float = MAX_OFFSET
+                     ) -> VehicleEngine:
+    """The engine on the drive shifted onto the waiting contributions (cross-correlation of the inversions).
+
+    The GPS offset of each drive is known to a few tenths of a metre (``road_offset_std_m``); averaging
+    inversions that far apart smooths the short wavelengths the IRI weighs. As ``roadcollab map``
+    (``estimate_fleet(align=True)``) does, the vehicle estimates the lag ``L`` of its band-limited
+    inversion against the previous vehicle's inversions waiting on its segments
+    (:func:`~roadcollab.experiments.distance_maps.estimate_offset`, within ``+-max_offset``, sub-sample
+    by a parabola through the peak) and moves its positions by ``-L``. Unlike ``map``, which shifts the
+    corrections to mean zero afterwards, the network cannot revise earlier vehicles: the first vehicle's
+    GPS offset is the fleet's (its error, about ``road_offset_std_m``, is common to every position).
+
+    Parameters
+    ----------
+    engine : VehicleEngine
+        The vehicle's engine on its placed drive.
+    waiting : dict
+        ``{segment: Contribution}`` checked by the agent.
+    index : int
+        The engine's vehicle number (names its design).
+    max_offset : float
+        m.
+
+    Returns
+    -------
+    VehicleEngine
+        ``engine`` itself when nothing waits on 2 * ``max_offset`` or more of its stretch (or the lag is 0).
+    """
+    ref = np.full(engine.inversion.shape, np.nan)
+    lo, hi = engine.i_first, engine.i_last + 1
+    for c in waiting.values():
+        a, b = max(c.i0, lo), min(c.i0 + c.n, hi)
+        if b > a:
+            ref[a - lo:b - lo] = c.inversion[a - c.i0:b - c.i0]
+    overlap = np.isfinite(ref[:, 0]) & np.isfinite(engine.inversion[:, 0])
+    if np.count_nonzero(overlap) * engine.plan.spacing < 2 * max_offset:
+        return engine
+    lag, _ = estimate_offset(ref, engine.inversion, engine.plan.spacing, max_offset)
+    if lag == 0.0:
+        return engine
+    d = engine.drive
+    moved = dataclasses.replace(d, positions=d.positions - lag, start_m=float(d.positions[0] - lag))
+    return VehicleEngine(moved, engine.plan, index=index)

@@ -8,6 +8,8 @@ The same :class:`~roadcollab.network.service.Service` and
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 
 from ..errors import ParameterError
@@ -17,6 +19,7 @@ from ..experiments.fleet_estimation import FleetEstimates
 from ..wire.identity import FleetAuthority, VehicleIdentity
 from .agent import VehicleAgent
 from .engine import VehicleEngine
+from .fleetroad import align_to_waiting
 from .plan import RoadPlan
 from .results import results_from_store
 from .service import Service
@@ -60,7 +63,8 @@ def run_in_memory(drives, plan: RoadPlan, *, store: ServiceStore | None = None, 
         The service's hook (:class:`~roadcollab.network.service.Service`), e.g. a ``RoadSync``.
     road : FleetRoad, optional
         The fleet's road (``plan.road_id``): each vehicle places its GPS drive on it first
-        (:meth:`~roadcollab.network.fleetroad.FleetRoad.place`), as ``roadcollab vehicle`` does.
+        (:meth:`~roadcollab.network.fleetroad.FleetRoad.place`) and aligns it to the waiting messages
+        (:func:`~roadcollab.network.fleetroad.align_to_waiting`), as ``roadcollab vehicle`` does.
 
     Returns
     -------
@@ -76,11 +80,12 @@ def run_in_memory(drives, plan: RoadPlan, *, store: ServiceStore | None = None, 
     svc = broker.client()
     svc.subscribe(service.topics.from_vehicles)
     for j, d in enumerate(drives):
-        extra = None
+        extra = realign = None
         if road is not None:
             d, extra = road.place(d)
+            realign = functools.partial(align_to_waiting, index=j)
         agent = VehicleAgent(VehicleEngine(d, plan, index=j), VehicleIdentity.enroll(authority, f"v{j + 1}"),
-                             authority.trust(), hello_extra=extra)
+                             authority.trust(), hello_extra=extra, realign=realign)
         car = broker.client()
         for f in agent.subscriptions:
             car.subscribe(f)
