@@ -48,7 +48,8 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
     p.add_argument("--roads", metavar="URL", default=None,
                    help="road-condition store to keep up to date while serving (IRI per 100 m with its interval "
                         "and vehicles, fused profile, anomalies; history kept): an SQLite file, sqlite:///path or "
-                        "postgresql://user@host/db; the store 'roadcollab map' writes")
+                        "postgresql://user@host/db; the store 'roadcollab map' writes; a fleet enrolled on a road "
+                        "writes map's segments with their geometry)")
     p.add_argument("--map", nargs="?", const="127.0.0.1:8765", default=None, metavar="HOST:PORT",
                    help="serve the live map of --roads (the page 'roadcollab map' writes, redrawn as segments "
                         "finish) on HOST:PORT (default with no value 127.0.0.1:8765, loopback only)")

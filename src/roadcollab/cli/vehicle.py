@@ -31,7 +31,9 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
     p = command_parser(
         subparsers, NAME, summary="one vehicle: its drive's segments through the service",
         does="Reads the drive, inverts it, cuts it into the fleet's segments; for each takes the message "
-             "waiting there, checks it, runs Algorithm 1, and publishes its signed contribution. Exits 0 when "
+             "waiting there, checks it, runs Algorithm 1, and publishes its signed contribution. In a fleet "
+             "enrolled on a road (enroll --network) it first places the drive on that road by its GPS fixes "
+             "and aligns it to the waiting messages. Exits 0 when "
              "the service has acknowledged every segment, 3 if --timeout passes first.",
         writes="nothing (messages to the broker; one line on stdout).",
         example="roadcollab vehicle --fleet fleet --id v1 --drive d1.csv --broker mqtt://127.0.0.1:1883")
