@@ -191,6 +191,50 @@ def test_enroll_copies_the_network_and_every_party_checks_it(sim, tmp_path, caps
     assert not (tmp_path / "g").exists() and not (tmp_path / "h").exists()
 
 
+def test_export_fleet_writes_the_geometry_serve_roads_writes(sim, tmp_path, capsys):
+    import pyogrio
+
+    root, on_main, _, network = sim
+    assert main(["enroll", "--fleet", str(tmp_path / "f"), "--vehicles", "3", "--fleet-id", "t", "--min-speed", "12",
+                 "--network", str(network), "--road-id", "main"]) == 0
+    plan = load_plan(tmp_path / "f")
+    road = FleetRoad.load(tmp_path / "f", plan)
+    drives = [clean_drive(d)[0] for d in load_drives(on_main)]
+    svc = ServiceStore(tmp_path / "s.sqlite", plan)
+    with RoadStore.open(tmp_path / "roads.sqlite") as roads:
+        sync = RoadSync(roads, svc, road=road)
+        run_in_memory(drives, plan, store=svc, on_fused=sync, road=road)
+        sync.flush()
+        segs, anoms = roads.segments(), roads.anomalies()
+    svc.close()
+    capsys.readouterr()
+    assert main(["export", "--store", str(tmp_path / "s.sqlite"), "--fleet", str(tmp_path / "f"), "--out",
+                 str(tmp_path / "out")]) == 0
+    assert f"road 'main': {len(segs)} segments and {len(anoms)} anomalies" in capsys.readouterr().out
+    fc = json.loads((tmp_path / "out" / "segments.geojson").read_text())
+    assert len(fc["features"]) == len(segs) >= 3
+    for f, s in zip(sorted(fc["features"], key=lambda f: f["properties"]["from_m"]), sorted(segs, key=lambda s: s.from_m)):
+        xy = np.array(f["geometry"]["coordinates"])
+        assert np.abs(xy - s.lonlat).max() <= 5e-8 and 11.5 < xy[0, 0] < 11.6 and 48.1 < xy[0, 1] < 48.2
+        assert np.isclose(f["properties"]["iri_m_per_km"], s.iri_m_per_km, rtol=1e-12)
+    an = json.loads((tmp_path / "out" / "anomalies.geojson").read_text())
+    assert len(an["features"]) == len(anoms) > 0
+    assert pyogrio.read_info(tmp_path / "out" / "roads.gpkg", layer="segments")["features"] == len(segs)
+    assert (tmp_path / "out" / "iri.csv").is_file()                 # and export's own files, as without --fleet
+    # a fleet folder of another plan, or of a fleet without a road, is one line
+    assert main(["enroll", "--fleet", str(tmp_path / "g"), "--vehicles", "1", "--fleet-id", "t"]) == 0
+    assert main(["export", "--store", str(tmp_path / "s.sqlite"), "--fleet", str(tmp_path / "g"), "--out",
+                 str(tmp_path / "out2")]) == 2
+    err = capsys.readouterr().err
+    assert "not the fleet of --store" in err and err.count("\n") == 1
+    ServiceStore(tmp_path / "g.sqlite", load_plan(tmp_path / "g")).close()
+    assert main(["export", "--store", str(tmp_path / "g.sqlite"), "--fleet", str(tmp_path / "g"), "--out",
+                 str(tmp_path / "out2")]) == 2
+    err = capsys.readouterr().err
+    assert "is not enrolled on a road" in err and err.count("\n") == 1
+    assert not (tmp_path / "out2").exists()
+
+
 def test_a_fleet_without_a_road_keeps_its_plan_table():
     assert "road_id" not in RoadPlan().to_dict()
     assert RoadPlan.from_dict(RoadPlan().to_dict(), "x") == RoadPlan()
