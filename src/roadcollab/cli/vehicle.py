@@ -47,14 +47,6 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
     return p
 
 
-def _place_on_road(fleet, plan, drive):
-    """``(drive on the fleet's road, hello fields)`` for a fleet on a road, else None (network/fleetroad.py)."""
-    from ..network.fleetroad import FleetRoad
-
-    road = FleetRoad.load(fleet, plan)
-    return None if road is None else road.place(drive)
-
-
 def run(args: argparse.Namespace, command_line: str) -> int:
     """Run one vehicle to its last acknowledgement.
 
@@ -116,3 +108,11 @@ def run(args: argparse.Namespace, command_line: str) -> int:
     print(f"{args.id}: {len(agent.segments)} segments done ({client.bytes_out} bytes sent"
           f"{', conflicts on ' + str(refused) if refused else ''}){note}", flush=True)
     return 0
+
+
+def _place_on_road(fleet, plan, drive):
+    """``(drive on the fleet's road, hello fields)`` for a fleet on a road, else None (network/fleetroad.py)."""
+    from ..network.fleetroad import FleetRoad
+
+    road = FleetRoad.load(fleet, plan)
+    return None if road is None else road.place(drive)

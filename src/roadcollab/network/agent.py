@@ -37,8 +37,8 @@ class VehicleAgent:
     realign : callable, optional
         ``realign(engine, checked) -> engine``: the engine again with its positions corrected against the
         checked waiting contributions, before it computes its own (a fleet on a road:
-        :func:`roadcollab.network.fleetroad.align_to_waiting`); contributions on segments the hello did not
-        announce are then not sent.
+        :func:`roadcollab.network.fleetroad.align_to_waiting`, whose engine contributes only on the
+        segments the hello announced).
     """
 
     def __init__(self, engine: VehicleEngine, identity: VehicleIdentity, trust: FleetTrust, *,
@@ -118,7 +118,7 @@ class VehicleAgent:
             self.engine = self.realign(self.engine, checked)
         out = []
         for c in self.engine.contributions(checked):
-            if c.segment in self.outcomes or c.segment not in self.segments:
+            if c.segment in self.outcomes:
                 continue
             t = self.topics.segment(self.vid, c.segment)
             self.pending[c.segment] = Publish(t, seal(self.identity, t, encode_contribution(c)))

@@ -3,7 +3,6 @@
 Layout written by :func:`enroll` (``roadcollab enroll``)::
 
     DIR/fleet.toml                    [plan] of the fleet (RoadPlan)
-    DIR/road-network.geojson          the road network of a fleet on a road (enroll --network), byte for byte
     DIR/authority/authority.key       Ed25519 authority key (0600) and trust.toml (the trust anchor)
     DIR/vehicles/vK/                  identity.key (0600), certificate.bin, trust.toml, broker.toml
     DIR/service/broker.toml           the service's broker login
@@ -31,11 +30,9 @@ from ..errors import FileFormatError, ParameterError
 from ..wire.identity import FleetAuthority, FleetTrust, VehicleIdentity, _read_toml, check_id
 from .plan import RoadPlan
 
-__all__ = ["ROAD_FILE", "Login", "enroll", "load_plan", "load_login", "load_trust", "acl_rules", "SERVICE_USER"]
+__all__ = ["Login", "enroll", "load_plan", "load_login", "load_trust", "acl_rules", "SERVICE_USER"]
 
 SERVICE_USER = "service"
-#: The fleet folder's copy of the road network of a fleet on a road (network/fleetroad.py).
-ROAD_FILE = "road-network.geojson"
 
 
 @dataclass(frozen=True)
@@ -95,7 +92,7 @@ def _mosquitto_acl(rules: dict) -> str:
     return "\n".join(lines)
 
 
-def enroll(folder, n_vehicles: int, plan: RoadPlan, *, network: bytes | None = None) -> list[str]:
+def enroll(folder, n_vehicles: int, plan: RoadPlan) -> list[str]:
     """Create a fleet folder (module docstring) with vehicles ``v1..vN``.
 
     Parameters
@@ -105,9 +102,6 @@ def enroll(folder, n_vehicles: int, plan: RoadPlan, *, network: bytes | None = N
     n_vehicles : int
         1..10000.
     plan : RoadPlan
-    network : bytes, optional
-        The road network file of a plan with a ``road_id`` (its SHA-256 is the plan's ``road_sha256``),
-        written as ``road-network.geojson``.
 
     Returns
     -------
@@ -129,13 +123,7 @@ def enroll(folder, n_vehicles: int, plan: RoadPlan, *, network: bytes | None = N
     if folder.is_dir() and any(folder.iterdir()):  # never write among files that are not ours
         raise ParameterError(f"--fleet {folder}: the folder is not empty; enroll creates a fleet in a new or empty "
                              "folder")
-    if bool(plan.road_id) != (network is not None) or \
-            (network is not None and hashlib.sha256(network).hexdigest() != plan.road_sha256):
-        raise ParameterError("enroll: a plan with a road_id needs its network file (and only then), with the "
-                             "plan's road_sha256")
     folder.mkdir(parents=True, exist_ok=True)
-    if network is not None:
-        (folder / ROAD_FILE).write_bytes(network)
     auth = FleetAuthority.generate(plan.fleet_id)
     auth.save(folder / "authority")
     lines = "\n".join(f"{k} = {json.dumps(v)}" for k, v in plan.to_dict().items())

@@ -50,12 +50,13 @@ from ..geo.segments import segment_bounds, segment_lonlat
 from ..io.drives import Drive
 from ..models.iri import IRISegments, iri
 from .engine import VehicleEngine
-from .fleetdir import ROAD_FILE
 from .plan import RoadPlan
 
 __all__ = ["ROAD_FILE", "MAX_OFFSET", "FleetRoad", "file_sha256", "check_road", "road_iri", "hello_fields",
            "check_hello", "align_to_waiting"]
 
+#: The fleet folder's copy of the road network (written by ``roadcollab enroll --network``).
+ROAD_FILE = "road-network.geojson"
 #: Largest correction of a vehicle's GPS offset by cross-correlation, m (``roadcollab map``'s ``max_offset``).
 MAX_OFFSET = 5.0
 
@@ -321,7 +322,8 @@ def align_to_waiting(engine: VehicleEngine, waiting: dict, *, index: int = 0, ma
     Returns
     -------
     VehicleEngine
-        ``engine`` itself when nothing waits on 2 * ``max_offset`` or more of its stretch (or the lag is 0).
+        ``engine`` itself when nothing waits on 2 * ``max_offset`` or more of its stretch (or the lag is 0);
+        else a new engine that contributes only on ``engine``'s segments (those its hello announced).
     """
     ref = np.full(engine.inversion.shape, np.nan)
     lo, hi = engine.i_first, engine.i_last + 1
@@ -337,4 +339,16 @@ def align_to_waiting(engine: VehicleEngine, waiting: dict, *, index: int = 0, ma
         return engine
     d = engine.drive
     moved = dataclasses.replace(d, positions=d.positions - lag, start_m=float(d.positions[0] - lag))
-    return VehicleEngine(moved, engine.plan, index=index)
+    return _Announced(moved, engine.plan, index=index, announced=engine.segments)
+
+
+class _Announced(VehicleEngine):
+    """A realigned engine: it contributes only on the segments the hello announced (the service refuses
+    others); a segment the shift moved it off is then "empty" for the agent."""
+
+    def __init__(self, drive: Drive, plan: RoadPlan, *, index: int, announced: list[int]) -> None:
+        super().__init__(drive, plan, index=index)
+        self.announced = frozenset(announced)
+
+    def contributions(self, waiting: dict | None = None) -> list:
+        return [c for c in super().contributions(waiting) if c.segment in self.announced]

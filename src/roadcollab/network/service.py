@@ -13,8 +13,8 @@ from dataclasses import dataclass
 from typing import Callable
 
 from ..errors import MessageError, ParameterError
-from ..wire.identity import FleetTrust
 from .fleetroad import check_hello
+from ..wire.identity import FleetTrust
 from .messages import Topics, decode_contribution, decode_json, encode_json, encode_waiting, open_from
 from .store import ServiceStore
 
