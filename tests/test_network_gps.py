@@ -294,3 +294,24 @@ def test_enroll_serve_fleet_over_mqtt_on_a_road(sim, tmp_path):
     for k, x in segs.items():
         assert np.isclose(x.iri_m_per_km, mem[k].iri_m_per_km, rtol=1e-9) and x.n_vehicles == 3
         assert np.abs(x.lonlat - mem[k].lonlat).max() <= 1e-9
+
+
+def test_alignment_to_the_waiting_message_undoes_a_known_shift(sim):
+    """A drive moved 1.5 m along the road, aligned to its own unmoved contributions: moved back (to 0.05 m),
+    contributing only on the segments it announced; with nothing waiting the engine is kept."""
+    import dataclasses
+
+    from roadcollab.geo.network import read_network
+    from roadcollab.network.engine import VehicleEngine
+    from roadcollab.network.fleetroad import align_to_waiting
+
+    _, on_main, _, network = sim
+    road = FleetRoad(read_network(network), "main")
+    d, _ = road.place(clean_drive(load_drives(on_main[:1])[0])[0])
+    plan = RoadPlan(fleet_id="t", min_speed=12.0, road_id="main", road_sha256=file_sha256(network))
+    waiting = {c.segment: c for c in VehicleEngine(d, plan).contributions()}
+    moved = VehicleEngine(dataclasses.replace(d, positions=d.positions + 1.5), plan)
+    assert align_to_waiting(moved, {}) is moved
+    again = align_to_waiting(moved, waiting)
+    assert abs(again.drive.positions[0] - d.positions[0]) <= 0.05
+    assert {c.segment for c in again.contributions(waiting)} <= set(moved.segments)
