@@ -25,6 +25,7 @@ NOT_NUMERIC = {"--out", "--roads", "--map", "--kernels", "--fleet-id", "--drive"
                "--broker", "--listen", "--scheduler", "--mechanism", "--iso-class", "--seeds", "--aggregation"}
 #: Options whose type checks a set that is not an interval (tested on their own below).
 SPECIAL = {"--paillier-bits"}
+NOT_NUMERIC |= {"--road-id"}   # enroll: a road of --network
 
 
 def _commands():

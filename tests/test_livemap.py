@@ -114,3 +114,70 @@ def test_live_map_in_headless_chromium_grows(tmp_path):
     assert (tmp_path / "map-live.png").stat().st_size > 10_000
     if os.environ.get("ROADCOLLAB_DOCS_SCREENSHOT"):
         (ROOT / "docs" / "map-live.png").write_bytes((tmp_path / "map-live.png").read_bytes())
+
+
+@pytest.mark.slow
+def test_live_map_draws_the_networked_fleet_in_headless_chromium(tmp_path):
+    """The networked fleet on a road (GPS drives of ``simulate-drives --gps``, in-memory transport, RoadSync
+    writing the store while the page is open): the page draws the store's segments and anomaly markers."""
+    spec = importlib.util.spec_from_file_location("map_screenshot", ROOT / "tools" / "map_screenshot.py")
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    if not Path(mod.CHROMIUM).exists() or importlib.util.find_spec("playwright") is None:
+        if os.environ.get("CI"):
+            pytest.fail("CI needs chromium (apt-get install -y chromium) and playwright (pip)")
+        pytest.skip("needs /usr/bin/chromium and playwright")
+    from playwright.sync_api import sync_playwright
+
+    from roadcollab.experiments.city import write_city
+    from roadcollab.geo.network import read_network
+    from roadcollab.io.drive_clean import clean_drive
+    from roadcollab.io.drives import load_drives
+    from roadcollab.network.fleetroad import FleetRoad, file_sha256
+    from roadcollab.network.memory import run_in_memory
+    from roadcollab.network.plan import RoadPlan
+    from roadcollab.network.roadsync import RoadSync
+    from roadcollab.network.store import ServiceStore
+
+    (tmp_path / "city").mkdir()
+    files = write_city(tmp_path / "city", seed=0)
+    road = FleetRoad(read_network(files["network"]), "main")
+    drives = [clean_drive(d)[0] for d in load_drives([str(p) for p in files["drives"][:3]])]   # main + cross
+    plan = RoadPlan(fleet_id="city", min_speed=12.0, road_id="main", road_sha256=file_sha256(files["network"]))
+    svc = ServiceStore(tmp_path / "s.sqlite", plan)
+    store = tmp_path / "roads.sqlite"
+    RoadStore.open(store).close()
+    live = LiveMap(store, poll_s=0.5).start()
+    foreign, errors = [], []
+    count = "() => document.querySelectorAll('path.rc-segment').length"
+    try:
+        with sync_playwright() as p:
+            browser = p.chromium.launch(executable_path=mod.CHROMIUM, args=mod.ARGS, timeout=60_000)
+            try:
+                page = browser.new_context(viewport={"width": 1200, "height": 800}).new_page()
+                page.route("**/*", lambda route: route.continue_() if route.request.url.startswith(live.url)
+                           else (foreign.append(route.request.url), route.abort()))
+                page.on("pageerror", lambda e: errors.append(str(e)))
+                page.goto(live.url, timeout=60_000)
+                page.wait_for_function("window.roadcollab !== undefined && window.roadcollab.polls > 0",
+                                       timeout=60_000)
+                assert page.evaluate(count) == 0                  # nothing in the store yet
+                with RoadStore.open(store) as roads:
+                    sync = RoadSync(roads, svc, road=road)
+                    run_in_memory(drives, plan, store=svc, on_fused=sync, road=road)
+                    sync.flush()
+                with RoadStore.open(store) as s:
+                    n_seg, n_an = len(s.segments()), len(s.anomalies())
+                    assert all(x.lonlat.shape[0] >= 2 for x in s.segments())
+                assert n_seg >= 4 and n_an > 0
+                page.wait_for_function(f"({count})() === {n_seg}", timeout=60_000)
+                assert page.evaluate("() => document.querySelectorAll('path.rc-anomaly').length") == n_an
+                page.wait_for_timeout(500)
+                page.screenshot(path=str(tmp_path / "map-network.png"))
+            finally:
+                browser.close()
+    finally:
+        live.stop()
+        svc.close()
+    assert foreign == [] and errors == []
+    assert (tmp_path / "map-network.png").stat().st_size > 10_000

@@ -43,6 +43,7 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
     p.add_argument("--min-speed", type=_MIN_SPEED, default=10.0, metavar="M/S",
                    help="slowest speed the fleet admits, m/s: fixes the wavenumber band edge 0.5 Hz / M/S "
                         f"(estimate takes it from the slowest drive; default 10; {help_range(_MIN_SPEED)})")
+    _add_road_options(p)
     p.add_argument("--segment-length", type=SEGMENT_LENGTH, default=100.0, metavar="M",
                    help=f"segment length (default 100; {help_range(SEGMENT_LENGTH)})")
     p.add_argument("--grid-step", type=GRID_STEP, default=0.05, metavar="M",
@@ -65,6 +66,44 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
     return p
 
 
+def _add_road_options(p) -> None:
+    """``--network FILE --road-id ID``: a fleet on a road (network/fleetroad.py)."""
+    p.add_argument("--network", metavar="FILE", default=None,
+                   help="road network GeoJSON (as 'roadcollab map --network'), copied into the fleet: with "
+                        "--road-id, the vehicles place their GPS drives on that road and 'serve --roads' writes "
+                        "its segments' geometry (default: no road, the drives' own distance axis)")
+    p.add_argument("--road-id", metavar="ID", default=None,
+                   help="the road of --network the fleet surveys, in its forward direction")
+
+
+def _road_of(args) -> tuple[dict, bytes | None]:
+    """The plan's road fields and the network file's bytes of ``--network``/``--road-id`` (({}, None) without)."""
+    from ..errors import ParameterError
+
+    if (args.network is None) != (args.road_id is None):
+        raise ParameterError("--network and --road-id go together (the fleet's road in its network)")
+    if args.network is None:
+        return {}, None
+    from ..geo.network import read_network
+    from ..network.fleetroad import check_road, file_sha256
+
+    check_road(read_network(args.network), args.road_id, "--road-id")
+    with open(args.network, "rb") as fh:
+        network = fh.read()
+    return {"road_id": args.road_id, "road_sha256": file_sha256(args.network)}, network
+
+
+def _write_road(args, plan, network: bytes | None) -> str:
+    """The network's copy in the new fleet folder (never replacing a file); the note for the summary line."""
+    if network is None:
+        return ""
+    from ..network.fleetroad import ROAD_FILE
+
+    with open(f"{args.fleet}/{ROAD_FILE}", "xb") as fh:
+        fh.write(network)
+    return f" on road {plan.road_id!r} of {args.network}"
+
+
 def run(args: argparse.Namespace, command_line: str) -> int:
     """Enroll the fleet and print one line.
 
@@ -84,8 +123,9 @@ def run(args: argparse.Namespace, command_line: str) -> int:
     from ..network.plan import RoadPlan
     from ..wire.identity import check_id
 
+    road, network = _road_of(args)
     plan = RoadPlan(fleet_id=check_id("--fleet-id", args.fleet_id), spacing=args.grid_step,
-                    segment_length=args.segment_length, min_speed=args.min_speed)
+                    segment_length=args.segment_length, min_speed=args.min_speed, **road)
     k = args.min_inputs
     t = k if args.threshold is None else args.threshold
     try:
@@ -94,7 +134,8 @@ def run(args: argparse.Namespace, command_line: str) -> int:
     except ParameterError as err:
         raise ParameterError(f"--round-size/--min-inputs/--threshold/--max-colluders: {err}") from None
     ids = enroll(args.fleet, args.vehicles, plan, policy)
+    on = _write_road(args, plan, network)
     how = (f"; secure aggregation, rounds of {policy.round_size} (k={k}, t={t}, c={policy.max_colluders})"
            if policy.secure else "")
-    print(f"enrolled fleet {plan.fleet_id!r} with {len(ids)} vehicles ({ids[0]}..{ids[-1]}) in {args.fleet}{how}")
+    print(f"enrolled fleet {plan.fleet_id!r} with {len(ids)} vehicles ({ids[0]}..{ids[-1]}) in {args.fleet}{on}{how}")
     return 0

@@ -52,7 +52,8 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
     p.add_argument("--roads", metavar="URL", default=None,
                    help="road-condition store to keep up to date while serving (IRI per 100 m with its interval "
                         "and vehicles, fused profile, anomalies; history kept): an SQLite file, sqlite:///path or "
-                        "postgresql://user@host/db; the store 'roadcollab map' writes")
+                        "postgresql://user@host/db; the store 'roadcollab map' writes; a fleet enrolled on a road "
+                        "writes map's segments with their geometry)")
     p.add_argument("--map", nargs="?", const="127.0.0.1:8765", default=None, metavar="HOST:PORT",
                    help="serve the live map of --roads (the page 'roadcollab map' writes, redrawn as segments "
                         "finish) on HOST:PORT (default with no value 127.0.0.1:8765, loopback only)")
@@ -83,13 +84,15 @@ def _road_outputs(args, store, command_line: str, log, map_at):
     """
     if args.roads is None:
         return None, None, None
+    from ..network.fleetroad import FleetRoad
     from ..network.livemap import LiveMap
     from ..network.roadsync import RoadSync
     from ..store import RoadStore
 
     sync = live = None
     try:
-        sync = RoadSync(RoadStore.open(args.roads), store, source=command_line, min_interval_s=1.0)
+        road = FleetRoad.load(args.fleet, store.plan)        # a fleet on a road: segments with their geometry
+        sync = RoadSync(RoadStore.open(args.roads), store, source=command_line, min_interval_s=1.0, road=road)
         if map_at is not None:
             live = LiveMap(args.roads, *map_at).start()
             print(f"live map of {args.roads} on {live.url}", flush=True)

@@ -6,6 +6,7 @@ import argparse
 import os
 import signal
 import threading
+from functools import partial
 from pathlib import Path
 
 from ._arguments import help_range, ranged
@@ -32,7 +33,9 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
     p = command_parser(
         subparsers, NAME, summary="one vehicle: its drive's segments through the service",
         does="Reads the drive, inverts it, cuts it into the fleet's segments; for each takes the message "
-             "waiting there, checks it, runs Algorithm 1, and publishes its signed contribution. Exits 0 when "
+             "waiting there, checks it, runs Algorithm 1, and publishes its signed contribution. In a fleet "
+             "enrolled on a road (enroll --network) it first places the drive on that road by its GPS fixes "
+             "and aligns it to the waiting messages. Exits 0 when "
              "the service has acknowledged every segment, 3 if --timeout passes first.",
         writes="nothing (messages to the broker; one line on stdout).",
         example="roadcollab vehicle --fleet fleet --id v1 --drive d1.csv --broker mqtt://127.0.0.1:1883")
@@ -113,8 +116,15 @@ def run(args: argparse.Namespace, command_line: str) -> int:
                             f"rc/{plan.fleet_id}", {})
         if os.environ.get("ROADCOLLAB_TEST_DIE_AFTER") == "shares":
             _die_after_shares(rounds)
-    agent = VehicleAgent(VehicleEngine(drive, plan, index=int(args.id[1:]) - 1 if args.id[1:].isdigit() else 0),
-                         identity, trust, rounds=rounds, relay_key=relay)
+    index = int(args.id[1:]) - 1 if args.id[1:].isdigit() else 0
+    road_fields, realign = _place_on_road(args.fleet, plan, drive), None
+    if road_fields is not None:
+        from ..network.fleetroad import align_to_waiting
+
+        drive, road_fields = road_fields
+        realign = partial(align_to_waiting, index=index)
+    agent = VehicleAgent(VehicleEngine(drive, plan, index=index), identity, trust, hello_extra=road_fields,
+                         realign=realign, rounds=rounds, relay_key=relay)
 
     def contributed() -> None:
         if policy.secure:     # 'roadcollab fleet' starts the next vehicle on this line
@@ -139,3 +149,11 @@ def run(args: argparse.Namespace, command_line: str) -> int:
     print(f"{args.id}: {len(agent.segments)} segments done ({client.bytes_out} bytes sent"
           f"{', conflicts on ' + str(refused) if refused else ''}){note}", flush=True)
     return 0
+
+
+def _place_on_road(fleet, plan, drive):
+    """``(drive on the fleet's road, hello fields)`` for a fleet on a road, else None (network/fleetroad.py)."""
+    from ..network.fleetroad import FleetRoad
+
+    road = FleetRoad.load(fleet, plan)
+    return None if road is None else road.place(drive)

@@ -38,18 +38,28 @@ class VehicleAgent:
         Its key and certificate.
     trust : FleetTrust
         The fleet's trust anchor (to check the waiting messages).
+    hello_extra : dict, optional
+        More hello fields (a fleet on a road: :func:`roadcollab.network.fleetroad.hello_fields`); they
+        never replace the fields the agent writes.
+    realign : callable, optional
+        ``realign(engine, checked) -> engine``: the engine again with its positions corrected against the
+        checked waiting contributions, before it computes its own (a fleet on a road:
+        :func:`roadcollab.network.fleetroad.align_to_waiting`, whose engine contributes only on the
+        segments the hello announced).
     rounds : RoundAgent, optional
         Its side of the secure-aggregation rounds (module docstring); default: in the clear.
     relay_key : RelayKey, optional
         The fleet's relay key; required with ``rounds`` (the waiting messages are sealed to it).
     """
 
-    def __init__(self, engine: VehicleEngine, identity: VehicleIdentity, trust: FleetTrust, *, rounds=None,
-                 relay_key=None) -> None:
+    def __init__(self, engine: VehicleEngine, identity: VehicleIdentity, trust: FleetTrust, *,
+                 hello_extra: dict | None = None, realign=None, rounds=None, relay_key=None) -> None:
         if rounds is not None and relay_key is None:
             raise ParameterError("secure aggregation needs the fleet's relay key (relay.key in the vehicle folder)")
         self.engine, self.identity, self.trust, self.rounds = engine, identity, trust, rounds
         self.relay_key = relay_key
+        self.hello_extra = dict(hello_extra or {})
+        self.realign = realign
         self.vid = identity.vehicle_id
         self.topics = Topics(engine.plan.fleet_id)
         self.segments = engine.segments
@@ -82,7 +92,7 @@ class VehicleAgent:
 
     def hello(self) -> Publish:
         d = self.engine.drive
-        body = encode_json({"segments": self.segments, "speed_mps": float(d.speed), "csv": d.csv_path.name,
+        body = encode_json({**self.hello_extra, "segments": self.segments, "speed_mps": float(d.speed), "csv": d.csv_path.name,
                             "n_samples": int(d.n_samples), "start_m": float(d.positions[0]),
                             "end_m": float(d.positions[-1])})
         topic = self.topics.hello(self.vid)
@@ -135,6 +145,8 @@ class VehicleAgent:
         self.started = True
         for s in done:
             self.outcomes[s] = "accepted"
+        if self.realign is not None and checked:
+            self.engine = self.realign(self.engine, checked)
         out = []
         for c in self.engine.contributions(checked):
             if self.rounds is not None and c.segment not in self.rounds.inputs:

@@ -5,8 +5,9 @@ served by the standard library's :mod:`http.server` in a thread, redrawn as the 
 bundled) with one more script: every ``poll_s`` seconds it fetches ``GET /data.json`` (the segments and
 anomalies GeoJSON of the store, and a version) and, when the version changed, redraws both layers. Each
 request opens the store afresh (read only), so whoever writes it (``serve --roads``, ``roadcollab map``)
-is seen. Only segments with a geometry (two or more positions) are drawn: the networked fleet's drives
-carry no GPS, so its segments in the store have none.
+is seen. Only segments with a geometry (two or more positions) are drawn: a networked fleet enrolled on a
+road (:mod:`roadcollab.network.fleetroad`) writes its segments' LineStrings; one without a road (drives
+without GPS) writes none, and its segments are not drawn.
 """
 
 from __future__ import annotations

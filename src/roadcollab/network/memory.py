@@ -10,6 +10,8 @@ a phase times out only when no message moves (``offline`` vehicles receive nothi
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 
 from ..errors import ParameterError
@@ -21,6 +23,7 @@ from ..privacy.secagg_store import SessionLedger
 from .agent import VehicleAgent
 from .aggregation import AggregationPolicy
 from .engine import VehicleEngine
+from .fleetroad import align_to_waiting
 from .plan import RoadPlan
 from .relaykey import RelayKey
 from .results import results_from_store
@@ -71,7 +74,7 @@ def _pump_all(service: Service, svc, cars: dict, agents: dict, offline, limit: i
 
 
 def run_in_memory(drives, plan: RoadPlan, *, store: ServiceStore | None = None, authority: FleetAuthority | None = None,
-                  on_fused=None, aggregation: AggregationPolicy | None = None, offline=(),
+                  on_fused=None, road=None, aggregation: AggregationPolicy | None = None, offline=(),
                   timeouts: int = 50) -> tuple[ServiceStore, MemoryBroker]:
     """Every drive through the service over the in-memory transport, in order.
 
@@ -86,6 +89,10 @@ def run_in_memory(drives, plan: RoadPlan, *, store: ServiceStore | None = None, 
         Default: a throwaway authority (the identities never leave the process).
     on_fused : callable, optional
         The service's hook (:class:`~roadcollab.network.service.Service`), e.g. a ``RoadSync``.
+    road : FleetRoad, optional
+        The fleet's road (``plan.road_id``): each vehicle places its GPS drive on it first
+        (:meth:`~roadcollab.network.fleetroad.FleetRoad.place`) and aligns it to the waiting messages
+        (:func:`~roadcollab.network.fleetroad.align_to_waiting`), as ``roadcollab vehicle`` does.
     aggregation : AggregationPolicy, optional
         Default: in the clear.
     offline : iterable of str
@@ -113,10 +120,15 @@ def run_in_memory(drives, plan: RoadPlan, *, store: ServiceStore | None = None, 
     for f in service.subscriptions:
         svc.subscribe(f)
     if rounds is not None:
-        return _run_secure(drives, plan, store, authority, service, broker, svc, aggregation, set(offline), timeouts)
+        return _run_secure(drives, plan, store, authority, service, broker, svc, aggregation, set(offline), timeouts,
+                           road)
     for j, d in enumerate(drives):
+        extra = realign = None
+        if road is not None:
+            d, extra = road.place(d)
+            realign = functools.partial(align_to_waiting, index=j)
         agent = VehicleAgent(VehicleEngine(d, plan, index=j), VehicleIdentity.enroll(authority, f"v{j + 1}"),
-                             authority.trust())
+                             authority.trust(), hello_extra=extra, realign=realign)
         car = broker.client()
         for f in agent.subscriptions:
             car.subscribe(f)
@@ -128,14 +140,19 @@ def run_in_memory(drives, plan: RoadPlan, *, store: ServiceStore | None = None, 
     return store, broker
 
 
-def _run_secure(drives, plan, store, authority, service, broker, svc, policy, offline, timeouts):
+def _run_secure(drives, plan, store, authority, service, broker, svc, policy, offline, timeouts, road=None):
     trust = authority.trust()
     relay = RelayKey.generate()
     agents, cars = {}, {}
     for j, d in enumerate(drives):
         ident = VehicleIdentity.enroll(authority, f"v{j + 1}")
         rounds = RoundAgent(ident, trust, policy.spec, SessionLedger(), f"rc/{plan.fleet_id}", {})
-        agent = VehicleAgent(VehicleEngine(d, plan, index=j), ident, trust, rounds=rounds, relay_key=relay)
+        extra = realign = None
+        if road is not None:
+            d, extra = road.place(d)
+            realign = functools.partial(align_to_waiting, index=j)
+        agent = VehicleAgent(VehicleEngine(d, plan, index=j), ident, trust, rounds=rounds, relay_key=relay,
+                             hello_extra=extra, realign=realign)
         car = broker.client()
         for f in agent.subscriptions:
             car.subscribe(f)

@@ -21,6 +21,8 @@ from ..errors import ParameterError
 
 __all__ = ["RoadPlan"]
 
+_TEXT = ("fleet_id", "road_id", "road_sha256")
+
 
 @dataclass(frozen=True)
 class RoadPlan:
@@ -40,6 +42,12 @@ class RoadPlan:
         Band edge in time, Hz (ExperimentConfig default 0.5).
     gamma : float
         Observer parameter (ExperimentConfig default 512).
+    road_id : str
+        The road of ``road-network.geojson`` in the fleet folder whose measure is the fleet's distance
+        axis (``enroll --network FILE --road-id ID``; :mod:`roadcollab.network.fleetroad`); empty: the
+        drives' own distance axis, without GPS.
+    road_sha256 : str
+        SHA-256 (hex) of that network file, so that the service and every vehicle read the same roads.
     """
 
     fleet_id: str = "fleet"
@@ -48,8 +56,12 @@ class RoadPlan:
     min_speed: float = 10.0
     band_low_hz: float = 0.5
     gamma: float = 512.0
+    road_id: str = ""
+    road_sha256: str = ""
 
     def __post_init__(self) -> None:
+        if bool(self.road_id) != bool(self.road_sha256):
+            raise ParameterError("road_id and road_sha256 go together (a fleet on a road of its network file)")
         for name in ("spacing", "segment_length", "min_speed", "band_low_hz", "gamma"):
             check_positive(name, getattr(self, name))
         m = self.segment_length / self.spacing
@@ -100,8 +112,12 @@ class RoadPlan:
         return self.spacing * np.arange(i0, i1)
 
     def to_dict(self) -> dict:
-        """The plan as a TOML/JSON table."""
-        return asdict(self)
+        """The plan as a TOML/JSON table (without the road keys of a fleet without a road: the same table as
+        before fleets had roads)."""
+        d = asdict(self)
+        if not self.road_id:
+            del d["road_id"], d["road_sha256"]
+        return d
 
     @classmethod
     def from_dict(cls, data: dict, where: str) -> "RoadPlan":
@@ -122,9 +138,9 @@ class RoadPlan:
             raise ParameterError(f"{where}: unknown plan keys {extra}; expected some of {sorted(known)}")
         kwargs = {}
         for k, v in data.items():
-            if k == "fleet_id":
+            if k in _TEXT:
                 if not isinstance(v, str):
-                    raise ParameterError(f"{where}: fleet_id must be a string")
+                    raise ParameterError(f"{where}: {k} must be a string")
                 kwargs[k] = v
             elif isinstance(v, bool) or not isinstance(v, (int, float)):
                 raise ParameterError(f"{where}: {k} must be a number, got {v!r}")

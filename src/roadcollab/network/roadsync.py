@@ -17,7 +17,16 @@ What is written
 - per anomaly of the fused elevation: a detection in the store's anomaly history when more vehicles are
   behind it than its stored votes (same kind within 2 m), with the new vehicles as votes, so the stored
   anomaly's votes are the vehicles behind the fused detection and its position and depth the vote-weighted
-  means of the fused detections as the fleet grew (``RoadStore.record_anomaly``). The network's fleet has no GPS: the geometry is empty and lon/lat are 0.
+  means of the fused detections as the fleet grew (``RoadStore.record_anomaly``).
+
+Geometry
+--------
+A fleet on a road (``enroll --network FILE --road-id ID``, :mod:`roadcollab.network.fleetroad`) has the
+road's measure as its distance axis: ``road_id`` is that road, the segments are ``roadcollab map``'s
+(fixed in the road's measure, only those the fused profile covers whole, :func:`~roadcollab.network.fleetroad.road_iri`),
+each with its LineString (``[lon, lat]``, RFC 7946 order), and each anomaly has its lon/lat on the road.
+A fleet without a road (drives without GPS) keeps its distance axis: segments from the start of each
+covered stretch (``export``'s), empty geometry and anomalies at lon/lat 0.
 """
 
 from __future__ import annotations
@@ -30,6 +39,7 @@ from ..errors import ParameterError
 from ..experiments.fleet_estimation import find_fleet_anomalies, fused_iri
 from ..models.iri import iri_segments
 from ..store import RoadStore
+from .fleetroad import FleetRoad, road_iri
 from .results import results_from_store
 from .store import ServiceStore
 
@@ -51,13 +61,20 @@ class RoadSync:
     min_interval_s : float
         At most one update per this many seconds while serving (0: after every change); :meth:`flush`
         writes what is pending.
+    road : FleetRoad, optional
+        The fleet's road (:meth:`FleetRoad.load` of the fleet folder): segments and anomalies get their
+        geometry (module docstring); None: the fleet's distance axis, no geometry.
     """
 
     def __init__(self, roads: RoadStore, service_store: ServiceStore, *, segment_length: float = 100.0,
-                 source: str = "roadcollab serve", min_interval_s: float = 0.0) -> None:
+                 source: str = "roadcollab serve", min_interval_s: float = 0.0, road: FleetRoad | None = None) -> None:
         self.roads, self.service_store = roads, service_store
         self.segment_length, self.source, self.min_interval_s = float(segment_length), source, float(min_interval_s)
-        self.road_id = service_store.plan.fleet_id
+        if road is not None and road.road_id != service_store.plan.road_id:
+            raise ParameterError(f"road {road.road_id!r} is not the road of the store's plan "
+                                 f"({service_store.plan.road_id!r})")
+        self.road = road
+        self.road_id = service_store.plan.fleet_id if road is None else road.road_id
         self._last: dict[float, tuple[float, int]] = {
             s.from_m: (s.iri_m_per_km, s.n_vehicles) for s in roads.segments() if s.road_id == self.road_id}
         self._dirty, self._t = False, -np.inf
@@ -87,7 +104,10 @@ class RoadSync:
         except ParameterError:                 # nothing applied yet
             return 0, 0
         view = r.fleet_view()
-        iri, _ = fused_iri(view, self.segment_length)
+        if self.road is None:
+            iri, _ = fused_iri(view, self.segment_length)
+        else:
+            iri = road_iri(r.position, r.fused, r.spacing, self.road.segment_bounds(self.segment_length))
         n_seg = 0 if iri is None else self._segments(r, iri)
         try:
             anomalies = find_fleet_anomalies(view)
@@ -125,7 +145,8 @@ class RoadSync:
             if len(own) >= 2:
                 half = 1.96 * float(np.std(own, ddof=1)) / np.sqrt(len(own))
                 lo, hi = max(value - half, 0.0), value + half
-            self.roads.record_segment(self.road_id, 1, a, b, np.zeros((0, 2)), value, iri_low=lo, iri_high=hi,
+            geometry = np.zeros((0, 2)) if self.road is None else self.road.segment_lonlat(a, b)
+            self.roads.record_segment(self.road_id, 1, a, b, geometry, value, iri_low=lo, iri_high=hi,
                                       n_vehicles=max(k, 1), profile=r.fused[inside], profile_spacing_m=r.spacing,
                                       source=self.source)
             self._last[a] = (value, k)
@@ -143,7 +164,8 @@ class RoadSync:
             new = V - (max(a[2][0] for a in near) if near else 0)
             if new <= 0:
                 continue
-            self.roads.record_anomaly(self.road_id, 1, row.position_m, 0.0, 0.0, row.kind, row.side,
+            lon, lat = (0.0, 0.0) if self.road is None else self.road.lonlat(row.position_m)
+            self.roads.record_anomaly(self.road_id, 1, row.position_m, lon, lat, row.kind, row.side,
                                       row.depth_m, votes=new, source=self.source)
             if near:
                 near[0][2][0] = V

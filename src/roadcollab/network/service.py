@@ -13,6 +13,7 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING, Callable
 
 from ..errors import MessageError, ParameterError
+from .fleetroad import check_hello
 from ..wire.identity import FleetTrust
 from .messages import Topics, decode_contribution, decode_json, encode_json, encode_waiting, open_from, \
     sealed_segment
@@ -163,6 +164,7 @@ class Service:
         if not isinstance(segs, list) or not all(isinstance(s, int) and 0 <= s < 10 ** 9 for s in segs) \
                 or len(segs) > 100000:
             raise MessageError("hello: 'segments' must be a list of segment numbers")
+        check_hello(self.plan, hello)                 # a fleet on a road: the hello is on it
         order = self.store.add_vehicle(vid, hello)
         waiting = {}
         for s in segs:
