@@ -68,6 +68,23 @@ def _die_after_shares(rounds) -> None:
     rounds.on_message = on_message
 
 
+def _secure_side(folder, identity, trust, plan, policy):
+    """``(RoundAgent, RelayKey)`` of a secure-aggregation fleet, ``(None, None)`` in the clear."""
+    if not policy.secure:
+        return None, None
+    from ..network.relaykey import RelayKey
+    from ..network.secround_agent import RoundAgent
+    from ..privacy.secagg_store import SessionLedger
+
+    relay = RelayKey.load(folder / "relay.key")
+    # One input per (segment, epoch) across restarts: the ledger lives with the vehicle's identity.
+    rounds = RoundAgent(identity, trust, policy.spec, SessionLedger(folder / "secagg_ledger.sqlite"),
+                        f"rc/{plan.fleet_id}", {})
+    if os.environ.get("ROADCOLLAB_TEST_DIE_AFTER") == "shares":
+        _die_after_shares(rounds)
+    return rounds, relay
+
+
 def run(args: argparse.Namespace, command_line: str) -> int:
     """Run one vehicle to its last acknowledgement.
 
@@ -104,18 +121,7 @@ def run(args: argparse.Namespace, command_line: str) -> int:
     if cleaning.n_spikes:
         print(f"{args.id}: {cleaning.n_spikes} isolated spikes repaired", flush=True)
     policy = load_aggregation(args.fleet)
-    rounds = relay = None
-    if policy.secure:
-        from ..network.relaykey import RelayKey
-        from ..network.secround_agent import RoundAgent
-        from ..privacy.secagg_store import SessionLedger
-
-        relay = RelayKey.load(folder / "relay.key")
-        # One input per (segment, epoch) across restarts: the ledger lives with the vehicle's identity.
-        rounds = RoundAgent(identity, trust, policy.spec, SessionLedger(folder / "secagg_ledger.sqlite"),
-                            f"rc/{plan.fleet_id}", {})
-        if os.environ.get("ROADCOLLAB_TEST_DIE_AFTER") == "shares":
-            _die_after_shares(rounds)
+    rounds, relay = _secure_side(folder, identity, trust, plan, policy)
     index = int(args.id[1:]) - 1 if args.id[1:].isdigit() else 0
     road_fields, realign = _place_on_road(args.fleet, plan, drive), None
     if road_fields is not None:
