@@ -315,3 +315,34 @@ def test_alignment_to_the_waiting_message_undoes_a_known_shift(sim):
     again = align_to_waiting(moved, waiting)
     assert abs(again.drive.positions[0] - d.positions[0]) <= 0.05
     assert {c.segment for c in again.contributions(waiting)} <= set(moved.segments)
+
+
+def test_a_secure_aggregation_fleet_on_a_road_writes_the_clear_fleets_segments(sim):
+    """The same three drives on ``main`` fused by secure aggregation (rounds of 3, k = t = 2): the road store
+    holds the same segments, geometry and IRI as the clear run (the sums differ by the 2^-40 m fixed point)."""
+    from roadcollab.geo.network import read_network
+    from roadcollab.network.aggregation import AggregationPolicy
+
+    root, on_main, _, network = sim
+    clear_url, _ = _network_run(root, on_main, network, "clear2")
+    road = FleetRoad(read_network(network), "main")
+    drives = [clean_drive(d)[0] for d in load_drives(on_main)]
+    vmin = min(float(road.place(d)[0].speeds().min()) for d in drives)
+    plan = RoadPlan(fleet_id="t", min_speed=vmin, road_id="main", road_sha256=file_sha256(network))
+    svc = ServiceStore(root / "secure-s.sqlite", plan)
+    url = root / "secure-roads.sqlite"
+    with RoadStore.open(url) as roads:
+        sync = RoadSync(roads, svc, road=road)
+        run_in_memory(drives, plan, store=svc, on_fused=sync, road=road,
+                      aggregation=AggregationPolicy(mode="secure", round_size=3, min_inputs=2, threshold=2))
+        sync.flush()
+    assert svc.rounds() and all(r["phase"] == "finished" and len(r["used"]) == 3 for r in svc.rounds())
+    svc.close()
+    with RoadStore.open(url) as s:
+        sec = {(m.from_m, m.to_m): m for m in s.segments()}
+    with RoadStore.open(clear_url) as s:
+        ref = {(m.from_m, m.to_m): m for m in s.segments()}
+    assert sec.keys() == ref.keys() and sec
+    for k, m in ref.items():
+        assert np.array_equal(sec[k].lonlat, m.lonlat)
+        assert abs(sec[k].iri_m_per_km - m.iri_m_per_km) <= 1e-9 * m.iri_m_per_km
