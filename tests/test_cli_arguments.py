@@ -22,7 +22,7 @@ from roadcollab.cli.main import build_parser, main
 
 #: Options that take a value that is not a number (checked elsewhere: files, folders, addresses, names).
 NOT_NUMERIC = {"--out", "--roads", "--map", "--kernels", "--fleet-id", "--drive", "--road-profile", "--road", "--network", "--store", "--tiles", "--fleet", "--id",
-               "--broker", "--listen", "--scheduler", "--mechanism", "--iso-class", "--seeds", "--aggregation"}
+               "--broker", "--listen", "--scheduler", "--mechanism", "--iso-class", "--seeds", "--aggregation", "--tls-host"}
 #: Options whose type checks a set that is not an interval (tested on their own below).
 SPECIAL = {"--paillier-bits"}
 NOT_NUMERIC |= {"--road-id"}   # enroll: a road of --network

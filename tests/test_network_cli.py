@@ -66,3 +66,29 @@ def test_status_and_export_of_a_store(tmp_path, capsys):
     assert main(["status", "--store", str(tmp_path / "junk.sqlite")]) == 2
     assert "not a roadcollab service store" in capsys.readouterr().err
     assert (tmp_path / "junk.sqlite").read_bytes() == b"not a database" * 100
+
+
+def test_enroll_tls_writes_a_fleet_ca_and_a_broker_certificate(tmp_path, capsys):
+    from cryptography import x509
+
+    from roadcollab.network.brokers import amqtt_config, mosquitto_config
+
+    fleet = tmp_path / "fleet"
+    assert main(["enroll", "--fleet", str(fleet), "--vehicles", "2", "--tls", "--tls-host", "rsu.example",
+                 "--tls-host", "10.0.0.7"]) == 0
+    assert "TLS" in capsys.readouterr().out
+    ca = x509.load_pem_x509_certificate((fleet / "broker" / "ca.pem").read_bytes())
+    cert = x509.load_pem_x509_certificate((fleet / "broker" / "server.pem").read_bytes())
+    cert.verify_directly_issued_by(ca)
+    san = cert.extensions.get_extension_for_class(x509.SubjectAlternativeName).value
+    assert set(map(str, san.get_values_for_type(x509.IPAddress))) == {"127.0.0.1", "10.0.0.7"}
+    assert set(san.get_values_for_type(x509.DNSName)) == {"localhost", "rsu.example"}
+    for f in ("broker/server.key", "authority/tls-ca.key"):
+        assert stat.S_IMODE((fleet / f).stat().st_mode) == 0o600, f
+    login = load_login(fleet / "vehicles" / "v2" / "broker.toml")
+    assert login.ca_file.read_bytes() == (fleet / "broker" / "ca.pem").read_bytes()
+    assert amqtt_config(fleet, "127.0.0.1", 8883)["listeners"]["default"]["ssl"] is True
+    conf = mosquitto_config(fleet, "127.0.0.1", 8883, tmp_path / "mosq").read_text()
+    assert "certfile" in conf and "keyfile" in conf and "tls_version tlsv1.2" in conf
+    assert main(["enroll", "--fleet", str(tmp_path / "g"), "--vehicles", "1", "--tls-host", "x"]) == 2
+    assert "--tls-host: needs --tls" in capsys.readouterr().err

@@ -48,6 +48,12 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
                    help=f"segment length (default 100; {help_range(SEGMENT_LENGTH)})")
     p.add_argument("--grid-step", type=GRID_STEP, default=0.05, metavar="M",
                    help=f"step of the distance grid (default 0.05, as estimate; {help_range(GRID_STEP)})")
+    p.add_argument("--tls", action="store_true",
+                   help="the broker listens with TLS only: a fleet CA and the broker's certificate are written, and "
+                        "clients connect with mqtts://HOST:PORT (default: no TLS, for loopback)")
+    p.add_argument("--tls-host", action="append", default=[], metavar="NAME",
+                   help="with --tls: a host name or address the broker is reached by, besides 127.0.0.1 and "
+                        "localhost (repeat)")
     g = p.add_argument_group("fusion (fixed for the fleet: the service does not choose it)")
     g.add_argument("--aggregation", choices=("clear", "secure"), default="clear",
                    help="clear: the service sums the inversions it receives; secure: vehicles send the next "
@@ -133,9 +139,13 @@ def run(args: argparse.Namespace, command_line: str) -> int:
                                    min_inputs=k, threshold=t, max_colluders=args.max_colluders, clip_m=args.clip)
     except ParameterError as err:
         raise ParameterError(f"--round-size/--min-inputs/--threshold/--max-colluders: {err}") from None
-    ids = enroll(args.fleet, args.vehicles, plan, policy)
+    if args.tls_host and not args.tls:
+        raise ParameterError("--tls-host: needs --tls")
+    ids = enroll(args.fleet, args.vehicles, plan, policy, tls_hosts=args.tls_host if args.tls else None)
     on = _write_road(args, plan, network)
     how = (f"; secure aggregation, rounds of {policy.round_size} (k={k}, t={t}, c={policy.max_colluders})"
            if policy.secure else "")
-    print(f"enrolled fleet {plan.fleet_id!r} with {len(ids)} vehicles ({ids[0]}..{ids[-1]}) in {args.fleet}{on}{how}")
+    tls = "; the broker listens with TLS (clients use mqtts://)" if args.tls else ""
+    print(f"enrolled fleet {plan.fleet_id!r} with {len(ids)} vehicles ({ids[0]}..{ids[-1]}) in {args.fleet}{on}{how}"
+          f"{tls}")
     return 0

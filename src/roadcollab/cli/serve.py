@@ -155,6 +155,7 @@ def run(args: argparse.Namespace, command_line: str) -> int:
     from ..network.mqtt_client import MqttClient
     from ..network.mqtt_run import run_service
     from ..network.pgstore import open_service_store
+    from ..network.tls import has_tls
 
     if args.map is not None and args.roads is None:
         from ..errors import ParameterError
@@ -175,7 +176,7 @@ def run(args: argparse.Namespace, command_line: str) -> int:
     if args.broker is None:
         host, port = parse_listen(args.listen)
         broker = EmbeddedBroker(Path(args.fleet), host, port).start()
-        url = f"mqtt://{host}:{port}"
+        url = f"{'mqtts' if has_tls(args.fleet) else 'mqtt'}://{host}:{port}"
     else:
         url = args.broker
     stop, republish = threading.Event(), threading.Event()

@@ -21,6 +21,7 @@ import threading
 from pathlib import Path
 
 from ..errors import ParameterError
+from .tls import has_tls
 
 __all__ = ["amqtt_config", "EmbeddedBroker", "mosquitto_config", "parse_listen"]
 
@@ -53,8 +54,12 @@ def amqtt_config(fleet: Path, host: str, port: int) -> dict:
     """
     fleet = Path(fleet)
     rules = json.loads((fleet / "broker" / "acl.json").read_text())
+    listener: dict = {"type": "tcp", "bind": f"{host}:{port}"}
+    if has_tls(fleet):        # enroll --tls: TLS only (network/tls.py)
+        listener.update(ssl=True, certfile=str(fleet / "broker" / "server.pem"),
+                        keyfile=str(fleet / "broker" / "server.key"))
     return {
-        "listeners": {"default": {"type": "tcp", "bind": f"{host}:{port}"}},
+        "listeners": {"default": listener},
         "plugins": {
             "amqtt.plugins.authentication.FileAuthPlugin": {"password_file": str(fleet / "broker" / "amqtt_passwd")},
             "amqtt.plugins.topic_checking.TopicAccessControlListPlugin": {"publish_acl": rules["publish"],
@@ -138,7 +143,9 @@ def mosquitto_config(fleet: Path, host: str, port: int, data_dir: Path) -> Path:
     data_dir.mkdir(parents=True, exist_ok=True)
     # Mosquitto started as root drops to the ``mosquitto`` user: it gets copies of the password file
     # and ACL (0600) it can read, in a data folder it can write.
-    for name in ("mosquitto_passwd", "mosquitto_acl"):
+    tls = has_tls(fleet)
+    names = ("mosquitto_passwd", "mosquitto_acl") + (("server.pem", "server.key") if tls else ())
+    for name in names:
         dst = data_dir / name
         dst.write_bytes((fleet / "broker" / name).read_bytes())
         dst.chmod(0o600)
@@ -148,11 +155,14 @@ def mosquitto_config(fleet: Path, host: str, port: int, data_dir: Path) -> Path:
         except KeyError:
             pw = None
         if pw is not None:
-            for p in (data_dir, data_dir / "mosquitto_passwd", data_dir / "mosquitto_acl"):
+            for p in (data_dir, *(data_dir / n for n in names)):
                 os.chown(p, pw.pw_uid, pw.pw_gid)
     conf = data_dir / "mosquitto.conf"
     conf.write_text("\n".join([
-        f"listener {port} {host}", "allow_anonymous false", f"password_file {data_dir / 'mosquitto_passwd'}",
+        f"listener {port} {host}",
+        *([f"certfile {data_dir / 'server.pem'}", f"keyfile {data_dir / 'server.key'}", "tls_version tlsv1.2"]
+          if tls else []),
+        "allow_anonymous false", f"password_file {data_dir / 'mosquitto_passwd'}",
         f"acl_file {data_dir / 'mosquitto_acl'}", "persistence true", f"persistence_location {data_dir}/",
         "autosave_interval 1", "max_queued_messages 100000", "log_dest stderr", "log_type error",
         "log_type warning", ""]))

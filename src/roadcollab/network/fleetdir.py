@@ -34,6 +34,7 @@ from ..wire.identity import FleetAuthority, FleetTrust, VehicleIdentity, _read_t
 from .aggregation import AggregationPolicy
 from .plan import RoadPlan
 from .relaykey import RelayKey
+from .tls import CA_FILE, write_fleet_tls
 
 __all__ = ["Login", "enroll", "load_plan", "load_aggregation", "load_login", "load_trust", "acl_rules",
            "SERVICE_USER"]
@@ -43,10 +44,12 @@ SERVICE_USER = "service"
 
 @dataclass(frozen=True)
 class Login:
-    """An MQTT login: ``username``, ``password``."""
+    """An MQTT login: ``username``, ``password``, and the CA file that the broker's TLS certificate must
+    chain to (``mqtts://`` brokers; None without TLS)."""
 
     username: str
     password: str
+    ca_file: Path | None = None
 
 
 def _write_secret(path: Path, text: str) -> None:
@@ -98,7 +101,8 @@ def _mosquitto_acl(rules: dict) -> str:
     return "\n".join(lines)
 
 
-def enroll(folder, n_vehicles: int, plan: RoadPlan, aggregation: AggregationPolicy | None = None) -> list[str]:
+def enroll(folder, n_vehicles: int, plan: RoadPlan, aggregation: AggregationPolicy | None = None, *,
+           tls_hosts=None) -> list[str]:
     """Create a fleet folder (module docstring) with vehicles ``v1..vN``.
 
     Parameters
@@ -110,6 +114,9 @@ def enroll(folder, n_vehicles: int, plan: RoadPlan, aggregation: AggregationPoli
     plan : RoadPlan
     aggregation : AggregationPolicy, optional
         Default: in the clear.
+    tls_hosts : list of str, optional
+        Given: the broker listens with TLS (:mod:`roadcollab.network.tls`); the names or addresses it is
+        reached by beyond 127.0.0.1 and localhost. None: no TLS.
 
     Returns
     -------
@@ -153,11 +160,15 @@ def enroll(folder, n_vehicles: int, plan: RoadPlan, aggregation: AggregationPoli
             relay.save(d / "relay.key")
     for user, pw in logins.items():
         d = folder / ("service" if user == SERVICE_USER else f"vehicles/{user}")
-        _write_secret(d / "broker.toml", f'username = "{user}"\npassword = "{pw}"\n')
+        ca = f'ca_file = "{CA_FILE}"\n' if tls_hosts is not None else ""
+        _write_secret(d / "broker.toml", f'username = "{user}"\npassword = "{pw}"\n{ca}')
     b = folder / "broker"
     b.mkdir()
     _write_secret(b / "amqtt_passwd", "".join(f"{u}:{_argon2_hash(p)}\n" for u, p in logins.items()))
     _write_secret(b / "mosquitto_passwd", "".join(f"{u}:{_mosquitto_hash(p)}\n" for u, p in logins.items()))
+    if tls_hosts is not None:
+        write_fleet_tls(folder, plan.fleet_id, [folder / "service"] + [folder / "vehicles" / v for v in ids],
+                        tls_hosts)
     rules = acl_rules(plan.fleet_id, ids)
     (b / "acl.json").write_text(json.dumps(rules, indent=1))
     (b / "mosquitto_acl").write_text(_mosquitto_acl(rules))
@@ -218,6 +229,11 @@ def load_login(path) -> Login:
     """
     data = _read_toml(path)
     try:
-        return Login(check_id("username", data["username"]), str(data["password"]))
+        ca = data.get("ca_file")
+        login = Login(check_id("username", data["username"]), str(data["password"]),
+                      None if ca is None else Path(path).parent / str(ca))
     except (KeyError, ParameterError) as err:
         raise FileFormatError(f"{path}: expected username and password ({err})") from None
+    if login.ca_file is not None and not login.ca_file.is_file():
+        raise FileFormatError(f"{path}: ca_file {login.ca_file} not found (the fleet CA that 'enroll --tls' writes)")
+    return login

@@ -23,20 +23,21 @@ __all__ = ["parse_broker_url", "MqttClient"]
 
 
 def parse_broker_url(url: str) -> tuple[str, int]:
-    """``mqtt://HOST:PORT`` as ``(host, port)`` (port 1883 if not given).
+    """``mqtt://HOST:PORT`` or ``mqtts://HOST:PORT`` (TLS) as ``(host, port)`` (default port 1883 / 8883).
 
     Parameters
     ----------
     url : str
-        ``mqtt://HOST:PORT``.
+        ``mqtt://HOST:PORT`` or ``mqtts://HOST:PORT``.
     """
     try:
         u = urlsplit(str(url))
-        port = u.port or 1883
+        port = u.port or (8883 if u.scheme == "mqtts" else 1883)
     except ValueError as err:
-        raise ParameterError(f"--broker {url}: expected mqtt://HOST:PORT ({err})") from None
-    if u.scheme != "mqtt" or not u.hostname or u.path not in ("", "/"):
-        raise ParameterError(f"--broker {url}: expected mqtt://HOST:PORT (e.g. mqtt://127.0.0.1:1883)")
+        raise ParameterError(f"--broker {url}: expected mqtt://HOST:PORT or mqtts://HOST:PORT ({err})") from None
+    if u.scheme not in ("mqtt", "mqtts") or not u.hostname or u.path not in ("", "/"):
+        raise ParameterError(f"--broker {url}: expected mqtt://HOST:PORT or mqtts://HOST:PORT (TLS; e.g. "
+                             "mqtt://127.0.0.1:1883)")
     return u.hostname, port
 
 
@@ -46,9 +47,10 @@ class MqttClient:
     Parameters
     ----------
     url : str
-        ``mqtt://HOST:PORT``.
+        ``mqtt://HOST:PORT``, or ``mqtts://HOST:PORT``: TLS, the broker's certificate checked against
+        ``login.ca_file`` and the host name.
     login : Login
-        Username and password.
+        Username and password (and the fleet CA for ``mqtts``).
     client_id : str
         Fixed per party (the persistent session is keyed by it).
     on_connect : callable, optional
@@ -70,6 +72,15 @@ class MqttClient:
         self._c = mqtt.Client(mqtt.CallbackAPIVersion.VERSION2, client_id=client_id, clean_session=False,
                               protocol=mqtt.MQTTv311)
         self._c.username_pw_set(login.username, login.password)
+        if str(url).startswith("mqtts://"):
+            if getattr(login, "ca_file", None) is None:
+                raise ParameterError(f"--broker {url}: TLS needs the fleet CA (ca_file in broker.toml, written by "
+                                     "'roadcollab enroll --tls')")
+            import ssl
+
+            # CERT_REQUIRED and the host-name check: a broker without the fleet's certificate is refused.
+            self._c.tls_set(ca_certs=str(login.ca_file), cert_reqs=ssl.CERT_REQUIRED,
+                            tls_version=ssl.PROTOCOL_TLS_CLIENT)
         self._c.reconnect_delay_set(min_delay=0.1, max_delay=5)
         self._c.max_inflight_messages_set(100)
         self._c.on_connect = self._on_connect
@@ -113,7 +124,9 @@ class MqttClient:
                 raise ParameterError(f"--broker {self.url}: the broker refused user {self.login.username!r} "
                                      f"({self.refused})")
         self.close()
-        raise ParameterError(f"--broker {self.url}: no connection within {timeout:g} s")
+        hint = " (TLS: does the broker hold the fleet's certificate for this host name?)" \
+            if str(self.url).startswith("mqtts://") else ""
+        raise ParameterError(f"--broker {self.url}: no connection within {timeout:g} s{hint}")
 
     def subscribe(self, topic_filter: str) -> None:
         self.filters.append(topic_filter)
