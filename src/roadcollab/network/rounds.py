@@ -92,7 +92,12 @@ class SecureRounds:
         return f"{self.prefix}/secagg/+/+/+/+"
 
     def owns(self, topic: str) -> bool:
-        """True for a round topic of this fleet."""
+        """True for a round topic of this fleet.
+
+        Parameters
+        ----------
+        topic : str
+        """
         return topic.startswith(f"{self.prefix}/secagg/")
 
     # -- rosters -----------------------------------------------------------------------------------
@@ -119,7 +124,12 @@ class SecureRounds:
         return 1 + max(r["epoch"] for r in rs) if rs else 0
 
     def maybe_open(self, segment: int) -> list[Publish]:
-        """Open the next round of ``segment`` if the roster rule allows (module docstring)."""
+        """Open the next round of ``segment`` if the roster rule allows (module docstring).
+
+        Parameters
+        ----------
+        segment : int
+        """
         if any(k[0] == segment for k in self.active):
             return []
         free = self.free(segment)

@@ -86,7 +86,12 @@ class RoundAgent:
     def finished(self, segment: int) -> bool:
         """True when a round that took this vehicle's masked input on ``segment`` has closed, or when its
         ledger says an earlier run of this vehicle already gave it (a restart: that round went on
-        without this process)."""
+        without this process).
+
+        Parameters
+        ----------
+        segment : int
+        """
         if any(k[0] == segment and used for k, (_, used) in self.closed.items()):
             return True
         if segment not in self._spent_checked:

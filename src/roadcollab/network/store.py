@@ -245,7 +245,12 @@ class ServiceStore:
             self.db.execute("UPDATE rounds SET phase = ? WHERE segment = ? AND epoch = ?", (phase, segment, epoch))
 
     def journal(self, segment: int, epoch: int) -> list[tuple]:
-        """The journal of round ``(segment, epoch)``, as :meth:`RoundCoordinator.replay` takes it."""
+        """The journal of round ``(segment, epoch)``, as :meth:`RoundCoordinator.replay` takes it.
+
+        Parameters
+        ----------
+        segment, epoch : int
+        """
         out: list[tuple] = []
         for kind, topic, payload in self.db.execute(
                 "SELECT kind, topic, payload FROM round_journal WHERE segment = ? AND epoch = ? ORDER BY id",
@@ -284,7 +289,12 @@ class ServiceStore:
 
     def rounds(self, segment: int | None = None) -> list[dict]:
         """Every round (of ``segment``), oldest first: ``segment, epoch, roster, phase, opened_s, closed_s,
-        used, silent, reason``."""
+        used, silent, reason``.
+
+        Parameters
+        ----------
+        segment : int, optional
+        """
         q = "SELECT segment, epoch, roster, phase, opened_s, closed_s, used, silent, reason FROM rounds"
         rows = self.db.execute(q + (" WHERE segment = ?" if segment is not None else "") +
                                " ORDER BY segment, epoch", (segment,) if segment is not None else ())

@@ -104,5 +104,11 @@ def write_fleet_tls(folder, fleet_id: str, parties: list[Path], hosts=()) -> Non
 
 
 def has_tls(fleet) -> bool:
-    """True when the fleet folder holds a broker certificate (``enroll --tls``)."""
+    """True when the fleet folder holds a broker certificate (``enroll --tls``).
+
+    Parameters
+    ----------
+    fleet : str or Path
+        The fleet folder.
+    """
     return (Path(fleet) / "broker" / "server.pem").is_file()
