@@ -15,10 +15,11 @@ fleet and takes part in each segment's round; the service learns only the round 
 import signal
 import subprocess
 import sys
+import time
 
 import numpy as np
 import pytest
-from netkit import HAVE_MOSQUITTO, assert_same_table, free_port, rc, read_csv, start_mosquitto, \
+from netkit import HAVE_MOSQUITTO, assert_same_table, free_port, rc, read_csv, start_amqtt, start_mosquitto, \
     start_serve, stop, write_drives
 
 from roadcollab.io.drives import load_drives
@@ -92,14 +93,31 @@ def test_secure_fleet_equals_estimate(world, tmp_path, kind):
     assert "secure aggregation" in (tmp_path / "out" / "report.md").read_text()
 
 
-def test_vehicle_killed_mid_round_is_left_behind(world, tmp_path):
-    """v4 deals its shares, then its process is killed (SIGKILL): every round finishes with v1-v3."""
+def _rounds_in(store_path, phase):
+    st = ServiceStore(store_path)
+    try:
+        rs = st.rounds()
+    finally:
+        st.close()
+    return bool(rs) and all(r["phase"] == phase for r in rs)
+
+
+@pytest.mark.parametrize("kill_serve", [False, True], ids=["vehicle-killed", "vehicle-and-serve-killed"])
+def test_vehicle_killed_mid_round_is_left_behind(world, tmp_path, kill_serve):
+    """v4 deals its shares, then its process is killed (SIGKILL): every round finishes with v1-v3. With
+    ``kill_serve``, the service is also killed (SIGKILL) while every round waits for v4's masked input, and
+    restarted on its store: it replays the rounds from their journal and finishes them the same way."""
     root, drives = world
     fleet = _fresh_fleet(root, tmp_path)
     port = free_port()
-    serve = start_serve(fleet, tmp_path / "s.sqlite", tmp_path / "serve.log", listen=port,
-                        extra=("--round-timeout", "3"))
     url = f"mqtt://127.0.0.1:{port}"
+    broker = None
+    timeout = ("--round-timeout", "8" if kill_serve else "3")
+    if kill_serve:     # a broker of its own, which outlives the service and keeps its session's messages
+        broker = start_amqtt(fleet, port, tmp_path / "broker.log")
+        serve = start_serve(fleet, tmp_path / "s.sqlite", tmp_path / "serve.log", broker=url, extra=timeout)
+    else:
+        serve = start_serve(fleet, tmp_path / "s.sqlite", tmp_path / "serve.log", listen=port, extra=timeout)
     procs = []
     try:
         env_kill = {"ROADCOLLAB_TEST_DIE_AFTER": "shares"}
@@ -114,6 +132,13 @@ def test_vehicle_killed_mid_round_is_left_behind(world, tmp_path):
             for line in p.stdout:
                 if "contributed" in line:
                     break
+        if kill_serve:
+            end = time.monotonic() + 30
+            while not _rounds_in(tmp_path / "s.sqlite", "masked") and time.monotonic() < end:
+                time.sleep(0.05)
+            assert _rounds_in(tmp_path / "s.sqlite", "masked")
+            assert stop(serve, signal.SIGKILL) == -signal.SIGKILL
+            serve = start_serve(fleet, tmp_path / "s.sqlite", tmp_path / "serve2.log", broker=url, extra=timeout)
         codes = [p.wait(timeout=200) for p in procs]
     finally:
         for p in procs:
@@ -121,6 +146,8 @@ def test_vehicle_killed_mid_round_is_left_behind(world, tmp_path):
                 p.kill()
             p.stdout.close()
         assert stop(serve) == 0
+        if broker is not None:
+            stop(broker)
     assert codes[:3] == [0, 0, 0] and codes[3] == -signal.SIGKILL, codes
     rounds = _no_clear_inversion(tmp_path / "s.sqlite")
     assert rounds and all(r["phase"] == "finished" and r["roster"] == ["v1", "v2", "v3", "v4"] and
