@@ -13,6 +13,7 @@
 from __future__ import annotations
 
 import queue
+import ssl
 import threading
 import time
 from urllib.parse import urlsplit
@@ -76,8 +77,6 @@ class MqttClient:
             if getattr(login, "ca_file", None) is None:
                 raise ParameterError(f"--broker {url}: TLS needs the fleet CA (ca_file in broker.toml, written by "
                                      "'roadcollab enroll --tls')")
-            import ssl
-
             # CERT_REQUIRED and the host-name check: a broker without the fleet's certificate is refused.
             self._c.tls_set(ca_certs=str(login.ca_file), cert_reqs=ssl.CERT_REQUIRED,
                             tls_version=ssl.PROTOCOL_TLS_CLIENT)
