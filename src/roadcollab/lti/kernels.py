@@ -32,13 +32,26 @@ import numpy as np
 
 from ..errors import ParameterError
 
-__all__ = ["KERNELS", "kernel_path", "use_kernels", "compiled_available", "block_eval", "pole_residue_eval"]
+__all__ = ["KERNELS", "kernel_path", "use_kernels", "compiled_available", "jit_options", "block_eval",
+           "pole_residue_eval"]
 
 KERNELS = ("compiled", "reference")
 
 _CHOICE: contextvars.ContextVar[str | None] = contextvars.ContextVar("roadcollab_kernels", default=None)
 #: The compiled functions once built (``{}`` before the first use; ``None`` values if numba is missing).
 _COMPILED: dict = {}
+
+
+def jit_options() -> dict:
+    """The options every compiled kernel of the package is built with (``numba.njit(**jit_options())``).
+
+    Returns
+    -------
+    dict
+        ``cache=True`` (machine code kept on disk), ``error_model="numpy"`` (no zero-division branch
+        in float divisions, module docstring), ``nogil=True``.
+    """
+    return {"cache": True, "error_model": "numpy", "nogil": True}
 
 
 def _build() -> dict:
@@ -50,7 +63,7 @@ def _build() -> dict:
     except ImportError:
         _COMPILED.update(block=None, pole=None)
         return _COMPILED
-    jit = numba.njit(cache=True, error_model="numpy", nogil=True)
+    jit = numba.njit(**jit_options())
 
     @jit
     def block(R, Bw, Cw, D, starts, stops, z, out):   # pragma: no cover - compiled

@@ -20,8 +20,10 @@ import numpy as np
 from .._validation import check_int, check_positive, check_real
 from ..errors import ParameterError
 from ..lti.discretisation import bilinear_discretize
+from ..lti.kernels import kernel_path
 from ..lti.realisation import StateSpaceData
 from ..estimation.grid import SegmentGrid
+from ._draw_kernel import draw_loop
 
 __all__ = ["ObfuscationSpec", "Obfuscator", "draw_obfuscator"]
 
@@ -295,6 +297,49 @@ def _max_gain_range_on_axis(num: np.ndarray, den: np.ndarray, powers: np.ndarray
     return float(np.linalg.norm(num[:, :, 0], 2)) * r
 
 
+def _candidate(spec: ObfuscationSpec, rng) -> tuple[np.ndarray, np.ndarray] | None:
+    """One candidate's poles and numerators (2, 2, n + 1), or None when two poles are too close."""
+    n = int(rng.integers(spec.order_range[0], spec.order_range[1] + 1))
+    poles = _random_roots(n, spec.pole_frequency_range, spec.pole_damping_range, spec.complex_fraction, rng)
+    if _min_relative_separation(poles) < spec.min_pole_separation:
+        return None
+    num = np.zeros((2, 2, n + 1))
+    diag_gain = np.exp(rng.uniform(np.log(0.5), np.log(2.0), 2))
+    for a in range(2):
+        for b in range(2):
+            zeros = _random_roots(n, spec.zero_frequency_range, spec.zero_damping_range,
+                                  spec.complex_fraction, rng)
+            # Scale so |N_ab(j w)/d(j w)| ~ gain at high frequency and O(gain) at DC.
+            gain = diag_gain[a] if a == b else spec.coupling * rng.uniform(-1, 1) * np.sqrt(np.prod(diag_gain))
+            num[a, b] = gain * _poly(zeros)
+    return poles, num
+
+
+class _Replay:
+    """Stands in for the generator to rebuild a candidate from the values it drew (in order)."""
+
+    def __init__(self, values: np.ndarray) -> None:
+        self._values, self._next = values, 0
+
+    def _take(self, k: int) -> np.ndarray:
+        out = self._values[self._next:self._next + k]
+        self._next += k
+        return out
+
+    def integers(self, low, high) -> int:
+        return int(self._take(1)[0])
+
+    def uniform(self, low=0.0, high=1.0, size=None):
+        return self._take(size).copy() if size is not None else float(self._take(1)[0])
+
+
+def _obfuscator(poles: np.ndarray, num: np.ndarray, dt: float) -> "Obfuscator":
+    """The accepted candidate, realised and discretised (bilinear)."""
+    A, B, C, D = _realise(poles, num)
+    Ad, Bd, Cd, Dd = bilinear_discretize(A, B, C, D, dt)
+    return Obfuscator(poles=poles, numerators=num, system=StateSpaceData(Ad, Bd, Cd, Dd, dt))
+
+
 def draw_obfuscator(spec: ObfuscationSpec, grid: SegmentGrid, *, rng=None,
                     max_attempts: int = 200) -> Obfuscator:
     """Draw one ``Psi`` from ``spec``, discretised for ``grid``.
@@ -329,25 +374,25 @@ def draw_obfuscator(spec: ObfuscationSpec, grid: SegmentGrid, *, rng=None,
     rng = np.random.default_rng(rng)
     dt = grid.dt
     powers = _warped_powers(grid, spec.order_range[1])
+    if kernel_path() == "compiled":
+        # The same loop compiled, drawing from this generator; the accepted candidate is rebuilt
+        # from the values it drew by the code below, so the draw is the same bit for bit.
+        drawn = draw_loop(spec, powers, rng, max_attempts)
+        if drawn is None:
+            raise ParameterError(f"no obfuscator satisfying spec was found in max_attempts={max_attempts} draws")
+        cand = _candidate(spec, _Replay(drawn))
+        assert cand is not None
+        return _obfuscator(*cand, dt)
     for _ in range(max_attempts):
-        n = int(rng.integers(spec.order_range[0], spec.order_range[1] + 1))
-        poles = _random_roots(n, spec.pole_frequency_range, spec.pole_damping_range, spec.complex_fraction, rng)
-        if _min_relative_separation(poles) < spec.min_pole_separation:
+        cand = _candidate(spec, rng)
+        if cand is None:
             continue
-        num = np.zeros((2, 2, n + 1))
-        diag_gain = np.exp(rng.uniform(np.log(0.5), np.log(2.0), 2))
-        for a in range(2):
-            for b in range(2):
-                zeros = _random_roots(n, spec.zero_frequency_range, spec.zero_damping_range,
-                                      spec.complex_fraction, rng)
-                # Scale so |N_ab(j w)/d(j w)| ~ gain at high frequency and O(gain) at DC.
-                gain = diag_gain[a] if a == b else spec.coupling * rng.uniform(-1, 1) * np.sqrt(np.prod(diag_gain))
-                num[a, b] = gain * _poly(zeros)
+        poles, num = cand
         # np.polymul is np.convolve and the operands have one length: the same values without
         # poly1d's checks (0.1 ms per candidate).
         det = np.convolve(num[0, 0], num[1, 1]) - np.convolve(num[0, 1], num[1, 0])
         z = np.roots(np.trim_zeros(det, "f"))
-        if z.size != 2 * n or np.max(z.real) > -spec.min_zero_distance:
+        if z.size != 2 * poles.size or np.max(z.real) > -spec.min_zero_distance:
             continue
         # The bilinear transform maps the bin at omega to s = j (2/dt) tan(omega/2) exactly, and
         # the common denominator cancels in the condition number: cond(Psi_d) on the grid is
@@ -357,7 +402,5 @@ def draw_obfuscator(spec: ObfuscationSpec, grid: SegmentGrid, *, rng=None,
             continue
         if _max_gain_range_on_axis(num, _poly(poles), powers) > spec.max_gain_range:
             continue
-        A, B, C, D = _realise(poles, num)
-        Ad, Bd, Cd, Dd = bilinear_discretize(A, B, C, D, dt)
-        return Obfuscator(poles=poles, numerators=num, system=StateSpaceData(Ad, Bd, Cd, Dd, dt))
+        return _obfuscator(poles, num, dt)
     raise ParameterError(f"no obfuscator satisfying spec was found in max_attempts={max_attempts} draws")
