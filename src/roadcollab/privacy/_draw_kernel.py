@@ -26,7 +26,7 @@ __all__ = ["draw_loop"]
 _KERNEL: dict[str, Any] = {}
 
 
-def _build() -> Any:
+def _build() -> Any:   # Long: the kernels are defined here so that numba is imported on first use only
     """Define and compile the loop on first use (``None`` without numba)."""
     if "loop" in _KERNEL:
         return _KERNEL["loop"]
@@ -78,11 +78,85 @@ def _build() -> Any:
                 c[k] = c[k] - r * c[k - 1]
 
     @jit
+    def zeros_ok(num: np.ndarray, n: int, min_zero_distance: float) -> bool:   # pragma: no cover - compiled
+        # det N = N00 N11 - N01 N10 (degree 2n), its roots: the transmission zeros.
+        det = np.zeros(2 * n + 1)
+        for i in range(n + 1):
+            for k in range(n + 1):
+                det[i + k] += num[0, i] * num[3, k] - num[1, i] * num[2, k]
+        f = 0
+        while f < 2 * n + 1 and det[f] == 0.0:
+            f += 1
+        deg = 2 * n - f
+        if deg < 2 * n:       # a leading zero: fewer than 2 n zeros
+            return False
+        comp = np.zeros((deg, deg), np.complex128)
+        for k in range(deg):
+            comp[0, k] = -det[k + 1] / det[0]
+        for k in range(1, deg):
+            comp[k, k - 1] = 1.0
+        zr = np.linalg.eigvals(comp)
+        worst = -np.inf
+        for k in range(deg):
+            if zr[k].real > worst:
+                worst = zr[k].real
+        if worst > -min_zero_distance:
+            return False
+        return True
+
+    @jit
+    def axis_ratios(num: np.ndarray, den: np.ndarray, n: int, powers: np.ndarray) -> tuple[float, float]:
+        # pragma: no cover - compiled
+        K = powers.shape[1]
+        # Condition number and gain range on the warped axis (obfuscator_design's closed forms):
+        # N_e(j w) = sum_k num[e, n - k] j^k w^k, d(j w) likewise.
+        r_cond = 0.0
+        r_gain = 0.0
+        # Coefficients of w^k in Re / Im of N_e(j w) and d(j w): c_k j^k (j^k = 1, j, -1, -j).
+        cre = np.zeros((n + 1, 5))
+        cim = np.zeros((n + 1, 5))
+        for k in range(n + 1):
+            sgn = 1.0 if k % 4 < 2 else -1.0
+            tgt = cre if k % 2 == 0 else cim
+            for e in range(4):
+                tgt[k, e] = sgn * num[e, n - k]
+            tgt[k, 4] = sgn * den[n - k].real
+        for q in range(K):
+            r0 = r1 = r2 = r3 = rd = 0.0
+            i0 = i1 = i2 = i3 = idd = 0.0
+            for k in range(n + 1):
+                wk = powers[k, q]
+                r0 += cre[k, 0] * wk
+                r1 += cre[k, 1] * wk
+                r2 += cre[k, 2] * wk
+                r3 += cre[k, 3] * wk
+                rd += cre[k, 4] * wk
+                i0 += cim[k, 0] * wk
+                i1 += cim[k, 1] * wk
+                i2 += cim[k, 2] * wk
+                i3 += cim[k, 3] * wk
+                idd += cim[k, 4] * wk
+            fro2 = r0 * r0 + i0 * i0 + r1 * r1 + i1 * i1 + r2 * r2 + i2 * i2 + r3 * r3 + i3 * i3
+            det_re = r0 * r3 - i0 * i3 - (r1 * r2 - i1 * i2)
+            det_im = r0 * i3 + i0 * r3 - (r1 * i2 + i1 * r2)
+            det2 = det_re * det_re + det_im * det_im
+            adet = np.sqrt(det2)
+            if not adet > 0.0:
+                return np.inf, np.inf
+            rc = fro2 / adet / 2
+            if rc > r_cond:
+                r_cond = rc
+            smax = np.sqrt((fro2 + np.sqrt(max(fro2 * fro2 - 4 * det2, 0.0))) / 2)
+            rg = np.sqrt(rd * rd + idd * idd) * smax / adet
+            if rg > r_gain:
+                r_gain = rg
+        return r_cond, r_gain
+
+    @jit
     def loop(rng: Any, lo: int, hi: int, plf0: float, plf1: float, pd0: float, pd1: float, zlf0: float,
              zlf1: float, zd0: float, zd1: float, cf: float, gl0: float, gl1: float, coupling: float,
              min_sep: float, min_zero_distance: float, max_condition: float, max_gain_range: float,
              powers: np.ndarray, max_attempts: int, rec: np.ndarray) -> tuple[int, int]:   # pragma: no cover
-        K = powers.shape[1]
         nmax = hi
         poles = np.empty(nmax, np.complex128)
         zeros = np.empty(nmax, np.complex128)
@@ -125,73 +199,10 @@ def _build() -> Any:
                 poly_into(zeros, n, cz)
                 for k in range(n + 1):
                     num[e, k] = gain * cz[k].real
-            # det N = N00 N11 - N01 N10 (degree 2n), its roots: the transmission zeros.
-            det = np.zeros(2 * n + 1)
-            for i in range(n + 1):
-                for k in range(n + 1):
-                    det[i + k] += num[0, i] * num[3, k] - num[1, i] * num[2, k]
-            f = 0
-            while f < 2 * n + 1 and det[f] == 0.0:
-                f += 1
-            deg = 2 * n - f
-            if deg < 2 * n:       # a leading zero: fewer than 2 n zeros
+            if not zeros_ok(num, n, min_zero_distance):
                 continue
-            comp = np.zeros((deg, deg), np.complex128)
-            for k in range(deg):
-                comp[0, k] = -det[k + 1] / det[0]
-            for k in range(1, deg):
-                comp[k, k - 1] = 1.0
-            zr = np.linalg.eigvals(comp)
-            worst = -np.inf
-            for k in range(deg):
-                if zr[k].real > worst:
-                    worst = zr[k].real
-            if worst > -min_zero_distance:
-                continue
-            # Condition number and gain range on the warped axis (obfuscator_design's closed forms):
-            # N_e(j w) = sum_k num[e, n - k] j^k w^k, d(j w) likewise.
             poly_into(poles, n, den)
-            r_cond = 0.0
-            r_gain = 0.0
-            # Coefficients of w^k in Re / Im of N_e(j w) and d(j w): c_k j^k (j^k = 1, j, -1, -j).
-            cre = np.zeros((n + 1, 5))
-            cim = np.zeros((n + 1, 5))
-            for k in range(n + 1):
-                sgn = 1.0 if k % 4 < 2 else -1.0
-                tgt = cre if k % 2 == 0 else cim
-                for e in range(4):
-                    tgt[k, e] = sgn * num[e, n - k]
-                tgt[k, 4] = sgn * den[n - k].real
-            for q in range(K):
-                r0 = r1 = r2 = r3 = rd = 0.0
-                i0 = i1 = i2 = i3 = idd = 0.0
-                for k in range(n + 1):
-                    wk = powers[k, q]
-                    r0 += cre[k, 0] * wk
-                    r1 += cre[k, 1] * wk
-                    r2 += cre[k, 2] * wk
-                    r3 += cre[k, 3] * wk
-                    rd += cre[k, 4] * wk
-                    i0 += cim[k, 0] * wk
-                    i1 += cim[k, 1] * wk
-                    i2 += cim[k, 2] * wk
-                    i3 += cim[k, 3] * wk
-                    idd += cim[k, 4] * wk
-                fro2 = r0 * r0 + i0 * i0 + r1 * r1 + i1 * i1 + r2 * r2 + i2 * i2 + r3 * r3 + i3 * i3
-                det_re = r0 * r3 - i0 * i3 - (r1 * r2 - i1 * i2)
-                det_im = r0 * i3 + i0 * r3 - (r1 * i2 + i1 * r2)
-                det2 = det_re * det_re + det_im * det_im
-                adet = np.sqrt(det2)
-                if not adet > 0.0:
-                    r_cond = np.inf
-                    break
-                rc = fro2 / adet / 2
-                if rc > r_cond:
-                    r_cond = rc
-                smax = np.sqrt((fro2 + np.sqrt(max(fro2 * fro2 - 4 * det2, 0.0))) / 2)
-                rg = np.sqrt(rd * rd + idd * idd) * smax / adet
-                if rg > r_gain:
-                    r_gain = rg
+            r_cond, r_gain = axis_ratios(num, den, n, powers)
             if not r_cond < np.inf:
                 continue
             if r_cond + np.sqrt(max(r_cond * r_cond - 1.0, 0.0)) > max_condition:
