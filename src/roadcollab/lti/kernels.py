@@ -38,6 +38,8 @@ __all__ = ["KERNELS", "kernel_path", "use_kernels", "compiled_available", "jit_o
 KERNELS = ("compiled", "reference")
 
 _CHOICE: contextvars.ContextVar[str | None] = contextvars.ContextVar("roadcollab_kernels", default=None)
+#: Bins per pass of the block kernel: its per-bin arrays (2 x (n + 4 + 2 k_max m) x TILE doubles) stay in cache.
+TILE = 256
 #: The compiled functions once built (``{}`` before the first use; ``None`` values if numba is missing).
 _COMPILED: dict = {}
 
@@ -66,44 +68,96 @@ def _build() -> dict:
     jit = numba.njit(**jit_options())
 
     @jit
-    def block(R, Bw, Cw, D, starts, stops, z, out):   # pragma: no cover - compiled
-        # (z I - R_b) X_b = Bw_b by back substitution per diagonal block (R_b upper triangular), then
-        # H = D + sum_b Cw_b X_b; every step a loop over the bins (innermost and contiguous, so
-        # LLVM vectorises it). Reciprocals in real arithmetic: 1/d = conj(d) / |d|^2.
-        M = z.shape[0]
+    def block(R, Bw, Cw, D, starts, stops, zr, zi, out):   # pragma: no cover - compiled
+        # H = D + sum_b Cw_b (z I - R_b)^-1 Bw_b, TILE bins at a time so every per-bin array stays in
+        # the L1/L2 cache, real and imaginary parts in separate arrays (the bin loops are innermost
+        # and contiguous, so LLVM vectorises them). Blocks of one and two eigenvalues through their
+        # resolvent entries (g_i = 1 / (z - R_ii); N_01 = g_0 R_01 g_1), as the numpy path does; larger
+        # ones by back substitution, (z I - R_b) X_b = Bw_b. Reciprocals in real arithmetic.
+        M = zr.shape[0]
         p, m = D.shape
         n = R.shape[0]
-        X = np.empty((n, m, M), np.complex128)
-        g = np.empty(M, np.complex128)
-        for q in range(p):
-            for r in range(m):
-                for k in range(M):
-                    out[q, r, k] = D[q, r]
-        for b in range(starts.shape[0]):
-            i0, i1 = starts[b], stops[b]
-            for i in range(i1 - 1, i0 - 1, -1):
+        pm = p * m
+        nb = starts.shape[0]
+        big = 1
+        for b in range(nb):
+            big = max(big, stops[b] - starts[b])
+        gr = np.empty((n, TILE))
+        gi = np.empty((n, TILE))
+        ar = np.empty((pm, TILE))
+        ai = np.empty((pm, TILE))
+        hr = np.empty(TILE)
+        hi = np.empty(TILE)
+        xr = np.empty((big, m, TILE))
+        xi = np.empty((big, m, TILE))
+        for t0 in range(0, M, TILE):
+            L = min(TILE, M - t0)
+            for i in range(n):
                 lr, li = R[i, i].real, R[i, i].imag
-                for k in range(M):
-                    dr = z[k].real - lr
-                    di = z[k].imag - li
+                for k in range(L):
+                    dr = zr[t0 + k] - lr
+                    di = zi[t0 + k] - li
                     s = 1.0 / (dr * dr + di * di)
-                    g[k] = complex(dr * s, -di * s)
-                for r in range(m):
-                    bir = Bw[i, r]
-                    for k in range(M):
-                        X[i, r, k] = bir
-                    for j in range(i + 1, i1):
-                        rij = R[i, j]
-                        for k in range(M):
-                            X[i, r, k] += rij * X[j, r, k]
-                    for k in range(M):
-                        X[i, r, k] *= g[k]
-            for q in range(p):
-                for r in range(m):
-                    for i in range(i0, i1):
-                        c = Cw[q, i]
-                        for k in range(M):
-                            out[q, r, k] += c * X[i, r, k]
+                    gr[i, k] = dr * s
+                    gi[i, k] = -di * s
+            for c in range(pm):
+                d = D[c // m, c % m]
+                for k in range(L):
+                    ar[c, k] = d
+                    ai[c, k] = 0.0
+            for b in range(nb):
+                i0, i1 = starts[b], stops[b]
+                sz = i1 - i0
+                if sz == 1:
+                    for c in range(pm):
+                        res = Cw[c // m, i0] * Bw[i0, c % m]
+                        rr, ri = res.real, res.imag
+                        for k in range(L):
+                            ar[c, k] += rr * gr[i0, k] - ri * gi[i0, k]
+                            ai[c, k] += rr * gi[i0, k] + ri * gr[i0, k]
+                elif sz == 2:
+                    i, l = i0, i0 + 1
+                    for k in range(L):
+                        hr[k] = gr[i, k] * gr[l, k] - gi[i, k] * gi[l, k]
+                        hi[k] = gr[i, k] * gi[l, k] + gi[i, k] * gr[l, k]
+                    rho = R[i, l]
+                    for c in range(pm):
+                        q, r = c // m, c % m
+                        r0 = Cw[q, i] * Bw[i, r]
+                        r1 = Cw[q, l] * Bw[l, r]
+                        r2 = Cw[q, i] * rho * Bw[l, r]
+                        a0, b0, a1, b1, a2, b2 = r0.real, r0.imag, r1.real, r1.imag, r2.real, r2.imag
+                        for k in range(L):
+                            ar[c, k] += (a0 * gr[i, k] - b0 * gi[i, k]) + (a1 * gr[l, k] - b1 * gi[l, k]) + (a2 * hr[k] - b2 * hi[k])
+                            ai[c, k] += (a0 * gi[i, k] + b0 * gr[i, k]) + (a1 * gi[l, k] + b1 * gr[l, k]) + (a2 * hi[k] + b2 * hr[k])
+                else:
+                    for ii in range(sz - 1, -1, -1):
+                        i = i0 + ii
+                        for r in range(m):
+                            br, bi = Bw[i, r].real, Bw[i, r].imag
+                            for k in range(L):
+                                xr[ii, r, k] = br
+                                xi[ii, r, k] = bi
+                            for jj in range(ii + 1, sz):
+                                rr, ri = R[i, i0 + jj].real, R[i, i0 + jj].imag
+                                for k in range(L):
+                                    xr[ii, r, k] += rr * xr[jj, r, k] - ri * xi[jj, r, k]
+                                    xi[ii, r, k] += rr * xi[jj, r, k] + ri * xr[jj, r, k]
+                            for k in range(L):
+                                a, bb = xr[ii, r, k], xi[ii, r, k]
+                                xr[ii, r, k] = a * gr[i, k] - bb * gi[i, k]
+                                xi[ii, r, k] = a * gi[i, k] + bb * gr[i, k]
+                    for c in range(pm):
+                        q, r = c // m, c % m
+                        for ii in range(sz):
+                            cr, ci = Cw[q, i0 + ii].real, Cw[q, i0 + ii].imag
+                            for k in range(L):
+                                ar[c, k] += cr * xr[ii, r, k] - ci * xi[ii, r, k]
+                                ai[c, k] += cr * xi[ii, r, k] + ci * xr[ii, r, k]
+            for k in range(L):
+                for c in range(pm):
+                    out[t0 + k, c // m, c % m] = complex(ar[c, k], ai[c, k])
+
 
     @jit
     def pole(lam, Res, D, z, out):   # pragma: no cover - compiled
@@ -192,7 +246,7 @@ def block_eval(R: np.ndarray, Bw: np.ndarray, Cw: np.ndarray, D: np.ndarray, blo
         Upper triangular within each block (entries between blocks are not read).
     Bw : (n, m) complex ndarray
     Cw : (p, n) complex ndarray
-    D : (p, m) ndarray
+    D : (p, m) real ndarray
     blocks : list of (int, int)
         ``[start, stop)`` of each diagonal block.
     z : (M,) complex ndarray
@@ -204,10 +258,11 @@ def block_eval(R: np.ndarray, Bw: np.ndarray, Cw: np.ndarray, D: np.ndarray, blo
     k = _build()["block"]
     starts = np.array([b[0] for b in blocks], dtype=np.int64)
     stops = np.array([b[1] for b in blocks], dtype=np.int64)
-    out = np.empty((D.shape[0], D.shape[1], z.size), complex)
+    z = np.asarray(z, dtype=complex)
+    out = np.empty((z.size, D.shape[0], D.shape[1]), complex)
     k(np.ascontiguousarray(R, complex), np.ascontiguousarray(Bw, complex), np.ascontiguousarray(Cw, complex),
-      np.ascontiguousarray(D, complex), starts, stops, np.ascontiguousarray(z, complex), out)
-    return out.transpose(2, 0, 1).copy()
+      np.ascontiguousarray(D, float), starts, stops, np.ascontiguousarray(z.real), np.ascontiguousarray(z.imag), out)
+    return out
 
 
 def pole_residue_eval(lam: np.ndarray, Res: np.ndarray, D: np.ndarray, z: np.ndarray) -> np.ndarray:
