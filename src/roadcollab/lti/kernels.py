@@ -56,7 +56,7 @@ def jit_options() -> dict:
     return {"cache": True, "error_model": "numpy", "nogil": True}
 
 
-def _build() -> dict:
+def _build() -> dict:   # Long: the kernels are defined here so that numba is imported on first use only
     """Import numba and define the kernels (lazily: importing numba costs about 0.3 s)."""
     if _COMPILED:
         return _COMPILED
@@ -69,6 +69,7 @@ def _build() -> dict:
 
     @jit
     def block(R, Bw, Cw, D, starts, stops, zr, zi, out):   # pragma: no cover - compiled
+        # Long: one tile of bins through every block in one compiled pass, its three block cases inline.
         # H = D + sum_b Cw_b (z I - R_b)^-1 Bw_b, TILE bins at a time so every per-bin array stays in
         # the L1/L2 cache, real and imaginary parts in separate arrays (the bin loops are innermost
         # and contiguous, so LLVM vectorises them). Blocks of one and two eigenvalues through their
@@ -156,29 +157,40 @@ def _build() -> dict:
                                 ai[c, k] += cr * xi[ii, r, k] + ci * xr[ii, r, k]
             for k in range(L):
                 for c in range(pm):
-                    out[t0 + k, c // m, c % m] = complex(ar[c, k], ai[c, k])
+                    out[t0 + k, c] = complex(ar[c, k], ai[c, k])
 
 
     @jit
-    def pole(lam, Res, D, z, out):   # pragma: no cover - compiled
-        # H = D + sum_i Res_i / (z - lambda_i); Res (n, p*m), out (p*m, M).
-        M = z.shape[0]
-        n, pm = Res.shape
-        g = np.empty(M, np.complex128)
-        for c in range(pm):
-            for k in range(M):
-                out[c, k] = D[c]
-        for i in range(n):
-            lr, li = lam[i].real, lam[i].imag
-            for k in range(M):
-                dr = z[k].real - lr
-                di = z[k].imag - li
-                s = 1.0 / (dr * dr + di * di)
-                g[k] = complex(dr * s, -di * s)
+    def pole(lr, li, Rr, Ri, Dr, Di, zr, zi, out):   # pragma: no cover - compiled
+        # H = D + sum_i Res_i / (z - lambda_i), real and imaginary parts apart, TILE bins at a time;
+        # Res (n, p*m), out (M, p*m) complex.
+        M = zr.shape[0]
+        n, pm = Rr.shape
+        gr = np.empty(TILE)
+        gi = np.empty(TILE)
+        ar = np.empty((pm, TILE))
+        ai = np.empty((pm, TILE))
+        for t0 in range(0, M, TILE):
+            L = min(TILE, M - t0)
             for c in range(pm):
-                rc = Res[i, c]
-                for k in range(M):
-                    out[c, k] += g[k] * rc
+                for k in range(L):
+                    ar[c, k] = Dr[c]
+                    ai[c, k] = Di[c]
+            for i in range(n):
+                for k in range(L):
+                    dr = zr[t0 + k] - lr[i]
+                    di = zi[t0 + k] - li[i]
+                    s = 1.0 / (dr * dr + di * di)
+                    gr[k] = dr * s
+                    gi[k] = -di * s
+                for c in range(pm):
+                    rr, ri = Rr[i, c], Ri[i, c]
+                    for k in range(L):
+                        ar[c, k] += rr * gr[k] - ri * gi[k]
+                        ai[c, k] += rr * gi[k] + ri * gr[k]
+            for k in range(L):
+                for c in range(pm):
+                    out[t0 + k, c] = complex(ar[c, k], ai[c, k])
 
     _COMPILED.update(block=block, pole=pole)
     return _COMPILED
@@ -261,7 +273,7 @@ def block_eval(R: np.ndarray, Bw: np.ndarray, Cw: np.ndarray, D: np.ndarray, blo
     z = np.asarray(z, dtype=complex)
     out = np.empty((z.size, D.shape[0], D.shape[1]), complex)
     k(np.ascontiguousarray(R, complex), np.ascontiguousarray(Bw, complex), np.ascontiguousarray(Cw, complex),
-      np.ascontiguousarray(D, float), starts, stops, np.ascontiguousarray(z.real), np.ascontiguousarray(z.imag), out)
+      np.ascontiguousarray(D, float), starts, stops, np.ascontiguousarray(z.real), np.ascontiguousarray(z.imag), out.reshape(z.size, -1))
     return out
 
 
@@ -274,7 +286,7 @@ def pole_residue_eval(lam: np.ndarray, Res: np.ndarray, D: np.ndarray, z: np.nda
         Poles.
     Res : (n, p * m) complex ndarray
         Residues, flattened per pole.
-    D : (p, m) ndarray
+    D : (p, m) ndarray, real or complex
     z : (M,) complex ndarray
 
     Returns
@@ -282,7 +294,12 @@ def pole_residue_eval(lam: np.ndarray, Res: np.ndarray, D: np.ndarray, z: np.nda
     (M, p, m) complex ndarray
     """
     k = _build()["pole"]
-    out = np.empty((D.size, z.size), complex)
-    k(np.ascontiguousarray(lam, complex), np.ascontiguousarray(Res, complex),
-      np.ascontiguousarray(D, complex).reshape(-1), np.ascontiguousarray(z, complex), out)
-    return out.T.reshape(z.size, *D.shape).copy()
+    lam = np.asarray(lam, dtype=complex)
+    Res = np.asarray(Res, dtype=complex)
+    Dc = np.asarray(D, dtype=complex)
+    z = np.asarray(z, dtype=complex)
+    out = np.empty((z.size,) + Dc.shape, complex)
+    k(np.ascontiguousarray(lam.real), np.ascontiguousarray(lam.imag), np.ascontiguousarray(Res.real),
+      np.ascontiguousarray(Res.imag), np.ascontiguousarray(Dc.real).reshape(-1), np.ascontiguousarray(Dc.imag).reshape(-1),
+      np.ascontiguousarray(z.real), np.ascontiguousarray(z.imag), out.reshape(z.size, -1))
+    return out

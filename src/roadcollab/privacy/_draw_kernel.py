@@ -156,12 +156,12 @@ def _build() -> Any:   # Long: the kernels are defined here so that numba is imp
     def loop(rng: Any, lo: int, hi: int, plf0: float, plf1: float, pd0: float, pd1: float, zlf0: float,
              zlf1: float, zd0: float, zd1: float, cf: float, gl0: float, gl1: float, coupling: float,
              min_sep: float, min_zero_distance: float, max_condition: float, max_gain_range: float,
-             powers: np.ndarray, max_attempts: int, rec: np.ndarray) -> tuple[int, int]:   # pragma: no cover
+             powers: np.ndarray, max_attempts: int, rec: np.ndarray, poles: np.ndarray,
+             num: np.ndarray) -> tuple[int, int]:   # pragma: no cover
+        # poles (hi,) complex and num (4, hi + 1) receive the accepted candidate (its first n, n + 1).
         nmax = hi
-        poles = np.empty(nmax, np.complex128)
         zeros = np.empty(nmax, np.complex128)
         cz = np.empty(nmax + 1, np.complex128)
-        num = np.empty((4, nmax + 1))
         den = np.empty(nmax + 1, np.complex128)
         for attempt in range(max_attempts):
             nrec = 0
@@ -214,15 +214,82 @@ def _build() -> Any:   # Long: the kernels are defined here so that numba is imp
             lead = np.sqrt((F + np.sqrt(max(F * F - 4 * dl * dl, 0.0))) / 2)
             if lead * r_gain > max_gain_range:
                 continue
-            return attempt, nrec
+            return attempt, n
         return max_attempts, -1
 
+    @jit
+    def realise(poles: np.ndarray, num: np.ndarray, n: int, dt: float) -> tuple[np.ndarray, np.ndarray,
+                                                                                np.ndarray, np.ndarray]:
+        # pragma: no cover - compiled
+        # obfuscator_design._realise (modal blocks, scaled) then bilinear_discretize, in one pass.
+        den = np.empty(n + 1, np.complex128)
+        poly_into(poles, n, den)
+        dden = np.empty(n, np.complex128)
+        for k in range(n):
+            dden[k] = den[k].real * (n - k)
+        A = np.zeros((2 * n, 2 * n))
+        B = np.zeros((2 * n, 2))
+        C = np.zeros((2, 2 * n))
+        i = 0
+        for q in range(n):
+            p = poles[q]
+            if p.imag < 0:
+                continue
+            dv = 0j
+            for k in range(n):
+                dv = dv * p + dden[k]
+            R = np.empty(4, np.complex128)
+            for e in range(4):
+                v = 0j
+                for k in range(n + 1):
+                    v = v * p + num[e, k]
+                R[e] = v / dv
+            if p.imag == 0:
+                cn = np.sqrt(R[0].real ** 2 + R[1].real ** 2 + R[2].real ** 2 + R[3].real ** 2)
+                sc = np.sqrt(max(cn, 1e-12) / np.sqrt(2.0))
+                for a in range(2):
+                    A[i + a, i + a] = p.real
+                    B[i + a, a] = sc
+                    for b in range(2):
+                        C[a, i + b] = R[2 * a + b].real / sc
+                i += 2
+            else:
+                cn = 0.0
+                for e in range(4):
+                    cn += 4 * (R[e].real ** 2 + R[e].imag ** 2)
+                sc = np.sqrt(max(np.sqrt(cn), 1e-12) / np.sqrt(2.0))
+                for a in range(2):
+                    A[i + a, i + a] = p.real
+                    A[i + 2 + a, i + 2 + a] = p.real
+                    A[i + a, i + 2 + a] = -p.imag
+                    A[i + 2 + a, i + a] = p.imag
+                    B[i + a, a] = sc
+                    for b in range(2):
+                        C[a, i + b] = 2 * R[2 * a + b].real / sc
+                        C[a, i + 2 + b] = -2 * R[2 * a + b].imag / sc
+                i += 4
+        h = 0.5 * dt
+        ima = np.eye(2 * n) - h * A
+        Ad = np.linalg.solve(ima, np.eye(2 * n) + h * A)
+        Bd = np.linalg.solve(ima, dt * B)
+        Cd = np.linalg.solve(ima.T.copy(), C.T.copy()).T.copy()
+        Dd = np.empty((2, 2))
+        for a in range(2):
+            for b in range(2):
+                v = num[2 * a + b, 0]
+                for k in range(2 * n):
+                    v += 0.5 * C[a, k] * Bd[k, b]
+                Dd[a, b] = v
+        return Ad, Bd, Cd, Dd
+
     _KERNEL["loop"] = loop
+    _KERNEL["realise"] = realise
     return loop
 
 
-def draw_loop(spec: Any, powers: np.ndarray, rng: np.random.Generator, max_attempts: int) -> np.ndarray | None:
-    """Run the rejection loop compiled; the values the accepted candidate drew, in order.
+def draw_loop(spec: Any, powers: np.ndarray, rng: np.random.Generator, max_attempts: int, dt: float
+              ) -> tuple[np.ndarray, np.ndarray, tuple[np.ndarray, ...]] | None:
+    """Run the rejection loop compiled, and realise the accepted candidate.
 
     Parameters
     ----------
@@ -232,22 +299,29 @@ def draw_loop(spec: Any, powers: np.ndarray, rng: np.random.Generator, max_attem
     rng : numpy.random.Generator
         Advanced exactly as the reference loop advances it.
     max_attempts : int
+    dt : float
+        Sample period of the discretisation, s.
 
     Returns
     -------
-    (n_values,) ndarray or None
-        The order ``n`` then every value ``rng.uniform`` returned for the accepted candidate; None if
-        no candidate was accepted in ``max_attempts``.
+    (poles, numerators, (Ad, Bd, Cd, Dd)) or None
+        Poles (n,) rad/s, numerators (2, 2, n + 1) and the discrete realisation (order 2 n) of the
+        accepted candidate; None if no candidate was accepted in ``max_attempts``.
     """
     loop = _build()
     plf = np.log(spec.pole_frequency_range)
     zlf = np.log(spec.zero_frequency_range)
     lo, hi = spec.order_range
     rec = np.empty(1 + 6 * 3 * hi + 8)
-    _, nrec = loop(rng, int(lo), int(hi), float(plf[0]), float(plf[1]), float(spec.pole_damping_range[0]),
-                   float(spec.pole_damping_range[1]), float(zlf[0]), float(zlf[1]),
-                   float(spec.zero_damping_range[0]), float(spec.zero_damping_range[1]),
-                   float(spec.complex_fraction), float(np.log(0.5)), float(np.log(2.0)), float(spec.coupling),
-                   float(spec.min_pole_separation), float(spec.min_zero_distance), float(spec.max_condition),
-                   float(spec.max_gain_range), np.ascontiguousarray(powers), int(max_attempts), rec)
-    return None if nrec < 0 else rec[:nrec]
+    poles = np.empty(hi, complex)
+    num = np.empty((4, hi + 1))
+    _, n = loop(rng, int(lo), int(hi), float(plf[0]), float(plf[1]), float(spec.pole_damping_range[0]),
+                float(spec.pole_damping_range[1]), float(zlf[0]), float(zlf[1]),
+                float(spec.zero_damping_range[0]), float(spec.zero_damping_range[1]),
+                float(spec.complex_fraction), float(np.log(0.5)), float(np.log(2.0)), float(spec.coupling),
+                float(spec.min_pole_separation), float(spec.min_zero_distance), float(spec.max_condition),
+                float(spec.max_gain_range), np.ascontiguousarray(powers), int(max_attempts), rec, poles, num)
+    if n < 0:
+        return None
+    poles, num = poles[:n].copy(), np.ascontiguousarray(num[:, :n + 1])
+    return poles, num.reshape(2, 2, n + 1), _KERNEL["realise"](poles, num, n, float(dt))
