@@ -148,3 +148,31 @@ def test_psi_response_from_its_poles_and_residues_is_the_realisation_response(pa
             got = psi.frequency_response(grid.omega_dt)
         assert _rel(got, direct_response(psi.system, grid.omega_dt)) < 1e-10
         assert np.allclose(psi.pole_residues()[2], psi.system.D, rtol=1e-12, atol=1e-14)
+
+
+@needs_numba
+def test_paper_segments_on_both_paths_leave_the_same_generator_state_and_the_same_estimates():
+    # Three vehicles relay `paper` over three segments on each path from one seed: after every segment
+    # the relay's generator is in the same state, and every vehicle's estimate agrees to round-off.
+    import dataclasses
+
+    from roadcollab.collaboration.relay import Exchange, Relay, simulate_measurements
+    from roadcollab.experiments.bench import _config_for
+    from roadcollab.experiments.pipeline import FleetPipeline
+    from roadcollab.models.vehicle import sample_fleet
+
+    cfg = dataclasses.replace(_config_for(2000), n_vehicles=3)
+    pipe = FleetPipeline(cfg, sample_fleet(3, cfg.fleet, rng=3))
+    roads = np.random.default_rng(4)
+    relays = {k: Relay(pipe.estimators, Exchange("paper", cfg.obfuscation), rng=5, unguarded=True) for k in kernels.KERNELS}
+    for _ in range(3):
+        w = pipe.road(roads).velocity[:pipe.grid.n_samples]
+        ys = simulate_measurements(pipe.estimators, w, cfg.sensor_noise_std, rng=roads)
+        steps = {}
+        for k, relay in relays.items():
+            with kernels.use_kernels(k):
+                steps[k] = relay.run(ys)
+        assert relays["compiled"].rng.bit_generator.state == relays["reference"].rng.bit_generator.state
+        for a, b in zip(steps["compiled"], steps["reference"]):
+            ref = b.result.estimate
+            assert np.max(np.abs(a.result.estimate - ref)) <= 1e-9 * np.max(np.abs(ref))
