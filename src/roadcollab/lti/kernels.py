@@ -3,15 +3,18 @@ and the numpy reference path.
 
 Two paths compute the same quantities:
 
-- ``"reference"``: numpy/scipy only (:func:`~roadcollab.lti.blockdiag.block_response` and the
-  pole-residue product of :func:`~roadcollab.lti.response.ss_response`);
-- ``"compiled"``: the same evaluations as loops compiled by numba, one pass over the bins with the
-  per-bin work in registers. They differ from the reference by round-off only (a different
-  summation order; tested to 1e-12 relative per bin).
+- ``"reference"``: numpy/scipy only (:func:`~roadcollab.lti.blockdiag.block_response`, the
+  pole-residue product of :func:`~roadcollab.lti.response.ss_response`, the ``Psi`` draw's loop in
+  :func:`~roadcollab.privacy.obfuscator_design.draw_obfuscator`);
+- ``"compiled"``: the same evaluations as loops compiled by numba, tiles of bins with real and
+  imaginary parts apart, the ``Psi`` draw's rejection loop and realisation
+  (:mod:`roadcollab.privacy._draw_kernel`, from the same random generator, leaving the same state) and
+  ``Psi``'s responses from its poles and residues. They differ from the reference by round-off only.
 
-The default is ``"reference"`` (numpy): measured, the compiled path made ``paper`` only 1.02-1.3x faster per
-segment (median, docs/speed.md) while importing numba and loading its cache added 0.4-0.9 s to every process
-that evaluates a response (a vehicle, a short command), so it is opt-in until it pays for itself. The
+The default is ``"reference"`` (numpy). The compiled path passes the 300-segment exactness test and
+makes ``paper`` about 1.4-1.9x faster per segment, but every process that uses it pays 1.2-1.5 s of
+numba start-up (import, cache load, code generation) and about 145 MiB, and a fresh installation
+compiles for about 15 s (docs/speed.md, "Second pass"). So it is opt-in, for long runs. The
 environment variable ``ROADCOLLAB_KERNELS=compiled`` (or ``reference``) sets the default, and
 :func:`use_kernels` selects a path for a block of code (``roadcollab bench --kernels``).
 
