@@ -54,8 +54,9 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
                    help=f"timed segments per point (default 30; {help_range(_REPEATS)})")
     p.add_argument("--quick", action="store_true", help="only up to 16k samples")
     p.add_argument("--kernels", choices=("compiled", "reference"), default=None,
-                   help="frequency-response kernels: compiled (numba; the default when it imports) or reference "
-                        "(numpy only); the paper mechanism is also timed on both, alternating")
+                   help="kernels: compiled (numba: the responses and the Psi draws) or reference (numpy only; the "
+                        "default unless ROADCOLLAB_KERNELS=compiled); the paper mechanism is also timed on both, "
+                        "alternating")
     g = p.add_argument_group("fleet scale (a local Dask cluster)")
     g.add_argument("--scale", type=_SCALE, default=None, metavar="SEGMENTS",
                    help="instead of the per-segment benchmark: drive this many road segments (comma-separated "

@@ -3,15 +3,18 @@ and the numpy reference path.
 
 Two paths compute the same quantities:
 
-- ``"reference"``: numpy/scipy only (:func:`~roadcollab.lti.blockdiag.block_response` and the
-  pole-residue product of :func:`~roadcollab.lti.response.ss_response`);
-- ``"compiled"``: the same evaluations as loops compiled by numba, one pass over the bins with the
-  per-bin work in registers. They differ from the reference by round-off only (a different
-  summation order; tested to 1e-12 relative per bin).
+- ``"reference"``: numpy/scipy only (:func:`~roadcollab.lti.blockdiag.block_response`, the
+  pole-residue product of :func:`~roadcollab.lti.response.ss_response`, the ``Psi`` draw's loop in
+  :func:`~roadcollab.privacy.obfuscator_design.draw_obfuscator`);
+- ``"compiled"``: the same evaluations as loops compiled by numba, tiles of bins with real and
+  imaginary parts apart, the ``Psi`` draw's rejection loop and realisation
+  (:mod:`roadcollab.privacy._draw_kernel`, from the same random generator, leaving the same state) and
+  ``Psi``'s responses from its poles and residues. They differ from the reference by round-off only.
 
-The default is ``"reference"`` (numpy): measured, the compiled path made ``paper`` only 1.02-1.3x faster per
-segment (median, docs/speed.md) while importing numba and loading its cache added 0.4-0.9 s to every process
-that evaluates a response (a vehicle, a short command), so it is opt-in until it pays for itself. The
+The default is ``"reference"`` (numpy). The compiled path passes the 300-segment exactness test and
+makes ``paper`` about 1.4-1.9x faster per segment, but every process that uses it pays 1.2-1.5 s of
+numba start-up (import, cache load, code generation) and about 145 MiB, and a fresh installation
+compiles for about 15 s (docs/speed.md, "Second pass"). So it is opt-in, for long runs. The
 environment variable ``ROADCOLLAB_KERNELS=compiled`` (or ``reference``) sets the default, and
 :func:`use_kernels` selects a path for a block of code (``roadcollab bench --kernels``).
 
@@ -32,16 +35,31 @@ import numpy as np
 
 from ..errors import ParameterError
 
-__all__ = ["KERNELS", "kernel_path", "use_kernels", "compiled_available", "block_eval", "pole_residue_eval"]
+__all__ = ["KERNELS", "kernel_path", "use_kernels", "compiled_available", "jit_options", "block_eval",
+           "pole_residue_eval"]
 
 KERNELS = ("compiled", "reference")
 
 _CHOICE: contextvars.ContextVar[str | None] = contextvars.ContextVar("roadcollab_kernels", default=None)
+#: Bins per pass of the block kernel: its per-bin arrays (2 x (n + 4 + 2 k_max m) x TILE doubles) stay in cache.
+TILE = 256
 #: The compiled functions once built (``{}`` before the first use; ``None`` values if numba is missing).
 _COMPILED: dict = {}
 
 
-def _build() -> dict:
+def jit_options() -> dict:
+    """The options every compiled kernel of the package is built with (``numba.njit(**jit_options())``).
+
+    Returns
+    -------
+    dict
+        ``cache=True`` (machine code kept on disk), ``error_model="numpy"`` (no zero-division branch
+        in float divisions, module docstring), ``nogil=True``.
+    """
+    return {"cache": True, "error_model": "numpy", "nogil": True}
+
+
+def _build() -> dict:   # Long: the kernels are defined here so that numba is imported on first use only
     """Import numba and define the kernels (lazily: importing numba costs about 0.3 s)."""
     if _COMPILED:
         return _COMPILED
@@ -50,68 +68,132 @@ def _build() -> dict:
     except ImportError:
         _COMPILED.update(block=None, pole=None)
         return _COMPILED
-    jit = numba.njit(cache=True, error_model="numpy", nogil=True)
+    jit = numba.njit(**jit_options())
 
     @jit
-    def block(R, Bw, Cw, D, starts, stops, z, out):   # pragma: no cover - compiled
-        # (z I - R_b) X_b = Bw_b by back substitution per diagonal block (R_b upper triangular), then
-        # H = D + sum_b Cw_b X_b; every step a loop over the bins (innermost and contiguous, so
-        # LLVM vectorises it). Reciprocals in real arithmetic: 1/d = conj(d) / |d|^2.
-        M = z.shape[0]
+    def block(R, Bw, Cw, D, starts, stops, zr, zi, out):   # pragma: no cover - compiled
+        # Long: one tile of bins through every block in one compiled pass, its three block cases inline.
+        # H = D + sum_b Cw_b (z I - R_b)^-1 Bw_b, TILE bins at a time so every per-bin array stays in
+        # the L1/L2 cache, real and imaginary parts in separate arrays (the bin loops are innermost
+        # and contiguous, so LLVM vectorises them). Blocks of one and two eigenvalues through their
+        # resolvent entries (g_i = 1 / (z - R_ii); N_01 = g_0 R_01 g_1), as the numpy path does; larger
+        # ones by back substitution, (z I - R_b) X_b = Bw_b. Reciprocals in real arithmetic.
+        M = zr.shape[0]
         p, m = D.shape
         n = R.shape[0]
-        X = np.empty((n, m, M), np.complex128)
-        g = np.empty(M, np.complex128)
-        for q in range(p):
-            for r in range(m):
-                for k in range(M):
-                    out[q, r, k] = D[q, r]
-        for b in range(starts.shape[0]):
-            i0, i1 = starts[b], stops[b]
-            for i in range(i1 - 1, i0 - 1, -1):
+        pm = p * m
+        nb = starts.shape[0]
+        big = 1
+        for b in range(nb):
+            big = max(big, stops[b] - starts[b])
+        gr = np.empty((n, TILE))
+        gi = np.empty((n, TILE))
+        ar = np.empty((pm, TILE))
+        ai = np.empty((pm, TILE))
+        hr = np.empty(TILE)
+        hi = np.empty(TILE)
+        xr = np.empty((big, m, TILE))
+        xi = np.empty((big, m, TILE))
+        for t0 in range(0, M, TILE):
+            L = min(TILE, M - t0)
+            for i in range(n):
                 lr, li = R[i, i].real, R[i, i].imag
-                for k in range(M):
-                    dr = z[k].real - lr
-                    di = z[k].imag - li
+                for k in range(L):
+                    dr = zr[t0 + k] - lr
+                    di = zi[t0 + k] - li
                     s = 1.0 / (dr * dr + di * di)
-                    g[k] = complex(dr * s, -di * s)
-                for r in range(m):
-                    bir = Bw[i, r]
-                    for k in range(M):
-                        X[i, r, k] = bir
-                    for j in range(i + 1, i1):
-                        rij = R[i, j]
-                        for k in range(M):
-                            X[i, r, k] += rij * X[j, r, k]
-                    for k in range(M):
-                        X[i, r, k] *= g[k]
-            for q in range(p):
-                for r in range(m):
-                    for i in range(i0, i1):
-                        c = Cw[q, i]
-                        for k in range(M):
-                            out[q, r, k] += c * X[i, r, k]
+                    gr[i, k] = dr * s
+                    gi[i, k] = -di * s
+            for c in range(pm):
+                d = D[c // m, c % m]
+                for k in range(L):
+                    ar[c, k] = d
+                    ai[c, k] = 0.0
+            for b in range(nb):
+                i0, i1 = starts[b], stops[b]
+                sz = i1 - i0
+                if sz == 1:
+                    for c in range(pm):
+                        res = Cw[c // m, i0] * Bw[i0, c % m]
+                        rr, ri = res.real, res.imag
+                        for k in range(L):
+                            ar[c, k] += rr * gr[i0, k] - ri * gi[i0, k]
+                            ai[c, k] += rr * gi[i0, k] + ri * gr[i0, k]
+                elif sz == 2:
+                    i, l = i0, i0 + 1
+                    for k in range(L):
+                        hr[k] = gr[i, k] * gr[l, k] - gi[i, k] * gi[l, k]
+                        hi[k] = gr[i, k] * gi[l, k] + gi[i, k] * gr[l, k]
+                    rho = R[i, l]
+                    for c in range(pm):
+                        q, r = c // m, c % m
+                        r0 = Cw[q, i] * Bw[i, r]
+                        r1 = Cw[q, l] * Bw[l, r]
+                        r2 = Cw[q, i] * rho * Bw[l, r]
+                        a0, b0, a1, b1, a2, b2 = r0.real, r0.imag, r1.real, r1.imag, r2.real, r2.imag
+                        for k in range(L):
+                            ar[c, k] += (a0 * gr[i, k] - b0 * gi[i, k]) + (a1 * gr[l, k] - b1 * gi[l, k]) + (a2 * hr[k] - b2 * hi[k])
+                            ai[c, k] += (a0 * gi[i, k] + b0 * gr[i, k]) + (a1 * gi[l, k] + b1 * gr[l, k]) + (a2 * hi[k] + b2 * hr[k])
+                else:
+                    for ii in range(sz - 1, -1, -1):
+                        i = i0 + ii
+                        for r in range(m):
+                            br, bi = Bw[i, r].real, Bw[i, r].imag
+                            for k in range(L):
+                                xr[ii, r, k] = br
+                                xi[ii, r, k] = bi
+                            for jj in range(ii + 1, sz):
+                                rr, ri = R[i, i0 + jj].real, R[i, i0 + jj].imag
+                                for k in range(L):
+                                    xr[ii, r, k] += rr * xr[jj, r, k] - ri * xi[jj, r, k]
+                                    xi[ii, r, k] += rr * xi[jj, r, k] + ri * xr[jj, r, k]
+                            for k in range(L):
+                                a, bb = xr[ii, r, k], xi[ii, r, k]
+                                xr[ii, r, k] = a * gr[i, k] - bb * gi[i, k]
+                                xi[ii, r, k] = a * gi[i, k] + bb * gr[i, k]
+                    for c in range(pm):
+                        q, r = c // m, c % m
+                        for ii in range(sz):
+                            cr, ci = Cw[q, i0 + ii].real, Cw[q, i0 + ii].imag
+                            for k in range(L):
+                                ar[c, k] += cr * xr[ii, r, k] - ci * xi[ii, r, k]
+                                ai[c, k] += cr * xi[ii, r, k] + ci * xr[ii, r, k]
+            for k in range(L):
+                for c in range(pm):
+                    out[t0 + k, c] = complex(ar[c, k], ai[c, k])
+
 
     @jit
-    def pole(lam, Res, D, z, out):   # pragma: no cover - compiled
-        # H = D + sum_i Res_i / (z - lambda_i); Res (n, p*m), out (p*m, M).
-        M = z.shape[0]
-        n, pm = Res.shape
-        g = np.empty(M, np.complex128)
-        for c in range(pm):
-            for k in range(M):
-                out[c, k] = D[c]
-        for i in range(n):
-            lr, li = lam[i].real, lam[i].imag
-            for k in range(M):
-                dr = z[k].real - lr
-                di = z[k].imag - li
-                s = 1.0 / (dr * dr + di * di)
-                g[k] = complex(dr * s, -di * s)
+    def pole(lr, li, Rr, Ri, Dr, Di, zr, zi, out):   # pragma: no cover - compiled
+        # H = D + sum_i Res_i / (z - lambda_i), real and imaginary parts apart, TILE bins at a time;
+        # Res (n, p*m), out (M, p*m) complex.
+        M = zr.shape[0]
+        n, pm = Rr.shape
+        gr = np.empty(TILE)
+        gi = np.empty(TILE)
+        ar = np.empty((pm, TILE))
+        ai = np.empty((pm, TILE))
+        for t0 in range(0, M, TILE):
+            L = min(TILE, M - t0)
             for c in range(pm):
-                rc = Res[i, c]
-                for k in range(M):
-                    out[c, k] += g[k] * rc
+                for k in range(L):
+                    ar[c, k] = Dr[c]
+                    ai[c, k] = Di[c]
+            for i in range(n):
+                for k in range(L):
+                    dr = zr[t0 + k] - lr[i]
+                    di = zi[t0 + k] - li[i]
+                    s = 1.0 / (dr * dr + di * di)
+                    gr[k] = dr * s
+                    gi[k] = -di * s
+                for c in range(pm):
+                    rr, ri = Rr[i, c], Ri[i, c]
+                    for k in range(L):
+                        ar[c, k] += rr * gr[k] - ri * gi[k]
+                        ai[c, k] += rr * gi[k] + ri * gr[k]
+            for k in range(L):
+                for c in range(pm):
+                    out[t0 + k, c] = complex(ar[c, k], ai[c, k])
 
     _COMPILED.update(block=block, pole=pole)
     return _COMPILED
@@ -179,7 +261,7 @@ def block_eval(R: np.ndarray, Bw: np.ndarray, Cw: np.ndarray, D: np.ndarray, blo
         Upper triangular within each block (entries between blocks are not read).
     Bw : (n, m) complex ndarray
     Cw : (p, n) complex ndarray
-    D : (p, m) ndarray
+    D : (p, m) real ndarray
     blocks : list of (int, int)
         ``[start, stop)`` of each diagonal block.
     z : (M,) complex ndarray
@@ -191,10 +273,11 @@ def block_eval(R: np.ndarray, Bw: np.ndarray, Cw: np.ndarray, D: np.ndarray, blo
     k = _build()["block"]
     starts = np.array([b[0] for b in blocks], dtype=np.int64)
     stops = np.array([b[1] for b in blocks], dtype=np.int64)
-    out = np.empty((D.shape[0], D.shape[1], z.size), complex)
+    z = np.asarray(z, dtype=complex)
+    out = np.empty((z.size, D.shape[0], D.shape[1]), complex)
     k(np.ascontiguousarray(R, complex), np.ascontiguousarray(Bw, complex), np.ascontiguousarray(Cw, complex),
-      np.ascontiguousarray(D, complex), starts, stops, np.ascontiguousarray(z, complex), out)
-    return out.transpose(2, 0, 1).copy()
+      np.ascontiguousarray(D, float), starts, stops, np.ascontiguousarray(z.real), np.ascontiguousarray(z.imag), out.reshape(z.size, -1))
+    return out
 
 
 def pole_residue_eval(lam: np.ndarray, Res: np.ndarray, D: np.ndarray, z: np.ndarray) -> np.ndarray:
@@ -206,7 +289,7 @@ def pole_residue_eval(lam: np.ndarray, Res: np.ndarray, D: np.ndarray, z: np.nda
         Poles.
     Res : (n, p * m) complex ndarray
         Residues, flattened per pole.
-    D : (p, m) ndarray
+    D : (p, m) ndarray, real or complex
     z : (M,) complex ndarray
 
     Returns
@@ -214,7 +297,12 @@ def pole_residue_eval(lam: np.ndarray, Res: np.ndarray, D: np.ndarray, z: np.nda
     (M, p, m) complex ndarray
     """
     k = _build()["pole"]
-    out = np.empty((D.size, z.size), complex)
-    k(np.ascontiguousarray(lam, complex), np.ascontiguousarray(Res, complex),
-      np.ascontiguousarray(D, complex).reshape(-1), np.ascontiguousarray(z, complex), out)
-    return out.T.reshape(z.size, *D.shape).copy()
+    lam = np.asarray(lam, dtype=complex)
+    Res = np.asarray(Res, dtype=complex)
+    Dc = np.asarray(D, dtype=complex)
+    z = np.asarray(z, dtype=complex)
+    out = np.empty((z.size,) + Dc.shape, complex)
+    k(np.ascontiguousarray(lam.real), np.ascontiguousarray(lam.imag), np.ascontiguousarray(Res.real),
+      np.ascontiguousarray(Res.imag), np.ascontiguousarray(Dc.real).reshape(-1), np.ascontiguousarray(Dc.imag).reshape(-1),
+      np.ascontiguousarray(z.real), np.ascontiguousarray(z.imag), out.reshape(z.size, -1))
+    return out
