@@ -156,5 +156,6 @@ def test_seeds_are_pooled_per_seed_and_dask_gives_identical_results():
         one = calibrate_anomalies(AnomalyCalibrationConfig(seeds=(s,), **common))
         assert [p.seed_objectives[k] for p in both.points] == [p.objective for p in one.points]
     dask = calibrate_anomalies(AnomalyCalibrationConfig(seeds=(1001, 1002), **common), workers=2)
-    values = lambda res: np.array([list(r.values()) for r in res.to_rows()], dtype=float)  # noqa: E731
+    values = lambda res: np.array([list(r.record().values()) for r in res.to_rows()], dtype=float)  # noqa: E731
     np.testing.assert_array_equal(values(dask), values(both))
+    assert [list(r.record()) for r in both.to_rows()] == [both.columns()] * 2   # the columns, in order

@@ -11,9 +11,10 @@ from roadcollab.collaboration.guard import GuardReport, ReceiverGuard, fleet_gua
 from roadcollab.collaboration.relay import Exchange, Relay
 from roadcollab.errors import MessageError, ParameterError
 from roadcollab.experiments.pipeline import PipelineCache, record_run
-from roadcollab.experiments.poisoning import CONSTRUCTIONS, _jordan_trap, poisoning_rows
+from roadcollab.experiments.poisoning import CONSTRUCTIONS, PoisoningRow, _jordan_trap, poisoning_rows
 from roadcollab.experiments.seeds import SeedPlan, run_stream
 from roadcollab.lti.realisation import StateSpaceData
+from roadcollab.reporting.records import row_columns
 from roadcollab.wire.message import ExchangeMessage
 from roadcollab.wire.protocol import decode, encode
 
@@ -104,7 +105,8 @@ def test_outcomes(poisoning):
             assert _row(poisoning, mech, name).outcome == "guard_refused"
             # without the guard the same message ruins the estimate (or makes it NaN)
             assert not _row(poisoning, mech, name).ratio_unguarded <= 100
-    assert poisoning.to_rows()[0].keys() >= {"mechanism", "construction", "ratio", "outcome"}
+    assert all(type(r) is PoisoningRow for r in poisoning.to_rows())
+    assert row_columns(PoisoningRow)[:4] == ["mechanism", "construction", "run", "outcome"]
 
 
 def test_guard_report_and_relay_validation(default_fleet_run):

@@ -10,7 +10,8 @@ import pytest
 from roadcollab.cli.main import main
 from roadcollab.errors import ParameterError
 from roadcollab.io.profiles import load_profile, packaged_profile_path
-from roadcollab.models.iri import GOLDEN_CAR, GoldenCar, golden_car_response, iri, iri_segments, rectified_slope
+from roadcollab.models.iri import (GOLDEN_CAR, GoldenCar, IRIRow, golden_car_response, iri, iri_segments,
+                                  rectified_slope)
 
 
 def _broadband(x):
@@ -156,6 +157,19 @@ def test_bad_arguments_are_named(call, match):
 def test_unknown_keyword_is_rejected():
     with pytest.raises(TypeError, match="segment_lenght"):
         iri_segments(np.arange(0.0, 200.0, 0.25), np.zeros(800), segment_lenght=50.0)
+
+
+def test_segments_to_rows_are_typed_rows_of_each_segment():
+    x = np.arange(0.0, 60.0, 0.1)
+    h = np.column_stack([0.002 * np.sin(2 * np.pi * x / 5.0), 0.001 * np.sin(2 * np.pi * x / 3.0)])
+    seg = iri_segments(x, h, 20.0)
+    rows = seg.to_rows()
+    assert [type(r) for r in rows] == [IRIRow] * 2
+    assert [(r.start_m, r.end_m) for r in rows] == [(0.0, 20.0), (20.0, 40.0)]
+    np.testing.assert_array_equal([r.iri_left_m_per_km for r in rows], seg.left)
+    np.testing.assert_array_equal([r.iri_right_m_per_km for r in rows], seg.right)
+    np.testing.assert_array_equal([r.iri_m_per_km for r in rows], seg.mean)
+    assert rows[0].iri_left_m_per_km != rows[0].iri_right_m_per_km
 
 
 # --- CLI ---------------------------------------------------------------------------------------------

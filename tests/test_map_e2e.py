@@ -43,11 +43,14 @@ def city(tmp_path_factory):
 def test_no_drive_on_the_parallel_road(city):
     by_drive = {}
     for p in city["summary"]["passes"]:
-        by_drive.setdefault(Path(p["drive"]).name, set()).add(p["road_id"])
+        by_drive.setdefault(Path(p.drive).name, set()).add(p.road_id)
     assert {f"drive{j}.csv": {"main", "cross"} for j in range(1, 6)} == {k: v for k, v in by_drive.items()
                                                                         if k < "drive6"}
     assert by_drive["drive6.csv"] == by_drive["drive7.csv"] == {"service"}
-    assert all(p["direction"] == 1 for p in city["summary"]["passes"])
+    assert all(p.direction == 1 for p in city["summary"]["passes"])
+    lines = (city["root"] / "out" / "passes.csv").read_text().splitlines()
+    assert lines[0] == "drive,road_id,direction,n_fixes,offset_std_m,u_from_m,u_to_m"
+    assert len(lines) == 1 + len(city["summary"]["passes"])
 
 
 def _truth_iri(truth, road_id, band_low, a, b, dx):
@@ -141,7 +144,7 @@ def test_direction_of_travel_is_kept(city, tmp_path):
     drives = [str(p) for p in city["files"]["drives"][5:]]
     s = map_command(drives, tmp_path / "out", store_url=tmp_path / "r.sqlite", command="rev", network_path=rev,
                     bootstrap=0)
-    assert {p["direction"] for p in s["passes"]} == {-1}
+    assert {p.direction for p in s["passes"]} == {-1}
     with RoadStore.open(tmp_path / "r.sqlite") as store:
         back, back_an = store.segments(), store.anomalies()
     with RoadStore.open(city["root"] / "roads.sqlite") as store:
@@ -165,7 +168,7 @@ def test_direction_of_travel_is_kept(city, tmp_path):
 def test_without_a_network_the_track_is_the_road(city, tmp_path):
     s = map_command([str(city["files"]["drives"][5])], tmp_path / "out", store_url=tmp_path / "t.sqlite",
                     command="track", bootstrap=0)
-    assert {p["road_id"] for p in s["passes"]} == {"drive6"}
+    assert {p.road_id for p in s["passes"]} == {"drive6"}
     with RoadStore.open(tmp_path / "t.sqlite") as store:
         segs, found = store.segments(), [a for a in store.anomalies() if a.kind == "pothole"]
     assert len(segs) >= 3

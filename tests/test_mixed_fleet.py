@@ -8,7 +8,7 @@ import pytest
 
 from roadcollab import ParameterError
 from roadcollab.cli.estimate import estimate_command
-from roadcollab.experiments.mixed_fleet import MIXED_SPEEDS, mixed_fleet_check, simulate_drive
+from roadcollab.experiments.mixed_fleet import MIXED_SPEEDS, MixedFleetRow, mixed_fleet_check, simulate_drive
 from roadcollab.io.drive_params import write_drive_params
 from roadcollab.io.drives import load_drive, write_drive_csv
 from roadcollab.io.profiles import measured_road
@@ -29,6 +29,14 @@ def test_mixed_fleet_meets_the_done_when(mixed):
     assert mixed.fused <= 0.5 * mixed.single_mean
     # Fusion keeps improving down the fleet (running average of the inversions).
     assert mixed.nmse["fused"][-1] < mixed.nmse["fused"][0]
+
+
+def test_mixed_fleet_rows_are_typed_per_drive(mixed):
+    rows = mixed.to_rows()
+    assert [type(r) for r in rows] == [MixedFleetRow] * 4
+    assert [(r.drive, r.speed) for r in rows] == [(1, "12"), (2, "15"), (3, "18"), (4, "13-17")]
+    for name in ("single", "inversion", "collaborative", "fused"):
+        np.testing.assert_array_equal([getattr(r, name) for r in rows], mixed.nmse[name])
 
 
 def test_mixed_speeds_as_accurate_as_one_speed(mixed):

@@ -13,7 +13,8 @@ from roadcollab.cli.main import main
 from roadcollab.experiments.sweep import run_sweep
 from roadcollab.experiments.sweep_config import SWEPT_ESTIMATORS, SweepConfig
 from roadcollab.experiments.sweep_findings import ratio_of_means
-from roadcollab.experiments.sweep_result import SweepResult
+from roadcollab.experiments.sweep_result import SweepResult, SweepRow
+from roadcollab.reporting.records import row_columns
 from roadcollab.reporting.sweep_report import write_sweep
 
 FIRST_COLUMNS = ["gamma", "sensor_noise_std", "parameter_uncertainty", "vehicle1_observer_mse", "algorithm1_mse",
@@ -79,9 +80,10 @@ def test_report_states_the_measured_ratio(tiny):
 def test_same_seed_reproduces_the_csv_and_another_seed_differs(tiny):
     _, rows = _read_csv(tiny / "sweep.csv")
     again = run_sweep(TINY_CONFIG, 3).to_rows()
-    assert [{k: float(r[k]) for k in r} for r in rows] == [{k: float(v) for k, v in r.items()} for r in again]
+    assert [{k: float(r[k]) for k in r} for r in rows] == [{k: float(getattr(r, k)) for k in row_columns(SweepRow)}
+                                                           for r in again]
     other = run_sweep(TINY_CONFIG, 4).to_rows()
-    assert all(a["algorithm1_mse"] != b["algorithm1_mse"] for a, b in zip(again, other))
+    assert all(a.algorithm1_mse != b.algorithm1_mse for a, b in zip(again, other))
 
 
 def test_common_random_numbers_across_gammas():

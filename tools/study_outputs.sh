@@ -33,4 +33,8 @@ $B anomalies --runs 3 --out "$OUT/anomalies" > /dev/null 2>&1
 $B sweep --runs 2 --vehicles 3 --gammas 8,512 --noise 0.05 --uncertainty 0.1 --out "$OUT/sweep" > /dev/null 2>&1
 $B calibrate-anomalies --seeds 1000 --runs-per-seed 2 --vehicles 3 --snr-thresholds 4.25 5 --min-depths-mm 12.5 \
     --out "$OUT/calibrate" > /dev/null 2>&1
+$B iri --out "$OUT/iri" > /dev/null 2>&1
+$B simulate-drives --gps --vehicles 2 --seed 5 --out "$OUT/city" > /dev/null 2>&1
+$B map $(for f in "$OUT"/city/drive*.csv; do echo --drive "$f"; done) --network "$OUT/city/network.geojson" \
+    --bootstrap 0 --seed 0 --store "$OUT/city/roads.sqlite" --out "$OUT/map" > /dev/null 2>&1
 echo "outputs in $OUT"

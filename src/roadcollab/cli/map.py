@@ -99,12 +99,12 @@ def map_command(drive_paths: list[str], out_dir, *, store_url, command: str, net
     Returns
     -------
     dict
-        Summary (counts, files, passes).
+        Summary (counts, files; ``"passes"``: the PassRow of every pass).
     """
-    from ..experiments.road_survey import store_survey, survey_drives
+    from ..experiments.road_survey import PassRow, store_survey, survey_drives
     from ..geo.network import read_network
     from ..io.drives import load_drives
-    from ..reporting.records import staged_output, write_config, write_csv
+    from ..reporting.records import staged_output, write_config, write_rows
     from ..store import RoadStore
 
     t0 = time.perf_counter()
@@ -120,7 +120,7 @@ def map_command(drive_paths: list[str], out_dir, *, store_url, command: str, net
         with RoadStore.open(store_url) as store:
             n_seg, n_an = store_survey(store, survey, source=command)
             summary = _write_outputs(out, store, tiles=tiles)
-        write_csv(out / "passes.csv", survey.passes)
+        write_rows(out / "passes.csv", survey.passes, PassRow)
         config = {"drives": list(drive_paths), "network": None if network_path is None else str(network_path),
                   "store": str(store_url), "segment_length_m": segment_length, "gps_sigma_m": gps_sigma,
                   "bootstrap": bootstrap, "tiles": tiles,
@@ -197,7 +197,7 @@ def run(args: argparse.Namespace, command_line: str) -> int:
     s = map_command(args.drive, args.out, store_url=args.store, command=command_line, network_path=args.network,
                     segment_length=args.segment_length, gps_sigma=args.gps_sigma, bootstrap=args.bootstrap,
                     seed=args.seed, tiles=args.tiles, limits=file_limits(args))
-    roads = sorted({(p["road_id"], p["direction"]) for p in s["passes"]})
+    roads = sorted({(p.road_id, p.direction) for p in s["passes"]})
     print(f"matched {len(s['passes'])} passes on {len(roads)} lane(s): "
           + ", ".join(f"{r}{d:+d}" for r, d in roads))
     for note in s["notes"]:

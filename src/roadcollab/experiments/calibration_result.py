@@ -3,17 +3,15 @@
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 
 import numpy as np
 
 from .anomaly_config import ESTIMATORS
 from .calibration_config import AnomalyCalibrationConfig
 
-__all__ = ["CalibrationPoint", "AnomalyCalibrationResult", "score_column"]
+__all__ = ["CalibrationPoint", "CalibrationRow", "AnomalyCalibrationResult", "score_column"]
 
-#: The leading columns of ``calibration.csv``; the per-condition scores follow (:func:`score_column`).
-_POINT_COLUMNS = ("snr_threshold", "min_depth_m", "objective", "gap_to_best", "gap_se")
 #: The scores of every condition and estimator in ``calibration.csv``, in column order.
 _METRICS = ("f1", "precision", "recall")
 
@@ -34,6 +32,53 @@ def score_column(metric: str, condition: str, estimator: str) -> str:
         ``<metric>_<condition>_<estimator>``.
     """
     return f"{metric}_{condition}_{estimator}"
+
+
+@dataclass(frozen=True)
+class CalibrationRow:
+    """One grid point of ``calibration.csv``: its leading columns, then its scores.
+
+    The score columns depend on the configured conditions, so they are not fields: ``scores`` holds
+    them and :meth:`AnomalyCalibrationResult.columns` keeps the file's column list.
+
+    Attributes
+    ----------
+    snr_threshold : float
+        The detector's threshold on the matched filter's SNR (dimensionless).
+    min_depth_m : float
+        The detector's depth floor, m.
+    objective : float
+        Mean F1 of :data:`OBJECTIVE_ESTIMATORS` over the conditions (dimensionless).
+    gap_to_best : float
+        ``J(best) - J(point)`` (mean F1).
+    gap_se : float
+        Its paired standard error over the seeds; NaN for one seed.
+    scores : dict
+        ``{score_column(metric, condition, estimator): value}`` of every metric (f1, precision,
+        recall), condition and estimator, in column order (dimensionless).
+    """
+
+    snr_threshold: float
+    min_depth_m: float
+    objective: float
+    gap_to_best: float
+    gap_se: float
+    scores: dict[str, float]
+
+    def record(self) -> dict:
+        """The row as ``calibration.csv`` writes it.
+
+        Returns
+        -------
+        dict
+            The leading fields, then ``scores``, keyed by column in column order.
+        """
+        return {"snr_threshold": self.snr_threshold, "min_depth_m": self.min_depth_m, "objective": self.objective,
+                "gap_to_best": self.gap_to_best, "gap_se": self.gap_se, **self.scores}
+
+
+#: The leading columns of ``calibration.csv`` (the fields of CalibrationRow before its scores).
+_POINT_COLUMNS = tuple(f.name for f in fields(CalibrationRow) if f.name != "scores")
 
 
 @dataclass(frozen=True, eq=False)
@@ -122,17 +167,18 @@ class AnomalyCalibrationResult:
         return list(_POINT_COLUMNS) + [score_column(m, c, e) for m in _METRICS for c in self.config.conditions
                                        for e in ESTIMATORS]
 
-    def to_rows(self) -> list[dict]:
-        """One dict per grid point for ``calibration.csv``, keys :meth:`columns` in order.
+    def to_rows(self) -> list[CalibrationRow]:
+        """One row per grid point for ``calibration.csv`` (:meth:`CalibrationRow.record` in :meth:`columns`).
 
         Returns
         -------
-        list of dict
+        list of CalibrationRow
+            In grid order.
         """
         rows = []
         for p in self.points:
             gap, se = self.gap(p)
-            values = [p.snr_threshold, p.min_depth, p.objective, gap, se] + [
-                p.scores[c, e][m] for m in _METRICS for c in self.config.conditions for e in ESTIMATORS]
-            rows.append(dict(zip(self.columns(), values)))
+            scores = {score_column(m, c, e): p.scores[c, e][m]
+                      for m in _METRICS for c in self.config.conditions for e in ESTIMATORS}
+            rows.append(CalibrationRow(p.snr_threshold, p.min_depth, p.objective, gap, se, scores))
         return rows

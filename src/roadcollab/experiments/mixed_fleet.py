@@ -28,7 +28,7 @@ from ..models.vehicle import FleetSpec, Vehicle, sample_fleet
 from .distance_maps import band_limit_stretch
 from .fleet_estimation import FLEET_ESTIMATORS, FleetEstimates, estimate_fleet
 
-__all__ = ["MIXED_SPEEDS", "SCORE_WAVELENGTHS", "MixedFleetResult", "simulate_drive", "score_fleet",
+__all__ = ["MIXED_SPEEDS", "SCORE_WAVELENGTHS", "MixedFleetRow", "MixedFleetResult", "simulate_drive", "score_fleet",
            "mixed_fleet_check"]
 
 MIXED_SPEEDS = (12.0, 15.0, 18.0, (13.0, 17.0))
@@ -133,6 +133,34 @@ def score_fleet(est: FleetEstimates, road: RoadProfile, *, margin: float = 40.0,
 
 
 @dataclass(frozen=True)
+class MixedFleetRow:
+    """One drive of the mixed-fleet table (the fields are its columns, in order).
+
+    Attributes
+    ----------
+    drive : int
+        1-based drive number.
+    speed : str
+        The drive's speed, m/s: ``"15"`` for a constant one, ``"13-17"`` for one swept within the drive.
+    single : float
+        NMSE of the drive's single-vehicle estimate in the 0.5-15 m band (dimensionless).
+    inversion : float
+        NMSE of the drive's own offline inversion.
+    collaborative : float
+        NMSE of the drive's collaborative estimate.
+    fused : float
+        NMSE of the fused elevation of drives 1..``drive``.
+    """
+
+    drive: int
+    speed: str
+    single: float
+    inversion: float
+    collaborative: float
+    fused: float
+
+
+@dataclass(frozen=True)
 class MixedFleetResult:
     """Outcome of :func:`mixed_fleet_check`.
 
@@ -163,15 +191,17 @@ class MixedFleetResult:
         """Mean NMSE of the single vehicles' own offline inversions (the strongest single-vehicle estimate)."""
         return float(np.mean(self.nmse["inversion"]))
 
-    def to_rows(self) -> list[dict]:
+    def to_rows(self) -> list[MixedFleetRow]:
         """One row per drive: ``drive, speed, single, inversion, collaborative, fused`` (NMSE).
 
         Returns
         -------
-        list of dict
+        list of MixedFleetRow
+            ``(V,)`` rows, in drive order.
         """
-        return [{"drive": j + 1, "speed": "-".join(f"{v:g}" for v in s) if isinstance(s, tuple) else f"{s:g}",
-                 **{name: float(self.nmse[name][j]) for name in FLEET_ESTIMATORS}} for j, s in enumerate(self.speeds)]
+        return [MixedFleetRow(j + 1, "-".join(f"{v:g}" for v in s) if isinstance(s, tuple) else f"{s:g}",
+                              **{name: float(self.nmse[name][j]) for name in FLEET_ESTIMATORS})
+                for j, s in enumerate(self.speeds)]
 
 
 def mixed_fleet_check(speeds=MIXED_SPEEDS, *, seed: int = 0, start_errors=None, align: bool = False,

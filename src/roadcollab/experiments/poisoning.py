@@ -134,14 +134,15 @@ class PoisoningResult:
 
     rows: tuple[PoisoningRow, ...]
 
-    def to_rows(self) -> list[dict]:
-        """Rows for a CSV, one dict per :class:`PoisoningRow` (field names as columns).
+    def to_rows(self) -> list[PoisoningRow]:
+        """The measurement's rows (the fields of :class:`PoisoningRow` are a CSV's columns, in order).
 
         Returns
         -------
-        list of dict
+        list of PoisoningRow
+            One per mechanism, construction and run.
         """
-        return [dataclasses.asdict(r) for r in self.rows]
+        return list(self.rows)
 
 
 def _with(message, **changes):

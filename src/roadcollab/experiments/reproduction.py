@@ -20,7 +20,6 @@ applications (anomaly detection) use are :func:`roadcollab.experiments.estimates
 
 from __future__ import annotations
 
-import dataclasses
 from dataclasses import dataclass
 from typing import Callable
 
@@ -229,14 +228,14 @@ class ReproductionResult:
                 *(w[j] for w in worst)))
         return rows
 
-    def to_rows(self) -> list[dict]:
-        """Rows of ``mse.csv`` as dicts (:meth:`table`; keys are the columns, in order).
+    def to_rows(self) -> list[MseRow]:
+        """Rows of ``mse.csv``, one per vehicle (:meth:`table`).
 
         Returns
         -------
-        list of dict
+        list of MseRow
         """
-        return [dataclasses.asdict(r) for r in self.table()]
+        return self.table()
 
     def fusion_rows(self) -> list[FusionRow]:
         """Rows of the fusion figure's CSV: MSE mean, std and 95 % CI per estimator and vehicle.

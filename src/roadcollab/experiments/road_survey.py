@@ -41,7 +41,7 @@ from ..models.iri import iri
 from ..store import RoadStore
 from .fleet_estimation import estimate_fleet, find_fleet_anomalies
 
-__all__ = ["MIN_BOOTSTRAP_VEHICLES", "SegmentEstimate", "AnomalyEstimate", "RoadSurvey", "survey_drives",
+__all__ = ["MIN_BOOTSTRAP_VEHICLES", "SegmentEstimate", "AnomalyEstimate", "PassRow", "RoadSurvey", "survey_drives",
            "lane_survey", "store_survey"]
 
 MIN_BOOTSTRAP_VEHICLES = 3   # two drives resample into three distinct sets: no interval worth the name
@@ -117,6 +117,35 @@ class AnomalyEstimate:
     votes: int
 
 
+@dataclass(frozen=True)
+class PassRow:
+    """One pass of a drive along one road, a row of ``passes.csv`` (the fields are its columns, in order).
+
+    Attributes
+    ----------
+    drive : str
+        The drive's CSV file as given.
+    road_id : str
+        The road it was placed on.
+    direction : int
+        ``+1`` along the road's measure, ``-1`` against it.
+    n_fixes : int
+        GPS fixes of the pass.
+    offset_std_m : float
+        Standard error of the pass's along-road offset, m.
+    u_from_m, u_to_m : float
+        The stretch of the drive's own distance that lies on this road, m.
+    """
+
+    drive: str
+    road_id: str
+    direction: int
+    n_fixes: int
+    offset_std_m: float
+    u_from_m: float
+    u_to_m: float
+
+
 @dataclass(frozen=True, eq=False)
 class RoadSurvey:
     """Everything the drives said about the network.
@@ -125,8 +154,8 @@ class RoadSurvey:
     ----------
     segments : list of SegmentEstimate
     anomalies : list of AnomalyEstimate
-    passes : list of dict
-        Per drive and road: ``drive``, ``road_id``, ``direction``, ``n_fixes``, ``offset_std_m``, ``u_from_m``, ``u_to_m``.
+    passes : list of PassRow
+        One per drive and road it was placed on.
     band_low_per_m : dict
         ``{(road_id, direction): n_low}``, cycles/m: the wavenumber band the estimate sees.
     """
@@ -277,13 +306,12 @@ def survey_drives(drives, network: RoadNetwork, *, segment_length: float = 100.0
     check_int("bootstrap", bootstrap, low=0, high=10_000)
     rng = np.random.default_rng(rng)
     lanes: dict = {}
-    rows = []
+    rows: list[PassRow] = []
     for d in drives:
         for p in road_passes(d, network, sigma_z=sigma_z):
             lanes.setdefault((p.road_id, p.direction), []).append(p)
-            rows.append({"drive": str(d.csv_path), "road_id": p.road_id, "direction": p.direction,
-                         "n_fixes": p.n_fixes, "offset_std_m": p.offset_std, "u_from_m": p.u_range[0],
-                         "u_to_m": p.u_range[1]})
+            rows.append(PassRow(str(d.csv_path), p.road_id, p.direction, p.n_fixes, p.offset_std,
+                                p.u_range[0], p.u_range[1]))
     if not lanes:
         raise ParameterError("no drive could be placed on any road of the network (every fix farther than 50 m "
                              "from every road, or passes shorter than 50 m)")

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import dataclasses
 from dataclasses import dataclass
 
 from .._validation import check_int, check_matrix, check_real
@@ -140,9 +139,14 @@ class SweepResult:
                 fused_posterior_mse=float(m["fused_posterior"][p, :, V - 1].mean()), n_runs=R, n_vehicles=V))
         return rows
 
-    def to_rows(self) -> list[dict]:
-        """Rows of ``sweep.csv``: :meth:`table` as dicts, keys in column order."""
-        return [dataclasses.asdict(r) for r in self.table()]
+    def to_rows(self) -> list[SweepRow]:
+        """Rows of ``sweep.csv``, one per grid point (:meth:`table`).
+
+        Returns
+        -------
+        list of SweepRow
+        """
+        return self.table()
 
     def findings(self, *, threshold: float = 1.25) -> list[SweepFinding]:
         """Per (noise, uncertainty) pair: where the single vehicle's observer catches up.

@@ -30,7 +30,7 @@ from ..errors import ParameterError
 from ..lti.discretisation import zoh_discretize
 from ..lti.modal import modal_states
 
-__all__ = ["GoldenCar", "GOLDEN_CAR", "golden_car_response", "rectified_slope", "iri", "IRISegments",
+__all__ = ["GoldenCar", "GOLDEN_CAR", "golden_car_response", "rectified_slope", "iri", "IRIRow", "IRISegments",
            "iri_segments"]
 
 
@@ -264,6 +264,31 @@ def iri(elevation, spacing, *, car: GoldenCar = GOLDEN_CAR) -> float:
     return float(1000.0 * np.mean(np.abs(rate)))
 
 
+@dataclass(frozen=True)
+class IRIRow:
+    """One segment of ``iri.csv`` (the fields are its columns, in order).
+
+    Attributes
+    ----------
+    start_m : float
+        Segment start, m (road distance as given).
+    end_m : float
+        Segment end, m.
+    iri_left_m_per_km : float
+        IRI of the left track, m/km.
+    iri_right_m_per_km : float
+        IRI of the right track, m/km (the left track's for a one-track profile).
+    iri_m_per_km : float
+        Mean IRI of the two tracks, m/km.
+    """
+
+    start_m: float
+    end_m: float
+    iri_left_m_per_km: float
+    iri_right_m_per_km: float
+    iri_m_per_km: float
+
+
 @dataclass(frozen=True, eq=False)
 class IRISegments:
     """IRI per road segment of both wheel tracks.
@@ -293,16 +318,15 @@ class IRISegments:
         """(s,) ndarray: mean IRI of the two tracks, m/km."""
         return 0.5 * (self.left + self.right)
 
-    def to_rows(self) -> list[dict]:
+    def to_rows(self) -> list[IRIRow]:
         """One row per segment for ``iri.csv``.
 
         Returns
         -------
-        list of dict
-            Keys ``start_m, end_m, iri_left_m_per_km, iri_right_m_per_km, iri_m_per_km``.
+        list of IRIRow
+            ``(s,)`` rows, in segment order.
         """
-        return [{"start_m": float(a), "end_m": float(b), "iri_left_m_per_km": float(lt),
-                 "iri_right_m_per_km": float(rt), "iri_m_per_km": float(mn)}
+        return [IRIRow(float(a), float(b), float(lt), float(rt), float(mn))
                 for a, b, lt, rt, mn in zip(self.start, self.end, self.left, self.right, self.mean)]
 
 

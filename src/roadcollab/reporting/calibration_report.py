@@ -90,7 +90,7 @@ def calibration_markdown(result: AnomalyCalibrationResult) -> str:
               "", "## Flatness of the optimum", "", *_flatness_lines(result), "",
               "## Every grid point (`calibration.csv`)", ""]
     cols = result.columns()[:5] + [score_column("f1", c, e) for c in cfg.conditions for e in OBJECTIVE_ESTIMATORS]
-    lines.append(markdown_table(result.to_rows(), cols))
+    lines.append(markdown_table([r.record() for r in result.to_rows()], cols))
     return "\n".join(lines) + "\n"
 
 
@@ -112,7 +112,8 @@ def write_calibration(result: AnomalyCalibrationResult, out, *, command: str) ->
     """
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
-    write_csv(out / "calibration.csv", result.to_rows(), result.columns())
+    # Columns depend on the conditions (CalibrationRow.scores): the list stays with the result.
+    write_csv(out / "calibration.csv", [r.record() for r in result.to_rows()], result.columns())
     write_config(out / "config.json", command=command, seed=None, config=result.config.to_dict(),
                  extra={"seeds": list(result.config.seeds), "elapsed_s": result.elapsed_s})
     (out / "report.md").write_text("\n".join([

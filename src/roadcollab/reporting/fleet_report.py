@@ -15,17 +15,17 @@ import numpy as np
 
 from ..experiments.drive_estimation import AnomalyRow, OffsetRow
 from ..experiments.fleet_estimation import FLEET_ESTIMATORS, FleetEstimates, covered_runs
-from ..models.iri import IRISegments
+from ..models.iri import IRIRow, IRISegments
 from . import plotting_drives
 from .drive_tables import write_array_csv, write_final_estimate
-from .records import markdown_table, write_config, write_csv, write_rows
+from .records import markdown_table, row_columns, write_config, write_rows
 
 __all__ = ["FLEET_FILES", "iri_lines", "write_iri_csv", "write_fleet_estimates"]
 
 FLEET_FILES = ["road_estimates.csv", "final_estimate.csv", "offsets.csv", "iri.csv", "anomalies.csv",
                "elevation.png", "config.json", "report.md"]
 _SIDES = ("left", "right")
-_IRI_COLUMNS = ["start_m", "end_m", "iri_left_m_per_km", "iri_right_m_per_km", "iri_m_per_km"]
+_IRI_COLUMNS = row_columns(IRIRow)
 
 
 def _blank(v: float):
@@ -41,7 +41,7 @@ def write_iri_csv(path, iri: IRISegments | None) -> None:
     path : str or Path
     iri : IRISegments or None
     """
-    write_csv(path, iri.to_rows() if iri is not None else [], _IRI_COLUMNS)
+    write_rows(path, iri.to_rows() if iri is not None else [], IRIRow)
 
 
 def iri_lines(iri: IRISegments | None, note: str | None, band_note: str) -> list[str]:

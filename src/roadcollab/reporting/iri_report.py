@@ -7,13 +7,13 @@ from pathlib import Path
 
 import numpy as np
 
-from ..models.iri import GoldenCar, IRISegments
+from ..models.iri import GoldenCar, IRIRow, IRISegments
 from . import plotting_iri
-from .records import markdown_table, output_dir, run_header, write_config, write_csv
+from .records import markdown_table, output_dir, row_columns, run_header, write_config, write_rows
 
 __all__ = ["iri_markdown", "write_iri"]
 
-_COLUMNS = ["start_m", "end_m", "iri_left_m_per_km", "iri_right_m_per_km", "iri_m_per_km"]
+_COLUMNS = row_columns(IRIRow)
 
 
 def iri_markdown(result: IRISegments, *, source: str, car: GoldenCar) -> str:
@@ -82,7 +82,7 @@ def write_iri(result: IRISegments, out, *, command: str, source: str, car: Golde
         ``out``.
     """
     out = output_dir(out)
-    write_csv(out / "iri.csv", result.to_rows(), _COLUMNS)
+    write_rows(out / "iri.csv", result.to_rows(), IRIRow)
     series = {"mean of the tracks" if result.tracks == 2 else "IRI of the measured track": result.mean}
     if result.tracks == 2:
         series.update({"left track": result.left, "right track": result.right})

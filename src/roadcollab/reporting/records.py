@@ -193,7 +193,7 @@ def write_config(path, *, command: str, seed: int | None, config: dict, extra: d
     return path
 
 
-def markdown_table(rows: list[dict], columns: list[str], headers: list[str] | None = None) -> str:
+def markdown_table(rows: list, columns: list[str], headers: list[str] | None = None) -> str:
     """A GitHub-flavoured Markdown table.
 
     Parameters
@@ -211,7 +211,7 @@ def markdown_table(rows: list[dict], columns: list[str], headers: list[str] | No
         The table, one line per row, without a trailing newline.
     """
     headers = headers or columns
-    rows = [dataclasses.asdict(r) if dataclasses.is_dataclass(r) else r for r in rows]
+    rows = [dataclasses.asdict(r) if dataclasses.is_dataclass(r) and not isinstance(r, type) else r for r in rows]
     out = ["| " + " | ".join(headers) + " |", "|" + "---|" * len(headers)]
     for r in rows:
         out.append("| " + " | ".join(fmt(r[c]) for c in columns) + " |")
