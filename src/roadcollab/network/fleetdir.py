@@ -175,6 +175,14 @@ def enroll(folder, n_vehicles: int, plan: RoadPlan, aggregation: AggregationPoli
     return ids
 
 
+def _fleet_toml(folder) -> tuple[Path, dict]:
+    """``(path, table)`` of ``folder/fleet.toml``; one line naming the folder if there is none."""
+    path = Path(folder) / "fleet.toml"
+    if not path.is_file():
+        raise ParameterError(f"--fleet {folder}: no fleet.toml (create the fleet with 'roadcollab enroll')")
+    return path, _read_toml(path)
+
+
 def load_plan(folder) -> RoadPlan:
     """The [plan] of ``folder/fleet.toml``.
 
@@ -183,10 +191,8 @@ def load_plan(folder) -> RoadPlan:
     folder : str or Path
         The fleet folder.
     """
-    path = Path(folder) / "fleet.toml"
-    if not path.is_file():
-        raise ParameterError(f"--fleet {folder}: no fleet.toml (create the fleet with 'roadcollab enroll')")
-    return RoadPlan.from_dict(_read_toml(path).get("plan"), str(path))
+    path, data = _fleet_toml(folder)
+    return RoadPlan.from_dict(data.get("plan"), str(path))
 
 
 def load_aggregation(folder) -> AggregationPolicy:
@@ -197,10 +203,8 @@ def load_aggregation(folder) -> AggregationPolicy:
     folder : str or Path
         The fleet folder.
     """
-    path = Path(folder) / "fleet.toml"
-    if not path.is_file():
-        raise ParameterError(f"--fleet {folder}: no fleet.toml (create the fleet with 'roadcollab enroll')")
-    data = _read_toml(path).get("aggregation")
+    path, data = _fleet_toml(folder)
+    data = data.get("aggregation")
     return AggregationPolicy() if data is None else AggregationPolicy.from_dict(data, str(path))
 
 

@@ -36,23 +36,6 @@ from .transport import MemoryBroker
 __all__ = ["run_in_memory", "estimate_fleet_in_memory"]
 
 
-def _pump(service: Service, svc, agent: VehicleAgent, car, limit: int) -> None:
-    """Deliver queued messages both ways until neither side has any (at most ``limit`` rounds)."""
-    for _ in range(limit):
-        moved = False
-        while (m := svc.receive(0.0)) is not None:
-            for p in service.handle(*m):
-                svc.publish(p.topic, p.payload, p.retain)
-            moved = True
-        while (m := car.receive(0.0)) is not None:
-            for p in agent.on_message(*m):
-                car.publish(p.topic, p.payload, p.retain)
-            moved = True
-        if not moved:
-            return
-    raise ParameterError(f"the in-memory run did not settle within {limit} rounds")
-
-
 def _pump_all(service: Service, svc, cars: dict, agents: dict, offline, limit: int) -> None:
     """Deliver until nothing moves, over every vehicle (``offline`` ones drain their queue unread)."""
     for _ in range(limit):
@@ -134,7 +117,7 @@ def run_in_memory(drives, plan: RoadPlan, *, store: ServiceStore | None = None, 
             car.subscribe(f)
         for p in agent.start():
             car.publish(p.topic, p.payload, p.retain)
-        _pump(service, svc, agent, car, limit=100)
+        _pump_all(service, svc, {agent.vid: car}, {agent.vid: agent}, set(), limit=100)
         if not agent.done:
             raise ParameterError(f"vehicle v{j + 1}: segments left unacknowledged {sorted(agent.pending)}")
     return store, broker
