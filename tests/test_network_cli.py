@@ -92,3 +92,28 @@ def test_enroll_tls_writes_a_fleet_ca_and_a_broker_certificate(tmp_path, capsys)
     assert "certfile" in conf and "keyfile" in conf and "tls_version tlsv1.2" in conf
     assert main(["enroll", "--fleet", str(tmp_path / "g"), "--vehicles", "1", "--tls-host", "x"]) == 2
     assert "--tls-host: needs --tls" in capsys.readouterr().err
+
+
+def test_serve_status_lines_and_live_status(capsys):
+    """``serve``'s event printer: off a terminal each line carries the counts; on one the counts live in a
+    status line rich keeps current below the event lines."""
+    import io
+
+    from rich.console import Console
+
+    from roadcollab.cli._service_status import ServiceStatus
+
+    st = {"vehicles": 3, "segments": 2, "contributions": 7, "refused": {"bad": 1, "late": 2},
+          "rounds": {"finished": 4, "open": 1}}
+    plain = ServiceStatus(secure=True, console=Console(file=io.StringIO(), force_terminal=False))
+    plain.event("segment 1: accepted v3", st)
+    assert capsys.readouterr().out == ("segment 1: accepted v3  [3 vehicles, 2 segments, 7 contributions, rounds 4 "
+                                       "finished/1 open/0 aborted, 3 refused]\n")
+    buf = io.StringIO()
+    live = ServiceStatus(secure=False, console=Console(file=buf, force_terminal=True, width=120))
+    live.event("hello from v1", st)
+    live.live.refresh()
+    live.stop()
+    out = buf.getvalue()
+    assert "hello from v1" in out and "serving: 3 vehicles, 2 segments, 7 contributions, 3 refused" in out
+    assert "rounds" not in out and live.live is None

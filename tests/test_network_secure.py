@@ -285,3 +285,67 @@ def test_relay_key_binds_the_topic():
         RelayKey.generate().open("rc/t/v/v1/seg/3", blob)
     with pytest.raises(MessageError, match="does not open"):
         k.open("rc/t/v/v1/seg/3", blob[:-1] + bytes([blob[-1] ^ 1]))
+
+
+class _Clock:
+    """A wall clock the test moves (both services read it)."""
+
+    def __init__(self):
+        self.t = 1000.0
+
+    def __call__(self):
+        return self.t
+
+
+def test_two_services_on_one_store_hold_each_round_once_and_take_over_a_dead_ones(drives, plan, clear, tmp_path):
+    """``serve --shared`` in secure mode: services A and B on one SQLite file, both receiving every round
+    message. A claims the rounds (one open round per segment, whoever opens it); B answers none of them.
+    A stops mid-round (killed: no more ticks); once its lease has run out B adopts the rounds from the
+    journal and finishes them with the clear run's sums. A's late writes are fenced (nothing twice)."""
+    clock = _Clock()
+    store_a, store_b = ServiceStore(tmp_path / "s.sqlite", plan), ServiceStore(tmp_path / "s.sqlite", plan)
+    auth, trust, broker, agents, cars = _secure_world(drives, plan, store_a)
+
+    def service(store, owner):
+        r = SecureRounds(store, trust, POLICY, f"rc/{plan.fleet_id}", phase_timeout_s=5.0,
+                         round_wait_s=float("inf"), clock=clock, owner=owner, lease_s=10.0)
+        svc = Service(store, trust, rounds=r)
+        client = broker.client()
+        for f in svc.subscriptions:
+            client.subscribe(f)
+        return svc, client
+
+    (a, ca), (b, cb) = service(store_a, "A"), service(store_b, "B")
+    for vid, ag in agents.items():            # A applies every contribution and opens every round
+        for p in ag.start():
+            cars[vid].publish(p.topic, p.payload, p.retain)
+    for _ in range(60):
+        _pump_one_step(a, ca, cars, agents)
+        m = cb.receive(0.0)                   # B sees the round messages too, and says nothing
+        if m is not None and "/secagg/" in m[0]:
+            assert b.handle(*m) == []
+        if any(r["phase"] == "consistency" for r in store_a.rounds()):
+            break
+    held = set(a.rounds.active)
+    assert held and not b.rounds.active
+    assert b.rounds.maybe_open(next(iter(held))[0]) == []          # the segment's round is A's
+    clock.t += 5.0                                                 # A's lease still runs: B adopts nothing
+    assert b.tick() == [] and not b.rounds.active
+    clock.t += 6.0                                                 # A is dead: its lease ran out
+    for p in b.tick():
+        cb.publish(p.topic, p.payload, p.retain)
+    assert set(b.rounds.active) == held
+    for _ in range(20):
+        _pump_all(b, cb, cars, agents, set(), limit=1000)
+        if not b.rounds.active:
+            break
+        for p in b.tick():
+            cb.publish(p.topic, p.payload)
+    assert all(r["phase"] == "finished" and len(r["used"]) == 4 for r in store_b.rounds())
+    assert all(ag.done for ag in agents.values())
+    assert _rel(results_from_store(store_b).fused, clear.fused) <= 1e-9
+    key, co = next(iter(a.rounds.active.items()))                  # A wakes up: its round is gone
+    co.journal.append(("advance",))
+    assert a.rounds._step(key, co, []) == [] and key not in a.rounds.active
+    assert _rel(results_from_store(store_b).fused, clear.fused) <= 1e-9
+    store_a.close(), store_b.close()

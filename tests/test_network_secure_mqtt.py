@@ -173,3 +173,60 @@ def test_vehicle_killed_mid_round_is_left_behind(world, tmp_path, kill_serve):
     scale = np.nanmax(np.abs(part))
     assert np.nanmax(np.abs(sec.fused - part)) / scale <= 1e-9
     assert np.array_equal(sec.coverage, ref.coverage[lo:lo + len(sec.position)])
+
+
+def _open_round_owner(store_path):
+    """The owner of an open round, or None."""
+    st = ServiceStore(store_path)
+    try:
+        rows = list(st.db.execute("SELECT o.owner FROM round_owners o JOIN rounds r ON r.segment = o.segment AND "
+                                  "r.epoch = o.epoch WHERE r.phase NOT IN ('finished', 'aborted')"))
+    finally:
+        st.close()
+    return rows[0][0] if rows else None
+
+
+@pytest.mark.skipif(not HAVE_MOSQUITTO, reason="apt-get install -y mosquitto")
+def test_two_secure_services_share_a_store_and_one_takes_over_the_others_rounds(world, tmp_path):
+    """Two ``serve --shared`` of a secure fleet against one Mosquitto and one store: each round is held by
+    one of them (a claim in the store). The service holding an open round is SIGKILLed; the other takes
+    its rounds over when the lease runs out (journal replay) and the equality with ``estimate`` holds."""
+    root, drives = world
+    fleet = _fresh_fleet(root, tmp_path)
+    port = free_port()
+    url = f"mqtt://127.0.0.1:{port}"
+    mosq = start_mosquitto(fleet, port, tmp_path / "mosq", tmp_path / "broker.log")
+    store = tmp_path / "s.sqlite"
+    # A killed service takes the relay messages in flight to it along (a shared subscription does not
+    # hand them to the other); the vehicle sends them again later, so rounds wait for all four vehicles.
+    extra = ("--round-timeout", "8", "--round-wait", "300")
+    serves = [start_serve(fleet, store, tmp_path / f"{k}.log", broker=url, shared=True, extra=extra) for k in "ab"]
+    fleet_run = subprocess.Popen([sys.executable, "-m", "roadcollab.cli.main", "fleet", "--fleet", fleet,
+                                  *sum((["--drive", str(d)] for d in drives), []), "--broker", url, "--timeout",
+                                  "180"], stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    killed = None
+    try:
+        end = time.monotonic() + 120
+        while killed is None and time.monotonic() < end and fleet_run.poll() is None:
+            owner = _open_round_owner(store) if store.exists() else None
+            if owner is not None:
+                killed = next(p for p in serves if owner.endswith(f"-{p.pid}"))
+                assert stop(killed, signal.SIGKILL) == -signal.SIGKILL
+            time.sleep(0.05)
+        out, _ = fleet_run.communicate(timeout=240)
+    finally:
+        if fleet_run.poll() is None:
+            fleet_run.kill()
+            fleet_run.communicate()
+        codes = [stop(p) for p in serves if p is not killed]
+        stop(mosq)
+    assert killed is not None, "no round was seen open"
+    assert codes == [0] and "4 of 4 vehicles done" in out, out
+    survivor = tmp_path / ("b.log" if killed is serves[0] else "a.log")
+    assert "taken over in phase" in survivor.read_text()
+    rounds = _no_clear_inversion(store)
+    assert rounds and all(r["phase"] == "finished" and len(r["used"]) == 4 for r in rounds), rounds
+    rc("export", "--store", store, "--out", tmp_path / "out")
+    err = assert_same_table(root / "estimate" / "final_estimate.csv", tmp_path / "out" / "final_estimate.csv",
+                            skip=("elevation_collaborative",))
+    assert err <= 1e-9

@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import os
 import signal
+import socket
 import threading
 from pathlib import Path
 
@@ -112,27 +113,25 @@ def _road_outputs(args, store, command_line: str, log, map_at):
     return sync, live, on_fused
 
 
-def _service(args, store, trust, policy, plan, command_line: str, map_at):
+def _service(args, store, trust, policy, plan, command_line: str, map_at, status):
     """The service with its event log, road outputs and (secure aggregation) rounds."""
     from ..network.service import Service
 
     def log(line: str) -> None:
         """One line per event, with the running counts (vehicles seen, segments done, rounds, refusals)."""
         if not args.quiet:
-            st = store.status()
-            r = st["rounds"]
-            rounds = (f", rounds {r.get('finished', 0)} finished/{r.get('open', 0)} open/{r.get('aborted', 0)} "
-                      f"aborted" if policy.secure else "")
-            print(f"{line}  [{st['vehicles']} vehicles, {st['segments']} segments, {st['contributions']} "
-                  f"contributions{rounds}, {sum(st['refused'].values())} refused]", flush=True)
+            status.event(line, store.status())
 
     sync, live, on_fused = _road_outputs(args, store, command_line, log, map_at)
     rounds = None
     if policy.secure:
         from ..network.rounds import SecureRounds
 
+        # Several services on one store hold rounds under their own names; one service keeps its name across
+        # restarts and so adopts its open rounds at once (network/rounds.py).
+        owner = f"serve-{socket.gethostname()}-{os.getpid()}" if args.shared else "serve"
         rounds = SecureRounds(store, trust, policy, f"rc/{plan.fleet_id}", log=log,
-                              phase_timeout_s=args.round_timeout, round_wait_s=args.round_wait)
+                              phase_timeout_s=args.round_timeout, round_wait_s=args.round_wait, owner=owner)
     return Service(store, trust, log=log, on_fused=on_fused, rounds=rounds), sync, live
 
 
@@ -163,15 +162,17 @@ def run(args: argparse.Namespace, command_line: str) -> int:
         raise ParameterError("--map: needs --roads URL (the live map shows the road store)")
     map_at = parse_listen(args.map, "--map") if args.map is not None else None
     plan, trust, policy = load_plan(args.fleet), load_trust(args.fleet), load_aggregation(args.fleet)
-    if policy.secure and args.shared:
-        from ..errors import ParameterError
-
-        raise ParameterError("--shared: a secure-aggregation fleet keeps each open round in one service; run one "
-                             "serve for it")
     login = load_login(Path(args.fleet) / "service" / "broker.toml")
     store = open_service_store(args.store, plan)
 
-    service, sync, live = _service(args, store, trust, policy, plan, command_line, map_at)
+    from ._service_status import ServiceStatus
+
+    status = ServiceStatus(policy.secure)
+    try:
+        service, sync, live = _service(args, store, trust, policy, plan, command_line, map_at, status)
+    except BaseException:
+        status.stop()
+        raise
     broker = None
     if args.broker is None:
         host, port = parse_listen(args.listen)
@@ -183,8 +184,9 @@ def run(args: argparse.Namespace, command_line: str) -> int:
     for sig in (signal.SIGINT, signal.SIGTERM):
         signal.signal(sig, lambda *_: stop.set())
     client = MqttClient(url, login, f"rc-service-{plan.fleet_id}" + (f"-{os.getpid()}" if args.shared else ""), on_connect=republish.set)
-    for filt in service.subscriptions:
-        client.subscribe(f"$share/{plan.fleet_id}/{filt}" if args.shared else filt)
+    private = {service.rounds.subscription} if service.rounds is not None else set()
+    for filt in service.subscriptions:     # every service sees every round message; each answers its own rounds
+        client.subscribe(f"$share/{plan.fleet_id}/{filt}" if args.shared and filt not in private else filt)
     try:
         client.connect()
         st = store.status()
@@ -194,6 +196,7 @@ def run(args: argparse.Namespace, command_line: str) -> int:
               f"contributions from {st['vehicles']} vehicles{how}", flush=True)
         handled = run_service(service, client, stop, republish)
     finally:
+        status.stop()
         client.close()
         if live is not None:
             live.stop()

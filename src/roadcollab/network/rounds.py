@@ -19,6 +19,15 @@ behind and its masks removed if ``t`` vehicles reveal (Bonawitz et al. 2017 drop
 Every accepted message and timeout is journalled in the store (the coordinator holds no secret), so a
 service killed mid-round and restarted on its store replays the round and sends its current phase's
 messages again; vehicles answer a repeated request with their first answer.
+
+Several services on one store (``serve --shared``): a round is opened by a claim in the store
+(:meth:`ServiceStore.open_round`, one transaction: one open round per segment, whoever opens it), and
+its coordinator holds a lease it renews every tick (:meth:`ServiceStore.adopt_rounds`). Every service receives every round message (the
+round topics are not shared-subscribed) and answers only those of the rounds it holds. When a service
+stops renewing (killed, cut off), another takes its rounds over once the lease has run out
+(:meth:`ServiceStore.adopt_rounds`) by the same journal replay as a restart. The store fences the old
+holder: a journal entry or a round's close from a service that lost the round is refused
+(:class:`~roadcollab.network.store.LostRound`), so a sum is added once.
 """
 
 from __future__ import annotations
@@ -31,6 +40,7 @@ from ..wire.identity import FleetTrust
 from .aggregation import AggregationPolicy, sums_from_total
 from .secround import RoundCoordinator, RoundTopics
 from .service import Publish
+from .roundstore import CLOSED, LostRound
 from .store import ServiceStore
 
 __all__ = ["SecureRounds"]
@@ -58,12 +68,18 @@ class SecureRounds:
     coordinator : type, optional
         The :class:`~roadcollab.network.secround.RoundCoordinator` class of every round (a subclass plays a
         deviating service in the attack tests).
+    owner : str
+        This service's name in the store's ``round_owners`` (unique per running service when several
+        share a store; the same name after a restart adopts its rounds at once).
+    lease_s : float
+        How long a claim on a round holds without a renewal (seconds; renewed every :meth:`tick`).
     """
 
     def __init__(self, store: ServiceStore, trust: FleetTrust, policy: AggregationPolicy, prefix: str, *,
                  log: Callable[[str], None] | None = None, on_fused=None, phase_timeout_s: float = 20.0,
                  round_wait_s: float = 60.0, clock: Callable[[], float] = time.time,
-                 coordinator: type[RoundCoordinator] = RoundCoordinator) -> None:
+                 coordinator: type[RoundCoordinator] = RoundCoordinator, owner: str = "serve",
+                 lease_s: float = 10.0) -> None:
         if not isinstance(policy, AggregationPolicy) or not policy.secure:
             raise ParameterError("SecureRounds needs an AggregationPolicy with mode 'secure'")
         self.store, self.trust, self.policy, self.prefix = store, trust, policy, prefix
@@ -72,19 +88,28 @@ class SecureRounds:
         self.on_fused = on_fused
         self.phase_timeout_s, self.round_wait_s, self.clock = float(phase_timeout_s), float(round_wait_s), clock
         self.coordinator = coordinator
+        self.owner, self.lease_s = str(owner), float(lease_s)
         self.active: dict[tuple[int, int], RoundCoordinator] = {}
         self.phase_since: dict[tuple[int, int], float] = {}
         self.resend: list[Publish] = []
-        for r in store.rounds():                   # a restarted service continues its open rounds
-            if r["phase"] in ("finished", "aborted"):
+        self.resend += self._adopt()                # a restarted service continues its open rounds
+
+    def _adopt(self) -> list[Publish]:
+        """Replay the open rounds this service holds now but not in memory (its own after a restart, or
+        another service's whose lease ran out); the messages of their current phases."""
+        out: list[Publish] = []
+        now = self.clock()
+        for key in self.store.adopt_rounds(self.owner, now, now + self.lease_s):
+            if key in self.active:
                 continue
-            key = (r["segment"], r["epoch"])
-            co, last = coordinator.replay(prefix, *key, self.spec, trust, store.journal(*key))
+            co, last = self.coordinator.replay(self.prefix, *key, self.spec, self.trust, self.store.journal(*key))
             self.active[key] = co
-            self.phase_since[key] = clock()
-            self.resend += last
+            self.phase_since[key] = now
+            self._log(f"round {key[0]}/{key[1]}: taken over in phase {co.phase}")
+            out += last
             if co.done:                             # killed between its last message and its close
-                self.resend += self._close(key, co)
+                out += self._close(key, co)
+        return out
 
     @property
     def subscription(self) -> str:
@@ -111,7 +136,7 @@ class SecureRounds:
         busy: set[str] = set()
         since: dict[str, float] = {}
         for r in self.store.rounds(segment):
-            if r["phase"] not in ("finished", "aborted"):
+            if r["phase"] not in CLOSED:
                 busy |= set(r["roster"])
             else:
                 busy |= set(r["used"]) | set(r["silent"])
@@ -130,7 +155,8 @@ class SecureRounds:
         ----------
         segment : int
         """
-        if any(k[0] == segment for k in self.active):
+        rounds = self.store.rounds(segment)
+        if any(r["phase"] not in CLOSED for r in rounds):     # one open round per segment, of any service
             return []
         free = self.free(segment)
         n = self.policy.round_size
@@ -151,7 +177,8 @@ class SecureRounds:
         """
         co = self.coordinator(self.prefix, *key, self.spec, self.trust)
         out = co.open(roster)
-        self.store.open_round(*key, roster)
+        if not self.store.open_round(*key, roster, owner=self.owner, lease_s=self.clock() + self.lease_s):
+            return []                               # another service opened the segment's round first
         co.journal.clear()                          # the store's open entry stands for it
         self.active[key] = co
         self.phase_since[key] = self.clock()
@@ -178,6 +205,8 @@ class SecureRounds:
         co = self.active.get(key)
         if co is None:
             known = [r for r in self.store.rounds(s) if r["epoch"] == e]
+            if known and known[0]["phase"] not in CLOSED:
+                return []                             # another service's round (it got this message too)
             why = f"round {s}/{e} is {known[0]['phase']}" if known else f"no round {s}/{e} was opened"
             self.store.log("refused", f"{topic}: {why}", vid=rest[-1] if rest else None, topic=topic)
             return []
@@ -189,15 +218,24 @@ class SecureRounds:
                 self.store.log(kind, reason, topic=f"{self.prefix}/secagg/{key[0]}/{key[1]}")
         co.events[:] = [ev for ev in co.events if ev[0] not in ("refused", "duplicate")]
         if co.journal:
-            self.store.journal_add(*key, co.journal, co.phase)
+            try:
+                self.store.journal_add(*key, co.journal, co.phase, owner=self.owner)
+            except LostRound as err:
+                return self._lost(key, err)
             co.journal.clear()
             self.phase_since[key] = self.clock()
         if co.done:
             out = out + self._close(key, co)
         return out
 
+    def _lost(self, key: tuple[int, int], err: LostRound) -> list[Publish]:
+        """Drop a round another service took over: nothing this service holds of it is sent or written."""
+        self.active.pop(key, None)
+        self.phase_since.pop(key, None)
+        self._log(f"round {key[0]}/{key[1]}: lost ({err})")
+        return []
+
     def _close(self, key: tuple[int, int], co: RoundCoordinator) -> list[Publish]:
-        del self.active[key]
         self.phase_since.pop(key, None)
         answered = {i for i in co.got["adverts"]}
         silent = [v for v in co.roster if co.pid[v] not in answered]
@@ -206,17 +244,20 @@ class SecureRounds:
             try:
                 total, count = sums_from_total(self.store.plan, co.result.result.total)
             except ParameterError as err:
-                self.store.close_round(*key, "aborted", used=co.used, silent=silent, reason=str(err))
-                self._log(f"round {key[0]}/{key[1]}: sum refused ({err})")
-                return self.maybe_open(key[0])
-            self.store.close_round(*key, "finished", used=co.used, silent=silent, reason=reason, total=total,
-                                   count=count)
-            self._log(f"round {key[0]}/{key[1]}: finished, {reason}")
-            if self.on_fused is not None:
-                self.on_fused(key[0], self.store)
-        else:
-            self.store.close_round(*key, "aborted", used=co.used, silent=silent, reason=reason)
-            self._log(f"round {key[0]}/{key[1]}: aborted ({reason})")
+                return self._closed(key, "aborted", co.used, silent, str(err), f"sum refused ({err})")
+            return self._closed(key, "finished", co.used, silent, reason, f"finished, {reason}", total, count)
+        return self._closed(key, "aborted", co.used, silent, reason, f"aborted ({reason})")
+
+    def _closed(self, key, phase, used, silent, reason, line, total=None, count=None) -> list[Publish]:
+        try:
+            self.store.close_round(key[0], key[1], phase, used=used, silent=silent, reason=reason, total=total, count=count,
+                                   owner=self.owner)
+        except LostRound as err:
+            return self._lost(key, err)
+        self.active.pop(key, None)
+        self._log(f"round {key[0]}/{key[1]}: {line}")
+        if total is not None and self.on_fused is not None:
+            self.on_fused(key[0], self.store)
         return self.maybe_open(key[0])
 
     def tick(self) -> list[Publish]:
@@ -226,8 +267,8 @@ class SecureRounds:
         -------
         list of Publish
         """
-        out: list[Publish] = []
         now = self.clock()
+        out: list[Publish] = self._adopt()          # renews this service's leases, takes over expired ones
         for key, co in list(self.active.items()):
             if now - self.phase_since.get(key, now) >= self.phase_timeout_s:
                 self._log(f"round {key[0]}/{key[1]}: phase {co.phase} timed out")
@@ -238,5 +279,5 @@ class SecureRounds:
         return out
 
     def _waiting_segments(self) -> list[int]:
-        seen = {r["segment"] for r in self.store.rounds() if r["phase"] not in ("finished", "aborted")}
+        seen = {r["segment"] for r in self.store.rounds() if r["phase"] not in CLOSED}
         return [s for s in self.store.contributed_segments() if s not in seen]

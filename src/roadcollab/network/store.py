@@ -9,7 +9,9 @@ row per vehicle and segment, the contribution as received), ``waiting`` (the env
 segment), ``fused`` (running sums of the inversions per segment), ``events`` (refusals and notes),
 and for secure aggregation ``rounds`` (one row per round: roster, phase, who was used or silent) and
 ``round_journal`` (what each open round's coordinator accepted, in order: it holds no secret, and a
-restarted service replays it, :meth:`RoundCoordinator.replay <roadcollab.network.secround.RoundCoordinator.replay>`).
+restarted service replays it, :meth:`RoundCoordinator.replay <roadcollab.network.secround.RoundCoordinator.replay>`)
+and ``round_owners`` (which service coordinates each open round, and until when its lease runs: several
+``serve --shared`` on one store claim rounds here and take over those of a service whose lease ran out).
 """
 
 from __future__ import annotations
@@ -26,6 +28,7 @@ import numpy as np
 from ..errors import ParameterError
 from .engine import Contribution, SegmentSums
 from .plan import RoadPlan
+from .roundstore import RoundTables
 
 __all__ = ["ServiceStore"]
 
@@ -46,10 +49,11 @@ CREATE TABLE IF NOT EXISTS rounds (segment INTEGER NOT NULL, epoch INTEGER NOT N
                                    silent TEXT, reason TEXT, PRIMARY KEY (segment, epoch));
 CREATE TABLE IF NOT EXISTS round_journal (id INTEGER PRIMARY KEY AUTOINCREMENT, segment INTEGER NOT NULL,
                                           epoch INTEGER NOT NULL, kind TEXT NOT NULL, topic TEXT, payload BLOB);
+CREATE TABLE IF NOT EXISTS round_owners (segment INTEGER NOT NULL, epoch INTEGER NOT NULL, owner TEXT NOT NULL,
+                                         lease_s REAL NOT NULL, PRIMARY KEY (segment, epoch));
 """
 
-
-class ServiceStore:
+class ServiceStore(RoundTables):
     """The service's SQLite file.
 
     Parameters
@@ -211,96 +215,6 @@ class ServiceStore:
     def contributed_segments(self) -> list[int]:
         """Segments with at least one contribution."""
         return [s for (s,) in self.db.execute("SELECT DISTINCT segment FROM contributions ORDER BY segment")]
-
-    # -- secure-aggregation rounds ---------------------------------------------------------------
-    def open_round(self, segment: int, epoch: int, roster: list[str]) -> None:
-        """Record a new round and its roster (the first entry of its journal).
-
-        Parameters
-        ----------
-        segment, epoch : int
-        roster : list of str
-        """
-        with self._tx():
-            self.db.execute("INSERT INTO rounds (segment, epoch, roster, phase, opened_s) VALUES (?, ?, ?, ?, ?)",
-                            (segment, epoch, json.dumps(list(roster)), "adverts", time.time()))
-            self.db.execute("INSERT INTO round_journal (segment, epoch, kind, topic, payload) VALUES (?, ?, ?, ?, ?)",
-                            (segment, epoch, "open", json.dumps(list(roster)), b""))
-
-    def journal_add(self, segment: int, epoch: int, entries, phase: str) -> None:
-        """Append coordinator journal entries (``("msg", topic, payload)`` or ``("advance",)``).
-
-        Parameters
-        ----------
-        segment, epoch : int
-        entries : iterable of tuple
-        phase : str
-            The round's phase after them.
-        """
-        with self._tx():
-            for e in entries:
-                self.db.execute("INSERT INTO round_journal (segment, epoch, kind, topic, payload) "
-                                "VALUES (?, ?, ?, ?, ?)", (segment, epoch, e[0], e[1] if len(e) > 1 else None,
-                                                           bytes(e[2]) if len(e) > 2 else b""))
-            self.db.execute("UPDATE rounds SET phase = ? WHERE segment = ? AND epoch = ?", (phase, segment, epoch))
-
-    def journal(self, segment: int, epoch: int) -> list[tuple]:
-        """The journal of round ``(segment, epoch)``, as :meth:`RoundCoordinator.replay` takes it.
-
-        Parameters
-        ----------
-        segment, epoch : int
-        """
-        out: list[tuple] = []
-        for kind, topic, payload in self.db.execute(
-                "SELECT kind, topic, payload FROM round_journal WHERE segment = ? AND epoch = ? ORDER BY id",
-                (segment, epoch)):
-            out.append(("open", json.loads(topic)) if kind == "open" else
-                       ("msg", topic, bytes(payload)) if kind == "msg" else ("advance",))
-        return out
-
-    def close_round(self, segment: int, epoch: int, phase: str, *, used: list[str], silent: list[str], reason: str,
-                    total: np.ndarray | None = None, count: np.ndarray | None = None) -> None:
-        """End a round; a finished round's sum is added to the segment's fused sums in the same transaction.
-
-        Parameters
-        ----------
-        segment, epoch : int
-        phase : str
-            ``finished`` or ``aborted``.
-        used, silent : list of str
-            Vehicles whose masked input it consumed; vehicles that never answered.
-        reason : str
-        total : (m, 2) ndarray, optional
-        count : (m,) ndarray, optional
-            The round's sums (:func:`~roadcollab.network.aggregation.sums_from_total`), when finished.
-        """
-        now = time.time()
-        with self._tx():
-            self.db.execute("UPDATE rounds SET phase = ?, closed_s = ?, used = ?, silent = ?, reason = ? "
-                            "WHERE segment = ? AND epoch = ?",
-                            (phase, now, json.dumps(used), json.dumps(silent), reason, segment, epoch))
-            self.db.execute("DELETE FROM round_journal WHERE segment = ? AND epoch = ?", (segment, epoch))
-            if total is not None and count is not None:
-                old = self._sums(segment)
-                sums = SegmentSums(segment, old.total + total, old.count + count)
-                row = self.db.execute("SELECT n_vehicles FROM fused WHERE segment = ?", (segment,)).fetchone()
-                self._write_sums(sums, (0 if row is None else int(row[0])) + len(used), now)
-
-    def rounds(self, segment: int | None = None) -> list[dict]:
-        """Every round (of ``segment``), oldest first: ``segment, epoch, roster, phase, opened_s, closed_s,
-        used, silent, reason``.
-
-        Parameters
-        ----------
-        segment : int, optional
-        """
-        q = "SELECT segment, epoch, roster, phase, opened_s, closed_s, used, silent, reason FROM rounds"
-        rows = self.db.execute(q + (" WHERE segment = ?" if segment is not None else "") +
-                               " ORDER BY segment, epoch", (segment,) if segment is not None else ())
-        return [{"segment": s, "epoch": e, "roster": json.loads(r), "phase": p, "opened_s": o, "closed_s": c,
-                 "used": json.loads(u) if u else [], "silent": json.loads(si) if si else [], "reason": why}
-                for s, e, r, p, o, c, u, si, why in rows]
 
     def _sums(self, segment: int) -> SegmentSums:
         row = self.db.execute("SELECT total, count FROM fused WHERE segment = ?", (segment,)).fetchone()
