@@ -94,7 +94,8 @@ def _worker(fleet: str, url: str, jobs: list, drives: list, out: str, secure: bo
     Path(out).write_text(json.dumps({"agents": results, "rss_base_kb": base, "rss_peak_kb": peak}))
 
 
-def measure(n: int, procs: int, broker: str, drives: list, root: Path, vmin: float, round_size: int = 0) -> dict:
+def measure(n: int, procs: int, broker: str, drives: list, root: Path, vmin: float, round_size: int = 0,
+            services: int = 1) -> dict:
     from netkit import free_port, rc, start_amqtt, start_mosquitto, start_serve, stop
 
     fleet = root / f"fleet{n}"
@@ -106,7 +107,8 @@ def measure(n: int, procs: int, broker: str, drives: list, root: Path, vmin: flo
     b = (start_amqtt(fleet, port, root / f"b{n}.log") if broker == "amqtt"
          else start_mosquitto(fleet, port, root / f"m{n}", root / f"b{n}.log"))
     store = root / f"s{n}.sqlite"
-    serve = start_serve(fleet, store, root / f"serve{n}.log", broker=url)
+    serves = [start_serve(fleet, store, root / f"serve{n}-{k}.log", broker=url, shared=services > 1)
+              for k in range(services)]
     jobs = [[] for _ in range(procs)]
     for i in range(n):
         jobs[i % procs].append((f"v{i + 1}", i % len(drives)))
@@ -121,7 +123,8 @@ def measure(n: int, procs: int, broker: str, drives: list, root: Path, vmin: flo
         w.join(1200)
     wall = time.time() - t0
     time.sleep(1.0)
-    stop(serve)
+    for serve in serves:
+        stop(serve)
     stop(b)
     with sqlite3.connect(store) as db:
         applied = {(v, s): t for v, s, t in db.execute("SELECT vid, segment, received_s FROM contributions")}
@@ -159,6 +162,7 @@ def main(argv=None) -> int:
     p.add_argument("--keep", action="store_true", help="keep the temporary folder")
     p.add_argument("--aggregation", choices=["clear", "secure"], default="clear")
     p.add_argument("--round-size", type=int, default=5, help="secure: vehicles per round (k = t = this)")
+    p.add_argument("--services", type=int, default=1, help="serve --shared instances on one store (SQLite)")
     args = p.parse_args(argv)
     from netkit import write_drives
     from roadcollab.io.drives import load_drives
@@ -168,7 +172,7 @@ def main(argv=None) -> int:
         drives, _ = write_drives(root / "drives")
         vmin = min(float(d.speeds().min()) for d in load_drives(drives))
         rs = args.round_size if args.aggregation == "secure" else 0
-        rows = [measure(n, args.procs, args.broker, drives, root, vmin, rs) for n in args.vehicles]
+        rows = [measure(n, args.procs, args.broker, drives, root, vmin, rs, args.services) for n in args.vehicles]
     finally:
         if not args.keep:
             shutil.rmtree(root, ignore_errors=True)
