@@ -5,9 +5,10 @@ Paillier, AEAD, secure aggregation) measured side by side on the same segments.
 One run is one segment (a fresh road, fresh sensor noise, fresh obfuscators; see
 :mod:`roadcollab.experiments.security.segment`); the fleet is the same in every run, so messages of
 one vehicle on different runs are what a curious receiver could try to link. The replica attacks and
-secure aggregation use the first ``replica_runs`` segments (:mod:`.replica`); the
-poisoning measurements their own runs (:mod:`.poisoning`, :mod:`.fusion_poisoning`). The tables are
-built in :mod:`.tables`.
+secure aggregation use the first ``replica_runs`` segments
+(:mod:`~roadcollab.experiments.security.replica`); the poisoning measurements their own runs
+(:mod:`.poisoning`, :mod:`.fusion_poisoning`). The tables are built in
+:mod:`~roadcollab.experiments.security.tables`.
 """
 
 from __future__ import annotations

@@ -1,5 +1,6 @@
 """The security study's tables from its segments: attacks, exactness, linkability, baselines, DP
-composition and the privacy/accuracy frontier (typed rows of :mod:`.rows`)."""
+composition and the privacy/accuracy frontier (typed rows of
+:mod:`~roadcollab.experiments.security.rows`)."""
 
 from __future__ import annotations
 
