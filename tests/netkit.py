@@ -20,7 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
-from roadcollab.experiments.mixed_fleet import MIXED_SPEEDS, simulate_drive
+from roadcollab.experiments.drives.mixed_fleet import MIXED_SPEEDS, simulate_drive
 from roadcollab.io.drive_params import write_drive_params
 from roadcollab.io.drives import write_drive_csv
 from roadcollab.io.profiles import measured_road

@@ -1,4 +1,4 @@
-"""Tests of roadcollab.detection.detector (detector, scoring) and roadcollab.experiments.anomaly_study."""
+"""Tests of roadcollab.detection.detector (detector, scoring) and roadcollab.experiments.anomalies.study."""
 
 from __future__ import annotations
 
@@ -14,8 +14,8 @@ from scipy.ndimage import uniform_filter1d
 
 from roadcollab.detection.detector import Detection, DetectorSpec, detect_anomalies
 from roadcollab.detection.scoring import match_detections
-from roadcollab.experiments.anomaly_config import ESTIMATORS, AnomalyStudyConfig
-from roadcollab.experiments.anomaly_study import run_anomaly_study
+from roadcollab.experiments.anomalies.config import ESTIMATORS, AnomalyStudyConfig
+from roadcollab.experiments.anomalies.study import run_anomaly_study
 from roadcollab.errors import ParameterError
 from roadcollab.experiments.config import ExperimentConfig
 from roadcollab.models.anomaly import Anomaly

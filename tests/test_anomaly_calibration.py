@@ -1,4 +1,4 @@
-"""Tests of roadcollab.experiments.anomaly_calibration and ``roadcollab calibrate-anomalies``."""
+"""Tests of roadcollab.experiments.anomalies.calibration and ``roadcollab calibrate-anomalies``."""
 
 from __future__ import annotations
 
@@ -10,10 +10,10 @@ import numpy as np
 import pytest
 
 from roadcollab.detection.detector import DetectorSpec
-from roadcollab.experiments.anomaly_calibration import calibrate_anomalies
-from roadcollab.experiments.anomaly_config import ESTIMATORS, AnomalyStudyConfig
-from roadcollab.experiments.anomaly_study import run_anomaly_study
-from roadcollab.experiments.calibration_config import EVALUATION_SEEDS, AnomalyCalibrationConfig, parse_seeds
+from roadcollab.experiments.anomalies.calibration import calibrate_anomalies
+from roadcollab.experiments.anomalies.config import ESTIMATORS, AnomalyStudyConfig
+from roadcollab.experiments.anomalies.study import run_anomaly_study
+from roadcollab.experiments.anomalies.calibration_config import EVALUATION_SEEDS, AnomalyCalibrationConfig, parse_seeds
 from roadcollab.cli.main import build_parser, main
 from roadcollab.errors import ParameterError
 from roadcollab.experiments.config import ExperimentConfig

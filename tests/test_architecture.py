@@ -29,6 +29,17 @@ ALLOWED = {
             "reporting", "geo", "store", "network"},
 }
 BASE = {"errors", "_validation", "__version__"}
+#: Inside experiments/: the studies (one subpackage each) that a study may import, besides the shared
+#: modules at the top of experiments/ (config, seeds, runner, pipeline), which import no study ("" below).
+STUDIES_ALLOWED = {
+    "": set(),
+    "drives": set(),
+    "bench": set(),
+    "anomalies": set(),
+    "reproduction": {"drives"},
+    "security": {"anomalies"},
+    "sweep": {"reproduction"},
+}
 #: Imports allowed inside functions: optional or heavy third-party modules only.
 LAZY_OK = {"control", "slycot", "numba", "dask", "matplotlib", "phe", "cryptography", "rich", "tomllib", "tomli", "gmpy2",
            "psycopg", "paho", "amqtt", "pwdlib"}
@@ -108,6 +119,52 @@ def test_no_hidden_imports(path):
 def test_lazy_import_rule(name, package, ok):
     assert _lazy_import_ok(name, package) is ok
 
+
+
+EXPERIMENTS = ROOT / "experiments"
+
+
+def _study(path: Path) -> str:
+    """The study subpackage of experiments/ that ``path`` is in ("" for the shared modules at its top)."""
+    parts = path.relative_to(EXPERIMENTS).parts
+    return parts[0] if len(parts) > 1 else ""
+
+
+def _study_import_ok(study: str, imported: str) -> bool:
+    """May a module of ``study`` import a module of study ``imported`` ("" the shared modules)?"""
+    return imported in ("", study) or imported in STUDIES_ALLOWED[study]
+
+
+def test_studies_are_listed():
+    subpackages = {p.name for p in EXPERIMENTS.iterdir() if (p / "__init__.py").exists()}
+    assert subpackages == set(STUDIES_ALLOWED) - {""}
+
+
+@pytest.mark.parametrize("path", sorted(EXPERIMENTS.rglob("*.py")), ids=lambda p: str(p.relative_to(ROOT)))
+def test_study_layers(path):
+    study = _study(path)
+    pkg = _module_name(path) if path.name == "__init__.py" else _module_name(path).rsplit(".", 1)[0]
+    for node in ast.walk(ast.parse(path.read_text())):
+        if not (isinstance(node, ast.ImportFrom) and node.level):
+            continue
+        base = pkg.split(".")
+        mod = ".".join(base[:len(base) - (node.level - 1)] + ([node.module] if node.module else []))
+        parts = mod.split(".")
+        if parts[:2] != ["roadcollab", "experiments"]:
+            continue
+        names = [parts[2]] if len(parts) > 2 else [a.name for a in node.names]
+        for name in names:
+            imported = name if name in STUDIES_ALLOWED else ""
+            assert _study_import_ok(study, imported), \
+                f"{path.relative_to(ROOT)} ({study or 'shared'}) imports the {imported} study; " \
+                f"allowed {sorted(STUDIES_ALLOWED[study])}"
+
+
+@pytest.mark.parametrize("study, imported, ok", [
+    ("security", "anomalies", True), ("anomalies", "security", False), ("", "drives", False),
+    ("sweep", "", True), ("sweep", "sweep", True), ("reproduction", "sweep", False)])
+def test_study_import_rule(study, imported, ok):
+    assert _study_import_ok(study, imported) is ok
 
 MAX_FUNCTION_LINES = 80
 

@@ -3,7 +3,7 @@
 import pytest
 
 from roadcollab import ParameterError
-from roadcollab.experiments.bench import bench_segment
+from roadcollab.experiments.bench.study import bench_segment
 
 
 @pytest.mark.parametrize("mechanism", ["none", "paper", "paper_vehicle", "hardened"])
@@ -22,7 +22,7 @@ def test_bench_rejects_unknown_mechanism():
 
 
 def test_naive_chain_agrees_with_the_library_and_exactness_is_measured():
-    from roadcollab.experiments.bench import bench_exactness, bench_naive
+    from roadcollab.experiments.bench.study import bench_exactness, bench_naive
 
     naive = bench_naive(1000, repeats=2)
     assert naive["library_ms_min"] > 0 and naive["speedup_min"] == naive["ms_min"] / naive["library_ms_min"]
@@ -34,7 +34,7 @@ def test_naive_chain_agrees_with_the_library_and_exactness_is_measured():
 
 
 def test_bench_times_both_kernel_paths_and_checks_every_segment():
-    from roadcollab.experiments.bench import bench_kernel_paths
+    from roadcollab.experiments.bench.study import bench_kernel_paths
     from roadcollab.lti.kernels import compiled_available
 
     rec = bench_segment(1000, mechanism="paper", repeats=3, kernels="reference")

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 import scipy.linalg
 
-from roadcollab.experiments.bench_naive import direct_response
+from roadcollab.experiments.bench.naive import direct_response
 from roadcollab.lti.blockdiag import block_response, block_schur
 from roadcollab.lti.realisation import StateSpaceData, SystemCache, random_orthogonal, series, similarity
 from roadcollab.lti.response import FrequencyResponseCache

@@ -6,7 +6,7 @@ from pathlib import Path
 
 import pytest
 
-from roadcollab.experiments.reproduction_rows import IriRow
+from roadcollab.experiments.reproduction.rows import IriRow
 from roadcollab.reporting.records import row_columns
 from roadcollab.wire import protocol
 from roadcollab.cli.main import main

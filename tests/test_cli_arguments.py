@@ -275,7 +275,7 @@ def test_range_messages_for_nan_and_words():
 
 def test_the_sweeps_default_grid_sizes_are_the_studys():
     from roadcollab.cli.sweep import DEFAULT_GRID_SIZES
-    from roadcollab.experiments.sweep_config import SweepConfig
+    from roadcollab.experiments.sweep.config import SweepConfig
 
     cfg = SweepConfig()
     assert DEFAULT_GRID_SIZES == (len(cfg.gammas), len(cfg.sensor_noise_stds), len(cfg.parameter_uncertainties))

@@ -7,8 +7,8 @@ from scipy.stats import norm
 from roadcollab.collaboration.robust_fusion import RobustFusion, common_scale
 from roadcollab.detection.corroboration import min_votes_for
 from roadcollab.errors import ParameterError
-from roadcollab.experiments.anomaly_config import AnomalyStudyConfig
-from roadcollab.experiments.collusion import collusion_rows
+from roadcollab.experiments.anomalies.config import AnomalyStudyConfig
+from roadcollab.experiments.security.collusion import collusion_rows
 
 
 def _pooled_attack(rng, n, c, shift):

@@ -12,12 +12,12 @@ import pytest
 
 from roadcollab import ParameterError
 from roadcollab.cli.estimate import add_estimate_arguments, estimate_command
-from roadcollab.experiments.drive_estimation import ESTIMATORS, estimate_drives, integrate_elevation
+from roadcollab.experiments.drives.estimation import ESTIMATORS, estimate_drives, integrate_elevation
 from roadcollab.io.drive_clean import clean_drive
 from roadcollab.io.drives import common_time_grid, load_drive, load_drives, read_drive_csv, write_drive_csv
 from roadcollab.io.drive_params import write_drive_params
 from roadcollab.experiments.config import ExperimentConfig
-from roadcollab.experiments.estimates import run_estimates
+from roadcollab.experiments.anomalies.estimates import run_estimates
 from roadcollab.experiments.pipeline import FleetPipeline
 from roadcollab.models.simulation import add_sensor_noise, simulate_response
 from roadcollab.models.vehicle import HalfCarParameters, sample_fleet
@@ -353,7 +353,7 @@ def test_small_drive_runs_end_to_end(tmp_path):
 
 
 def test_command_writes_estimates_when_detection_cannot_run(tmp_path, monkeypatch):
-    import roadcollab.experiments.drive_estimation as study   # the command imports it when it runs
+    import roadcollab.experiments.drives.estimation as study   # the command imports it when it runs
 
     def refuse(est):
         raise ParameterError("window of 300 samples is shorter than the longest template")

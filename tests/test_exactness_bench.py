@@ -15,7 +15,7 @@ compiled, 2.4e-10 numpy).
 
 import pytest
 
-from roadcollab.experiments.bench import bench_exactness
+from roadcollab.experiments.bench.study import bench_exactness
 from roadcollab.lti import kernels
 
 

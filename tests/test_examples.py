@@ -5,7 +5,7 @@ import importlib
 
 import pytest
 
-MODULES = ["roadcollab.collaboration.relay", "roadcollab.wire.protocol", "roadcollab.experiments.reproduction",
+MODULES = ["roadcollab.collaboration.relay", "roadcollab.wire.protocol", "roadcollab.experiments.reproduction.study",
            "roadcollab.collaboration.algorithm1", "roadcollab.collaboration.fusion", "roadcollab.detection.detector",
            "roadcollab.models.simulation", "roadcollab.models.vehicle", "roadcollab.estimation.grid",
            "roadcollab.experiments.pipeline"]

@@ -11,7 +11,7 @@ from roadcollab.collaboration.guard import GuardReport, ReceiverGuard, fleet_gua
 from roadcollab.collaboration.relay import Exchange, Relay
 from roadcollab.errors import MessageError, ParameterError
 from roadcollab.experiments.pipeline import PipelineCache, record_run
-from roadcollab.experiments.poisoning import CONSTRUCTIONS, PoisoningRow, _jordan_trap, poisoning_rows
+from roadcollab.experiments.security.poisoning import CONSTRUCTIONS, PoisoningRow, _jordan_trap, poisoning_rows
 from roadcollab.experiments.seeds import SeedPlan, run_stream
 from roadcollab.lti.realisation import StateSpaceData
 from roadcollab.reporting.records import row_columns

@@ -107,7 +107,7 @@ def test_compiled_psi_draw_is_the_reference_draw_and_leaves_the_same_generator_s
     # The compiled rejection loop draws from the caller's generator: the same candidates accepted, the
     # same generator state after every draw; the design and its realisation equal up to round-off.
     from roadcollab.estimation.grid import SegmentGrid
-    from roadcollab.experiments.bench_naive import direct_response
+    from roadcollab.experiments.bench.naive import direct_response
     from roadcollab.privacy.obfuscator_design import ObfuscationSpec, draw_obfuscator
 
     grid = SegmentGrid(n_samples=4000, sample_rate=200.0)
@@ -137,7 +137,7 @@ def test_psi_response_from_its_poles_and_residues_is_the_realisation_response(pa
     # a dense solve of the discrete realisation: equal up to the realisation's rounding (measured 7.6e-12
     # over 300 draws), at Nyquist too (z = -1).
     from roadcollab.estimation.grid import SegmentGrid
-    from roadcollab.experiments.bench_naive import direct_response
+    from roadcollab.experiments.bench.naive import direct_response
     from roadcollab.privacy.obfuscator_design import ObfuscationSpec, draw_obfuscator
 
     grid = SegmentGrid(n_samples=4000, sample_rate=200.0)
@@ -157,7 +157,7 @@ def test_paper_segments_on_both_paths_leave_the_same_generator_state_and_the_sam
     import dataclasses
 
     from roadcollab.collaboration.relay import Exchange, Relay, simulate_measurements
-    from roadcollab.experiments.bench import _config_for
+    from roadcollab.experiments.bench.study import _config_for
     from roadcollab.experiments.pipeline import FleetPipeline
     from roadcollab.models.vehicle import sample_fleet
 

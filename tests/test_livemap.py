@@ -72,7 +72,7 @@ def test_live_map_in_headless_chromium_grows(tmp_path):
     from playwright.sync_api import sync_playwright
 
     from roadcollab.cli.map import map_command
-    from roadcollab.experiments.city import write_city
+    from roadcollab.experiments.drives.city import write_city
 
     (tmp_path / "city").mkdir()
     files = write_city(tmp_path / "city", seed=0)
@@ -129,7 +129,7 @@ def test_live_map_draws_the_networked_fleet_in_headless_chromium(tmp_path):
         pytest.skip("needs /usr/bin/chromium and playwright")
     from playwright.sync_api import sync_playwright
 
-    from roadcollab.experiments.city import write_city
+    from roadcollab.experiments.drives.city import write_city
     from roadcollab.geo.network import read_network
     from roadcollab.io.drive_clean import clean_drive
     from roadcollab.io.drives import load_drives

@@ -1,6 +1,6 @@
 """Issue 21's done-when, end to end on the simulated city: files -> ``roadcollab map`` -> store -> files -> browser.
 
-The city (roadcollab.experiments.city): ``main`` + ``cross`` (one route through a junction) driven
+The city (roadcollab.experiments.drives.city): ``main`` + ``cross`` (one route through a junction) driven
 by 5 vehicles at 12, 15, 18, 13-17 and 14 m/s, ``service`` 10 m north of ``main`` driven by 2, 5 Hz
 GPS with 3 m errors east and north. Truth IRI: the true profile passed through the same wavenumber
 weight as the estimate (``band_low_per_m`` of the lane in config.json, from 0.5 Hz at the slowest
@@ -18,8 +18,8 @@ import pyogrio
 import pytest
 
 from roadcollab.cli.map import map_command
-from roadcollab.experiments.city import CITY_POTHOLES, simulate_city, write_city
-from roadcollab.experiments.distance_maps import band_limit_stretch
+from roadcollab.experiments.drives.city import CITY_POTHOLES, simulate_city, write_city
+from roadcollab.experiments.drives.distance_maps import band_limit_stretch
 from roadcollab.geo.projection import geodesic_m
 from roadcollab.models.iri import iri
 from roadcollab.store import RoadStore

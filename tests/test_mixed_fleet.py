@@ -8,7 +8,7 @@ import pytest
 
 from roadcollab import ParameterError
 from roadcollab.cli.estimate import estimate_command
-from roadcollab.experiments.mixed_fleet import MIXED_SPEEDS, MixedFleetRow, mixed_fleet_check, simulate_drive
+from roadcollab.experiments.drives.mixed_fleet import MIXED_SPEEDS, MixedFleetRow, mixed_fleet_check, simulate_drive
 from roadcollab.io.drive_params import write_drive_params
 from roadcollab.io.drives import load_drive, write_drive_csv
 from roadcollab.io.profiles import measured_road
@@ -50,8 +50,8 @@ def test_oracle_mapping_through_distance_is_nearly_exact():
     """With noise-free sensors and the vehicles' true parameters, the time -> distance map loses little."""
     road = measured_road(rng=1)
     fleet = sample_fleet(2, FleetSpec(estimate_uncertainty=0.0), rng=2)
-    from roadcollab.experiments.fleet_estimation import estimate_fleet
-    from roadcollab.experiments.mixed_fleet import score_fleet
+    from roadcollab.experiments.drives.fleet_estimation import estimate_fleet
+    from roadcollab.experiments.drives.mixed_fleet import score_fleet
     drives = [simulate_drive(road, fleet[0], 12.0, start=5.0, noise_std=0.0, rng=3),
               simulate_drive(road, fleet[1], (13.0, 17.0), start=9.0, noise_std=0.0, rng=4)]
     nmse = score_fleet(estimate_fleet(drives), road)

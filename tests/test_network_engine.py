@@ -1,6 +1,6 @@
 """The per-segment engine and the service's protocol over the in-memory transport (issue 19, part 1).
 
-Oracle: :func:`roadcollab.experiments.fleet_estimation.estimate_fleet` (what ``roadcollab estimate`` runs for
+Oracle: :func:`roadcollab.experiments.drives.fleet_estimation.estimate_fleet` (what ``roadcollab estimate`` runs for
 drives at different speeds). The engine cuts the same computation by segment, so its results must be the
 same numbers exactly (bit for bit: the same operations on the same values).
 """
@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 
 from roadcollab import MessageError, ParameterError
-from roadcollab.experiments.fleet_estimation import estimate_fleet
-from roadcollab.experiments.mixed_fleet import MIXED_SPEEDS, simulate_drive
+from roadcollab.experiments.drives.fleet_estimation import estimate_fleet
+from roadcollab.experiments.drives.mixed_fleet import MIXED_SPEEDS, simulate_drive
 from roadcollab.io.profiles import measured_road
 from roadcollab.models.vehicle import FleetSpec, sample_fleet
 from roadcollab.network.agent import VehicleAgent

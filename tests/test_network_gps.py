@@ -104,8 +104,8 @@ def test_networked_segments_and_anomalies_land_where_map_puts_them(sim):
         assert d and min(d) <= 2.0, (b, d)
     # against the truth: IRI within 10 % of the true profile's in the band the fleet sees (0.5 Hz / 12 m/s),
     # every pothole within 2 m
-    from roadcollab.experiments.city import simulate_city
-    from roadcollab.experiments.distance_maps import band_limit_stretch
+    from roadcollab.experiments.drives.city import simulate_city
+    from roadcollab.experiments.drives.distance_maps import band_limit_stretch
     from roadcollab.geo.network import read_network
     from roadcollab.models.iri import iri
 

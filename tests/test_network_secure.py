@@ -15,7 +15,7 @@ import pytest
 
 from roadcollab import MessageError, ParameterError
 from roadcollab.cli.main import main
-from roadcollab.experiments.mixed_fleet import MIXED_SPEEDS, simulate_drive
+from roadcollab.experiments.drives.mixed_fleet import MIXED_SPEEDS, simulate_drive
 from roadcollab.io.profiles import measured_road
 from roadcollab.models.vehicle import FleetSpec, sample_fleet
 from roadcollab.network.agent import VehicleAgent

@@ -30,7 +30,7 @@ import numpy as np
 import pytest
 from netkit import free_port, rc, start_amqtt, stop, write_drives
 
-from roadcollab.experiments.secagg_attacks import _fake_adverts
+from roadcollab.experiments.security.secagg_attacks import _fake_adverts
 from roadcollab.io.drives import load_drives
 from roadcollab.network.fleetdir import load_aggregation, load_login, load_plan, load_trust
 from roadcollab.network.mqtt_client import MqttClient

@@ -81,7 +81,7 @@ def test_bad_parallel_arguments():
 
 @pytest.mark.slow     # end-to-end: a whole study or a worker pool (make test-slow)
 def test_attack_study_on_dask_matches_serial():
-    from roadcollab.experiments.security_study import AttackStudyConfig, run_attack_study
+    from roadcollab.experiments.security.study import AttackStudyConfig, run_attack_study
 
     cfg = AttackStudyConfig(experiment=ExperimentConfig(n_vehicles=3, n_runs=1, segment_length=90.0), n_runs=2,
                             paillier_bits=512, paillier_sample=2, physical_fit_runs=1, dp_epsilons=(1.0,),
@@ -113,7 +113,7 @@ def test_seed_plan_streams_are_stateless_and_match_spawn():
 
 @pytest.mark.slow     # end-to-end: a whole study or a worker pool (make test-slow)
 def test_fleet_scale_run_matches_serial_on_pool_and_dask():
-    from roadcollab.experiments.scale import run_scale, run_segments
+    from roadcollab.experiments.bench.scale import run_scale, run_segments
 
     cfg = ExperimentConfig(n_vehicles=2, n_runs=1, segment_length=60.0)
     serial = run_segments(cfg, 3, 4)

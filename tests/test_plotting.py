@@ -7,7 +7,7 @@ import matplotlib.image
 import numpy as np
 import pytest
 
-from roadcollab.experiments.reproduction_rows import FusionRow
+from roadcollab.experiments.reproduction.rows import FusionRow
 from roadcollab.reporting import plotting
 from roadcollab.reporting.plotting_security import _grouped
 

@@ -13,9 +13,9 @@ from roadcollab.cli.estimate import estimate_command
 from roadcollab.cli.main import main
 from roadcollab.detection.detector import detect_anomalies
 from roadcollab.detection.scoring import match_detections
-from roadcollab.experiments.drive_estimation import estimate_drives, window_slices
-from roadcollab.experiments.drive_simulation import simulate_drives, write_drives
-from roadcollab.experiments.fleet_estimation import estimate_fleet
+from roadcollab.experiments.drives.estimation import estimate_drives, window_slices
+from roadcollab.experiments.drives.simulation import simulate_drives, write_drives
+from roadcollab.experiments.drives.fleet_estimation import estimate_fleet
 from roadcollab.io.drive_clean import MAX_SPIKE_FRACTION, clean_drive, find_spikes
 from roadcollab.io.drive_params import STANDARD_GRAVITY, write_drive_params
 from roadcollab.io.drives import load_drive, write_drive_csv

@@ -16,7 +16,7 @@ from roadcollab.collaboration.guard import ReceiverGuard, fleet_guards
 from roadcollab.collaboration.relay import Relay
 from roadcollab.errors import ParameterError
 from roadcollab.experiments.pipeline import PipelineCache, record_run
-from roadcollab.experiments.receiver_attacks import receiver_attack_rows
+from roadcollab.experiments.security.receiver_attacks import receiver_attack_rows
 from roadcollab.experiments.seeds import SeedPlan, run_stream
 
 CFG = rc.ExperimentConfig()          # the default fleet (10 vehicles), as the study

@@ -9,7 +9,7 @@ from roadcollab import ExperimentConfig, ParameterError, sample_fleet
 from roadcollab.detection.detector import Detection
 from roadcollab.detection.scoring import match_detections
 from roadcollab.experiments.pipeline import FleetPipeline
-from roadcollab.experiments.reproduction import WINDOWED_CONTROL, run_reproduction
+from roadcollab.experiments.reproduction.study import WINDOWED_CONTROL, run_reproduction
 from roadcollab.collaboration.fusion import LinearMMSE, plant_moments, posterior_draws
 from roadcollab.privacy.obfuscation import obfuscate, theorem1_errors
 from roadcollab.collaboration.relay import Exchange, Relay, simulate_measurements
@@ -204,7 +204,7 @@ def test_theorem1_with_margin_when_the_receiver_evaluates_by_another_algorithm(p
     """The receiver's responses of T~, S~ by a dense solve per bin (not the library's eigen/Schur path)
     agree with the library's and with the sender's Psi1 T to 1e-9 per bin; estimates with and without
     privacy agree to 1e-11, with either receiver."""
-    from roadcollab.experiments.bench_naive import direct_response, exactness_figures
+    from roadcollab.experiments.bench.naive import direct_response, exactness_figures
     from roadcollab.lti.response import _schur_frequency_response
 
     _, ys, Ys = records

@@ -8,10 +8,10 @@ import pytest
 
 from roadcollab.errors import ParameterError
 from roadcollab.experiments.config import ExperimentConfig
-from roadcollab.experiments.replica_study import replica_messages
-from roadcollab.experiments.security_segment import target_poles
+from roadcollab.experiments.security.replica_study import replica_messages
+from roadcollab.experiments.security.segment import target_poles
 from roadcollab.experiments.pipeline import PipelineCache
-from roadcollab.experiments.security_study import AttackStudyConfig
+from roadcollab.experiments.security.study import AttackStudyConfig
 from roadcollab.models.simulation import simulate_response
 from roadcollab.privacy.attacks import pole_errors
 from roadcollab.privacy.baselines.dp import DPSpec, gaussian_sigma

@@ -4,8 +4,8 @@ import numpy as np
 import pytest
 
 import roadcollab as rc
-from roadcollab.experiments.reproduction import ESTIMATORS, run_reproduction
-from roadcollab.experiments.reproduction_iri import elevation_with_end, iri_ratios, iri_rows, run_iri
+from roadcollab.experiments.reproduction.study import ESTIMATORS, run_reproduction
+from roadcollab.experiments.reproduction.iri import elevation_with_end, iri_ratios, iri_rows, run_iri
 from roadcollab.io.profiles import measured_road
 from roadcollab.models.iri import iri_segments
 from roadcollab.models.profile import RoadProfile

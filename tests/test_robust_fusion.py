@@ -9,8 +9,8 @@ from roadcollab.detection.corroboration import corroborate, votes
 from roadcollab.detection.detector import Detection
 from roadcollab.errors import MessageError, ParameterError
 from roadcollab.estimation.grid import SegmentGrid
-from roadcollab.experiments.anomaly_config import AnomalyStudyConfig
-from roadcollab.experiments.fusion_poisoning import fusion_poisoning_rows
+from roadcollab.experiments.anomalies.config import AnomalyStudyConfig
+from roadcollab.experiments.security.fusion_poisoning import fusion_poisoning_rows
 from roadcollab.wire.message import InversionMessage
 
 

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from roadcollab.errors import FileFormatError, MessageError
-from roadcollab.experiments.secagg_attacks import SECAGG_ATTACKS, active_attack, active_spec, legacy_attack
+from roadcollab.experiments.security.secagg_attacks import SECAGG_ATTACKS, active_attack, active_spec, legacy_attack
 from roadcollab.privacy._secagg_kernels import encode_fixed, decode_sum
 from roadcollab.privacy.secagg_active import verify_roster
 from roadcollab.privacy.secagg_active_run import SecAggFleet, run_active_session

@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import pytest
 
-from roadcollab.experiments.anomaly_config import AnomalyStudyConfig
-from roadcollab.experiments.secagg_bounds import bounded_influence_ceiling
+from roadcollab.experiments.anomalies.config import AnomalyStudyConfig
+from roadcollab.experiments.security.secagg_bounds import bounded_influence_ceiling
 
 
 @pytest.mark.slow

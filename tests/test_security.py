@@ -7,8 +7,8 @@ from roadcollab import ExperimentConfig, sample_fleet
 from roadcollab.experiments.pipeline import FleetPipeline
 from roadcollab.privacy.obfuscation import obfuscate
 from roadcollab.privacy.attacks import (PhysicalPrior, attack_model_reduction, attack_multiplicity, attack_pole_intersection, attack_signals_prior, pole_errors, select_by_prior)
-from roadcollab.experiments.security_study import AttackStudyConfig, run_attack_study
-from roadcollab.experiments.security_tables import _linkability
+from roadcollab.experiments.security.study import AttackStudyConfig, run_attack_study
+from roadcollab.experiments.security.tables import _linkability
 from roadcollab.models.simulation import add_sensor_noise, simulate_response
 
 CFG = ExperimentConfig(n_vehicles=3, n_runs=1, segment_length=120.0)

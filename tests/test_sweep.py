@@ -10,10 +10,10 @@ import pytest
 
 from roadcollab import ExperimentConfig, ParameterError
 from roadcollab.cli.main import main
-from roadcollab.experiments.sweep import run_sweep
-from roadcollab.experiments.sweep_config import SWEPT_ESTIMATORS, SweepConfig
-from roadcollab.experiments.sweep_findings import ratio_of_means
-from roadcollab.experiments.sweep_result import SweepResult, SweepRow
+from roadcollab.experiments.sweep.study import run_sweep
+from roadcollab.experiments.sweep.config import SWEPT_ESTIMATORS, SweepConfig
+from roadcollab.experiments.sweep.findings import ratio_of_means
+from roadcollab.experiments.sweep.result import SweepResult, SweepRow
 from roadcollab.reporting.records import row_columns
 from roadcollab.reporting.sweep_report import write_sweep
 

@@ -6,8 +6,8 @@ Quoted in docs/security-receivers.md. Run: ``.venv/bin/python tools/honest_resid
 import numpy as np
 
 from roadcollab.collaboration.robust_fusion import RobustFusion
-from roadcollab.experiments.anomaly_config import AnomalyStudyConfig
-from roadcollab.experiments.fusion_poisoning import _honest_run
+from roadcollab.experiments.anomalies.config import AnomalyStudyConfig
+from roadcollab.experiments.security.fusion_poisoning import _honest_run
 from roadcollab.experiments.pipeline import FleetPipeline, fleet_and_run_seeds
 from roadcollab.experiments.seeds import SeedPlan
 

@@ -10,7 +10,7 @@ import argparse
 
 import numpy as np
 
-from roadcollab.experiments.mixed_fleet import MIXED_SPEEDS, mixed_fleet_check
+from roadcollab.experiments.drives.mixed_fleet import MIXED_SPEEDS, mixed_fleet_check
 
 
 def main() -> None:

@@ -12,7 +12,7 @@ Usage: .venv/bin/python tools/paper_floor.py   (from the repository root)
 import time, statistics
 import numpy as np
 from threadpoolctl import threadpool_limits
-from roadcollab.experiments.bench import _config_for
+from roadcollab.experiments.bench.study import _config_for
 from roadcollab.experiments.pipeline import FleetPipeline
 from roadcollab.collaboration.relay import Exchange, Relay
 from roadcollab.models.simulation import add_sensor_noise, simulate_response

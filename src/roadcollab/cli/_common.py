@@ -390,7 +390,7 @@ def run_with_progress(total: int, description: str, work: Callable[[Callable[[in
 # --- simulation options --------------------------------------------------------------------------
 
 def config_from_args(args: argparse.Namespace) -> ExperimentConfig:
-    """The :class:`~roadcollab.experiments.reproduction.ExperimentConfig` of the simulation options.
+    """The :class:`~roadcollab.experiments.reproduction.study.ExperimentConfig` of the simulation options.
 
     Parameters
     ----------

@@ -60,8 +60,8 @@ def run(args: argparse.Namespace, command_line: str) -> int:
     int
         Exit status 0.
     """
-    from ..experiments.anomaly_config import AnomalyStudyConfig
-    from ..experiments.anomaly_study import run_anomaly_study
+    from ..experiments.anomalies.config import AnomalyStudyConfig
+    from ..experiments.anomalies.study import run_anomaly_study
     from ..reporting.anomaly_report import write_anomalies
     from ..reporting.records import staged_output
 

@@ -72,8 +72,8 @@ def run(args: argparse.Namespace, command_line: str) -> int:
         Exit status 0.
     """
     from ..experiments.config import ExperimentConfig
-    from ..experiments.security_replica import replica_fit_count
-    from ..experiments.security_study import AttackStudyConfig, run_attack_study
+    from ..experiments.security.replica import replica_fit_count
+    from ..experiments.security.study import AttackStudyConfig, run_attack_study
     from ..reporting.attack_report import write_attack
     from ..reporting.records import staged_output
 

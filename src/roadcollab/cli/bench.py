@@ -79,7 +79,7 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
 
 def _run_scale(args: argparse.Namespace) -> int:
     """``--scale``: the fleet-scale runs, printed as a table or one JSON line."""
-    from ..experiments.scale import run_scale
+    from ..experiments.bench.scale import run_scale
 
     total = sum(args.scale)
     bar, advance = progress(total, f"{plural(args.vehicles, 'vehicle')} x {plural(total, 'segment')}")
@@ -124,7 +124,7 @@ def run(args: argparse.Namespace, command_line: str) -> int:
     int
         Exit status 0.
     """
-    from ..experiments.bench import run_bench
+    from ..experiments.bench.study import run_bench
 
     if args.scale is not None:
         return _run_scale(args)

@@ -113,8 +113,8 @@ def run(args: argparse.Namespace, command_line: str) -> int:
     int
         Exit status 0.
     """
-    from ..experiments.anomaly_calibration import calibrate_anomalies
-    from ..experiments.calibration_config import AnomalyCalibrationConfig, parse_seeds
+    from ..experiments.anomalies.calibration import calibrate_anomalies
+    from ..experiments.anomalies.calibration_config import AnomalyCalibrationConfig, parse_seeds
     from ..experiments.config import ExperimentConfig
     from ..reporting.calibration_report import write_calibration
     from ..reporting.records import staged_output

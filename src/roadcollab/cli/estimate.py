@@ -1,7 +1,7 @@
 """``roadcollab estimate --drive FILE [--drive FILE ...] --out DIR``: the road from recorded drives.
 
 Reads the drives (:mod:`roadcollab.io.drives`, file formats there), runs Algorithm 1 down them
-(:mod:`roadcollab.experiments.drive_estimation`), looks for anomalies and writes CSV files,
+(:mod:`roadcollab.experiments.drives.estimation`), looks for anomalies and writes CSV files,
 figures, ``config.json`` and ``report.md`` (:mod:`roadcollab.reporting.drives_report`).
 """
 
@@ -36,7 +36,7 @@ def _detector_config() -> dict | None:
 def _time_grid(drives, out, *, command: str, segment_length: float, t0: float, cleaning: list[dict],
                notes: list[str]) -> dict:
     """The drives share one time grid: relay in time as the simulations do, then IRI of the fused elevation."""
-    from ..experiments.drive_estimation import estimate_drives, find_anomalies
+    from ..experiments.drives.estimation import estimate_drives, find_anomalies
     from ..models.iri import iri_segments
     from ..reporting.drives_report import write_estimates
 
@@ -65,7 +65,7 @@ def _stretches_note(stretches) -> str:
 def _distance_grid(drives, out, *, command: str, segment_length: float, align: bool, max_offset: float,
                    spacing: float, t0: float, notes: list[str], cleaning: list[dict]) -> dict:
     """Drives on different grids (or aligned): every estimate on one distance grid."""
-    from ..experiments.fleet_estimation import drive_stretches, estimate_fleet, find_fleet_anomalies, fused_iri
+    from ..experiments.drives.fleet_estimation import drive_stretches, estimate_fleet, find_fleet_anomalies, fused_iri
     from ..reporting.fleet_report import write_fleet_estimates
 
     if align:
@@ -103,9 +103,9 @@ def estimate_command(drive_paths: list[str], out_dir, *, command: str, limits: F
 
     Every drive is cleaned first (:func:`roadcollab.io.drive_clean.clean_drive`: isolated spikes
     repaired and counted, the slow offset such as gravity removed). Drives that share one time grid
-    (constant speed, sample rate and start) are relayed in time exactly as the simulations are (:func:`~roadcollab.experiments.drive_estimation.estimate_drives`);
+    (constant speed, sample rate and start) are relayed in time exactly as the simulations are (:func:`~roadcollab.experiments.drives.estimation.estimate_drives`);
     any others, or with ``align``, are estimated on one distance grid
-    (:func:`~roadcollab.experiments.fleet_estimation.estimate_fleet`).
+    (:func:`~roadcollab.experiments.drives.fleet_estimation.estimate_fleet`).
 
     Parameters
     ----------

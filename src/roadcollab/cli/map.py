@@ -7,7 +7,7 @@ one ``serve`` and ``export`` will share.
 
 Reads the drives (with ``lat_deg, lon_deg`` columns, :mod:`roadcollab.io.gps`), matches them to
 the network (:mod:`roadcollab.geo.matching`; without ``--network`` each drive's own GPS track is
-its road), surveys every lane (:mod:`roadcollab.experiments.road_survey`), adds the result to the
+its road), surveys every lane (:mod:`roadcollab.experiments.drives.road_survey`), adds the result to the
 store (:mod:`roadcollab.store`), and writes the store's whole content as files. The store is
 updated before the files are written: if writing them fails, ``--out`` is left as it was and the
 store keeps the new estimates (a second run rewrites the files from it).
@@ -101,7 +101,7 @@ def map_command(drive_paths: list[str], out_dir, *, store_url, command: str, net
     dict
         Summary (counts, files; ``"passes"``: the PassRow of every pass).
     """
-    from ..experiments.road_survey import PassRow, store_survey, survey_drives
+    from ..experiments.drives.road_survey import PassRow, store_survey, survey_drives
     from ..geo.network import read_network
     from ..io.drives import load_drives
     from ..reporting.records import staged_output, write_config, write_rows

@@ -76,8 +76,8 @@ def _measured(args: argparse.Namespace, cache):
     (ReproductionResult, float) or None
         The result and its wall time, s.
     """
-    from ..experiments.reproduction import run_reproduction
-    from ..experiments.reproduction_iri import IRI_SEGMENT_LENGTH
+    from ..experiments.reproduction.study import run_reproduction
+    from ..experiments.reproduction.iri import IRI_SEGMENT_LENGTH
 
     if args.road_profile is not None or args.measured_runs <= 0:
         return None
@@ -106,7 +106,7 @@ def run(args: argparse.Namespace, command_line: str) -> int:
     from rich.console import Console
 
     from ..experiments.pipeline import PipelineCache
-    from ..experiments.reproduction import run_reproduction
+    from ..experiments.reproduction.study import run_reproduction
     from ..reporting.records import staged_output
     from ..reporting.reproduction_report import headline_table, write_reproduction
 

@@ -1,7 +1,7 @@
 """``roadcollab simulate-drives --out DIR``: simulated drives as real-looking drive files.
 
-The simulation is :func:`roadcollab.experiments.drive_simulation.simulate_drives` (returns the drives)
-and the files are written by :func:`~roadcollab.experiments.drive_simulation.write_drives`; this
+The simulation is :func:`roadcollab.experiments.drives.simulation.simulate_drives` (returns the drives)
+and the files are written by :func:`~roadcollab.experiments.drives.simulation.write_drives`; this
 module parses the options and stages the folder (``d1.csv``, ``d1.toml``, ..., ``config.json``,
 ``road.csv`` with the true elevation and ``README.md`` with the command to estimate the road).
 """
@@ -38,14 +38,14 @@ def simulate_command(out_dir, *, command: str, vehicles: int = 3, speeds=(15.0,)
     command : str
         The command line, recorded in ``config.json``.
     vehicles, speeds, road, length_m, sample_rate, noise_std, gravity, seed
-        As :func:`roadcollab.experiments.drive_simulation.simulate_drives` (m/s, m, Hz, m/s^2).
+        As :func:`roadcollab.experiments.drives.simulation.simulate_drives` (m/s, m, Hz, m/s^2).
 
     Returns
     -------
     dict
         ``out_dir``, ``drives`` (CSV names), ``n_samples`` (per drive), ``road_length_m``, ``speeds_mps``.
     """
-    from ..experiments.drive_simulation import simulate_drives, write_drives
+    from ..experiments.drives.simulation import simulate_drives, write_drives
     from ..reporting.drive_tables import write_array_csv
     from ..reporting.records import staged_output, write_config
 
@@ -68,7 +68,7 @@ def simulate_command(out_dir, *, command: str, vehicles: int = 3, speeds=(15.0,)
 
 def simulate_gps_command(out_dir, *, command: str, network_path=None, vehicles: int = 3, speeds=None,
                          seed: int = 0) -> dict:
-    """``simulate-drives --gps [--network FILE]``: GPS drives on a road network (:mod:`roadcollab.experiments.city`).
+    """``simulate-drives --gps [--network FILE]``: GPS drives on a road network (:mod:`roadcollab.experiments.drives.city`).
 
     Parameters
     ----------
@@ -90,7 +90,7 @@ def simulate_gps_command(out_dir, *, command: str, network_path=None, vehicles: 
     dict
         ``out_dir``, ``drives`` (CSV names), ``network``.
     """
-    from ..experiments.city import write_city
+    from ..experiments.drives.city import write_city
     from ..geo.network import read_network
     from ..reporting.records import staged_output, write_config
 

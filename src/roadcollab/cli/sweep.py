@@ -32,7 +32,7 @@ def _check(args: argparse.Namespace) -> str | None:
     return None
 
 if TYPE_CHECKING:     # annotation only: imported lazily in _config
-    from ..experiments.sweep_config import SweepConfig
+    from ..experiments.sweep.config import SweepConfig
 
 __all__ = ["NAME", "add_parser", "run"]
 
@@ -80,7 +80,7 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
 
 def _config(args: argparse.Namespace) -> SweepConfig:
     """The sweep's grid and run counts; options not given keep the :class:`SweepConfig` defaults."""
-    from ..experiments.sweep_config import SweepConfig
+    from ..experiments.sweep.config import SweepConfig
 
     kw = {key: values for key, values in (("gammas", args.gammas), ("sensor_noise_stds", args.noise),
                                           ("parameter_uncertainties", args.uncertainty)) if values is not None}
@@ -102,7 +102,7 @@ def run(args: argparse.Namespace, command_line: str) -> int:
     int
         Exit status 0.
     """
-    from ..experiments.sweep import run_sweep
+    from ..experiments.sweep.study import run_sweep
     from ..reporting.records import staged_output
     from ..reporting.sweep_report import write_sweep
 

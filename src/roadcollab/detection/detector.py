@@ -42,13 +42,13 @@ Template grids, ``enveloping_length``, ``merge_tolerance``, ``crosstalk_ratio`` 
 bumps 0.5-3 m, 0.25 m enveloping; 10 % parameter errors leak well under 30 % between tracks).
 ``snr_threshold``, ``min_depth``, ``nms_guard`` and the confidence logistic were chosen on
 *training* runs only: root seeds 1000..1004 (``SeedPlan(s)`` -> fleet and
-8 runs each, exactly as in :func:`roadcollab.experiments.anomaly_study.run_anomaly_study`), 10 vehicles,
+8 runs each, exactly as in :func:`roadcollab.experiments.anomalies.study.run_anomaly_study`), 10 vehicles,
 ISO class C, 0.05 m/s^2 noise, three road conditions (default anomalies 2.5-10 cm, all anomalies
 2 cm, all 3 cm), scored on vehicles 2..10. Evaluation uses other seeds (the study's default
 seed 0), never these.
 
 - ``snr_threshold`` and ``min_depth``: ``roadcollab calibrate-anomalies`` (module
-  :mod:`roadcollab.experiments.anomaly_calibration`) runs this grid search and writes every point. Objective:
+  :mod:`roadcollab.experiments.anomalies.calibration`) runs this grid search and writes every point. Objective:
   mean F1 of the collaborative and fused estimates over the three conditions. Re-measured after the
   online estimator became lag-free (bilinear discretisation, observer gamma 512) and the half-car
   model got its (1/2) I_x: grid ``snr_threshold`` 3.5, 4, 4.25, 4.5, 5, 5.5 x ``min_depth`` 5, 7.5,

@@ -1,1 +1,2 @@
-"""Studies: reproduction, sweep, security, anomalies, calibration, benchmark, the runner."""
+"""Studies, one subpackage each (reproduction, sweep, security, anomalies, drives, bench), above the
+modules they share: the configuration, the seed plan, the fleet pipeline and the runner."""

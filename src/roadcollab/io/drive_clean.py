@@ -2,7 +2,7 @@
 
 Both steps act on the accelerations only and leave every other field of the
 :class:`~roadcollab.io.drives.Drive` as read. ``roadcollab estimate`` applies :func:`clean_drive` to
-every drive; the estimators (:mod:`roadcollab.experiments.drive_estimation`) take drives as given.
+every drive; the estimators (:mod:`roadcollab.experiments.drives.estimation`) take drives as given.
 
 Spikes (glitches)
 -----------------

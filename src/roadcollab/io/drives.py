@@ -3,7 +3,7 @@
 Each drive is one vehicle's pass over the same road segment; drives are taken in the order
 given (vehicle 1 first). This module reads and validates the logs (:func:`load_drives`) and writes
 them (:func:`write_drive_csv`, :func:`write_drive_params`); the estimation is
-:mod:`roadcollab.experiments.drive_estimation`, the command ``roadcollab estimate`` is
+:mod:`roadcollab.experiments.drives.estimation`, the command ``roadcollab estimate`` is
 :mod:`roadcollab.cli.estimate`.
 
 File formats
@@ -50,8 +50,8 @@ Road position of sample ``k`` (:attr:`Drive.positions`): ``start_m + speed_mps *
 constant speed; ``start_m`` + the trapezoidal integral of the ``speed_mps`` column; or
 ``start_m + distance_m[k] - distance_m[0]``. Drives may differ in speed, sample rate, start and
 length: :func:`common_time_grid` says whether they share one time grid (then
-:func:`roadcollab.experiments.drive_estimation.estimate_drives` relays them in time, as the
-simulations do); otherwise :mod:`roadcollab.experiments.fleet_estimation` works on road distance.
+:func:`roadcollab.experiments.drives.estimation.estimate_drives` relays them in time, as the
+simulations do); otherwise :mod:`roadcollab.experiments.drives.fleet_estimation` works on road distance.
 
 Every error is a :class:`~roadcollab.errors.FileFormatError` (a ``ParameterError``) whose message
 starts with the file's

@@ -1,6 +1,6 @@
 """The per-segment engine: what one vehicle computes for each segment of road it passed.
 
-The same steps as :func:`roadcollab.experiments.fleet_estimation.estimate_fleet`, cut by segment so that
+The same steps as :func:`roadcollab.experiments.drives.fleet_estimation.estimate_fleet`, cut by segment so that
 they can travel as messages (module docstring there for the method):
 
 1. the vehicle designs its estimator (Lemma 1) at its mean speed and inverts its record in its own time
@@ -23,9 +23,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import ParameterError
-from ..experiments.distance_maps import band_limit_stretch, covered, elevation_to_distance
-from ..experiments.drive_estimation import integrate_elevation
-from ..experiments.fleet_estimation import collaborative_velocity, invert_drive
+from ..experiments.drives.distance_maps import band_limit_stretch, covered, elevation_to_distance
+from ..experiments.drives.estimation import integrate_elevation
+from ..experiments.drives.fleet_estimation import collaborative_velocity, invert_drive
 from ..io.drives import Drive
 from .plan import RoadPlan
 

@@ -43,7 +43,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import FileFormatError, MessageError, ParameterError
-from ..experiments.distance_maps import estimate_offset
+from ..experiments.drives.distance_maps import estimate_offset
 from ..geo.matching import lonlat_at, road_passes
 from ..geo.network import RoadNetwork, read_network
 from ..geo.segments import segment_bounds, segment_lonlat
@@ -258,7 +258,7 @@ def road_iri(position: np.ndarray, fused: np.ndarray, spacing: float, bounds: li
     """IRI of the fused profile on ``roadcollab map``'s segments that it covers whole.
 
     A segment ``[a, b]`` counts when every grid point in it is finite and its first and last grid
-    points are within one step of ``a`` and ``b`` (as :func:`roadcollab.experiments.road_survey.lane_survey`);
+    points are within one step of ``a`` and ``b`` (as :func:`roadcollab.experiments.drives.road_survey.lane_survey`);
     its IRI per track is :func:`roadcollab.models.iri.iri` over those points (``map``'s too).
 
     Parameters
@@ -303,7 +303,7 @@ def align_to_waiting(engine: VehicleEngine, waiting: dict, *, index: int = 0, ma
     inversions that far apart smooths the short wavelengths the IRI weighs. As ``roadcollab map``
     (``estimate_fleet(align=True)``) does, the vehicle estimates the lag ``L`` of its band-limited
     inversion against the previous vehicle's inversions waiting on its segments
-    (:func:`~roadcollab.experiments.distance_maps.estimate_offset`, within ``+-max_offset``, sub-sample
+    (:func:`~roadcollab.experiments.drives.distance_maps.estimate_offset`, within ``+-max_offset``, sub-sample
     by a parabola through the peak) and moves its positions by ``-L``. Unlike ``map``, which shifts the
     corrections to mean zero afterwards, the network cannot revise earlier vehicles: the first vehicle's
     GPS offset is the fleet's (its error, about ``road_offset_std_m``, is common to every position).

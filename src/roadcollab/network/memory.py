@@ -16,8 +16,8 @@ import numpy as np
 
 from ..errors import ParameterError
 from ..experiments.config import ExperimentConfig
-from ..experiments.distance_maps import distance_grid
-from ..experiments.fleet_estimation import FleetEstimates
+from ..experiments.drives.distance_maps import distance_grid
+from ..experiments.drives.fleet_estimation import FleetEstimates
 from ..wire.identity import FleetAuthority, VehicleIdentity
 from ..privacy.secagg_store import SessionLedger
 from .agent import VehicleAgent
@@ -159,7 +159,7 @@ def _run_secure(drives, plan, store, authority, service, broker, svc, policy, of
 
 def estimate_fleet_in_memory(drives, *, spacing: float = 0.05, gamma: float | None = None,
                              band_low_hz: float | None = None) -> FleetEstimates:
-    """:func:`~roadcollab.experiments.fleet_estimation.estimate_fleet` (unaligned, no fleet prior) through
+    """:func:`~roadcollab.experiments.drives.fleet_estimation.estimate_fleet` (unaligned, no fleet prior) through
     the service and the vehicles over the in-memory transport: what ``roadcollab estimate`` runs.
 
     The plan takes the band edge from the drives' slowest speed, as ``estimate_fleet`` does, and 100 m

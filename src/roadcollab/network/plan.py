@@ -1,13 +1,13 @@
 """The fleet's road plan: the distance grid, its segments and the estimator design every vehicle shares.
 
 A networked fleet cannot wait for its slowest vehicle to learn the wavenumber band edge that
-:func:`roadcollab.experiments.fleet_estimation.estimate_fleet` takes from the drives
+:func:`roadcollab.experiments.drives.fleet_estimation.estimate_fleet` takes from the drives
 (``n_low = band_low_hz / v_min``): the plan fixes it when the fleet is enrolled, from the slowest speed
 the fleet admits (``min_speed``). With ``min_speed`` equal to the drives' slowest speed the networked
 run and ``roadcollab estimate`` compute the same numbers.
 
 Segment ``s`` is the grid points ``i`` with ``s * m <= i < (s + 1) * m``, ``m = segment_length / spacing``,
-grid point ``i`` at ``i * spacing`` metres (the grid of :func:`~roadcollab.experiments.distance_maps.distance_grid`).
+grid point ``i`` at ``i * spacing`` metres (the grid of :func:`~roadcollab.experiments.drives.distance_maps.distance_grid`).
 """
 
 from __future__ import annotations

@@ -1,6 +1,6 @@
 """The fleet's estimates on the distance grid, read back from the service's store.
 
-The same arrays as :class:`~roadcollab.experiments.fleet_estimation.FleetEstimates` (unaligned): the
+The same arrays as :class:`~roadcollab.experiments.drives.fleet_estimation.FleetEstimates` (unaligned): the
 grid spans every vehicle's covered stretch (``distance_grid`` of all drives), the vehicles are in the
 order of their ids (drive ``k`` is vehicle ``vk``), and ``fused`` is the service's running sums
 (:class:`~roadcollab.network.engine.SegmentSums`), i.e. the average of every inversion at each point.
@@ -59,9 +59,9 @@ class NetworkResults:
     received_s: dict
 
     def fleet_view(self) -> Any:   # duck-typed: the FleetEstimates attributes those functions read
-        """The attributes :func:`~roadcollab.experiments.fleet_estimation.fused_iri` and
-        :func:`~roadcollab.experiments.fleet_estimation.find_fleet_anomalies` read (fused elevation, grid,
-        each vehicle's mean speed), as a :class:`~roadcollab.experiments.fleet_estimation.FleetEstimates`
+        """The attributes :func:`~roadcollab.experiments.drives.fleet_estimation.fused_iri` and
+        :func:`~roadcollab.experiments.drives.fleet_estimation.find_fleet_anomalies` read (fused elevation, grid,
+        each vehicle's mean speed), as a :class:`~roadcollab.experiments.drives.fleet_estimation.FleetEstimates`
         would give them.
 
         Returns

@@ -3,8 +3,8 @@
 :class:`RoadSync` is the observer :class:`~roadcollab.network.service.Service` calls when a segment's
 fused sums change. It reads the service store back (:func:`~roadcollab.network.results.results_from_store`)
 and computes the IRI per segment and the corroborated anomalies of the fused elevation with the very
-functions ``roadcollab export`` uses (:func:`~roadcollab.experiments.fleet_estimation.fused_iri`,
-:func:`~roadcollab.experiments.fleet_estimation.find_fleet_anomalies`), so the road store and
+functions ``roadcollab export`` uses (:func:`~roadcollab.experiments.drives.fleet_estimation.fused_iri`,
+:func:`~roadcollab.experiments.drives.fleet_estimation.find_fleet_anomalies`), so the road store and
 ``export``'s ``iri.csv``/``anomalies.csv`` hold the same numbers.
 
 What is written
@@ -36,7 +36,7 @@ import time
 import numpy as np
 
 from ..errors import ParameterError
-from ..experiments.fleet_estimation import find_fleet_anomalies, fused_iri
+from ..experiments.drives.fleet_estimation import find_fleet_anomalies, fused_iri
 from ..models.iri import iri_segments
 from ..store import RoadStore
 from .fleetroad import FleetRoad, road_iri

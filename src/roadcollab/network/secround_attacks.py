@@ -9,7 +9,7 @@ the victim beyond an honest aggregate:
 - ``differencing``: a finished round with every vehicle, then a second round on the same (segment,
   epoch) without the victim; recovered = ``n avg_1 - (n - 1) avg_2`` if the second finishes.
 - ``equivocation``: ``U_3`` told with the victim to the victim and half the others, without it to the
-  rest; recovered (exactly, see :func:`roadcollab.experiments.secagg_attacks.active_attack`) if the
+  rest; recovered (exactly, see :func:`roadcollab.experiments.security.secagg_attacks.active_attack`) if the
   reveals hold ``t`` shares of the victim's ``b`` and ``t`` of its ``s_sk``.
 - ``sybil``: the victim and ``k - 1`` ids the service plays (adverts signed by identities of an
   authority of its own); recovered if the victim sends ``y`` in that roster (the service holds every
@@ -24,7 +24,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..errors import ParameterError
-from ..experiments.secagg_attacks import _fake_adverts
+from ..experiments.security.secagg_attacks import _fake_adverts
 from ..privacy.secagg_messages import SecAggSpec, session_id
 from ..privacy.secagg_store import SessionLedger
 from ..wire.identity import FleetAuthority, VehicleIdentity

@@ -5,8 +5,8 @@ from __future__ import annotations
 from pathlib import Path
 
 from . import plotting
-from ..experiments.anomaly_rows import (DepthDetectionRow, DetectionRow, MapRow, NoiseDetectionRow,
-                                        VehicleDetectionRow)
+from ..experiments.anomalies.rows import (DepthDetectionRow, DetectionRow, MapRow, NoiseDetectionRow,
+                                          VehicleDetectionRow)
 from .records import markdown_table, output_dir, row_columns, run_header, write_config, write_rows
 from .wording import plural
 
@@ -50,7 +50,7 @@ def anomaly_markdown(result) -> str:
 
     Parameters
     ----------
-    result : roadcollab.experiments.anomaly_study.AnomalyStudyResult
+    result : roadcollab.experiments.anomalies.study.AnomalyStudyResult
         The anomaly study.
 
     Returns
@@ -84,7 +84,7 @@ def write_anomalies(result, out, *, command: str, elapsed: float) -> None:
 
     Parameters
     ----------
-    result : roadcollab.experiments.anomaly_study.AnomalyStudyResult
+    result : roadcollab.experiments.anomalies.study.AnomalyStudyResult
         The anomaly study.
     out : str or Path
         Output folder (created if missing; files overwritten).

@@ -6,8 +6,8 @@ from __future__ import annotations
 import dataclasses
 from pathlib import Path
 
-from ..experiments.fusion_poisoning import PoisoningSummary
-from ..experiments.security_rows import (AttackRow, BaselineRow, CompositionRow, ExactnessRow, FrontierPoint,
+from ..experiments.security.fusion_poisoning import PoisoningSummary
+from ..experiments.security.rows import (AttackRow, BaselineRow, CompositionRow, ExactnessRow, FrontierPoint,
                                          LinkabilityRow, PoleRow, pole_rows)
 from . import plotting, plotting_security
 from .records import markdown_table, output_dir, row_columns, run_header, write_config, write_rows
@@ -92,7 +92,7 @@ def security_markdown(result) -> str:
 
     Parameters
     ----------
-    result : roadcollab.experiments.security_study.AttackStudyResult
+    result : roadcollab.experiments.security.study.AttackStudyResult
         The security study.
 
     Returns
@@ -119,7 +119,7 @@ def write_attack(result, out, *, command: str, elapsed: float) -> None:
 
     Parameters
     ----------
-    result : roadcollab.experiments.security_study.AttackStudyResult
+    result : roadcollab.experiments.security.study.AttackStudyResult
         The security study.
     out : str or Path
         Output folder (created if missing; files overwritten).

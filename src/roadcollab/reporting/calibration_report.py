@@ -4,9 +4,9 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from ..experiments.anomaly_config import ESTIMATORS
-from ..experiments.calibration_config import EVALUATION_SEEDS, OBJECTIVE_ESTIMATORS
-from ..experiments.calibration_result import AnomalyCalibrationResult, score_column
+from ..experiments.anomalies.config import ESTIMATORS
+from ..experiments.anomalies.calibration_config import EVALUATION_SEEDS, OBJECTIVE_ESTIMATORS
+from ..experiments.anomalies.calibration_result import AnomalyCalibrationResult, score_column
 from .records import fmt, markdown_table, write_config, write_csv
 from .wording import plural
 

@@ -9,7 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..experiments.drive_estimation import ESTIMATORS, AnomalyRow, DriveEstimates
+from ..experiments.drives.estimation import ESTIMATORS, AnomalyRow, DriveEstimates
 from ..experiments.config import ExperimentConfig
 from . import plotting_drives
 from ..models.iri import IRISegments
@@ -252,13 +252,13 @@ def write_estimates(est: DriveEstimates, out, *, command: str, anomalies: list[A
     Parameters
     ----------
     est : DriveEstimates
-        From :func:`~roadcollab.experiments.drive_estimation.estimate_drives`.
+        From :func:`~roadcollab.experiments.drives.estimation.estimate_drives`.
     out : str or Path
         Output folder (created with its parents if missing; files in it are overwritten).
     command : str
         The command line, recorded in ``config.json`` and ``report.md``.
     anomalies : list of AnomalyRow or None
-        Rows of :func:`~roadcollab.experiments.drive_estimation.find_anomalies`;
+        Rows of :func:`~roadcollab.experiments.drives.estimation.find_anomalies`;
         None if detection was not run (``anomalies.csv`` then holds the header only and the report says so).
     anomaly_note : str, optional
         Note for the report and ``config.json`` (e.g. why detection was not run).

@@ -13,8 +13,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ..experiments.drive_estimation import AnomalyRow, OffsetRow
-from ..experiments.fleet_estimation import FLEET_ESTIMATORS, FleetEstimates, covered_runs
+from ..experiments.drives.estimation import AnomalyRow, OffsetRow
+from ..experiments.drives.fleet_estimation import FLEET_ESTIMATORS, FleetEstimates, covered_runs
 from ..models.iri import IRIRow, IRISegments
 from . import plotting_drives
 from .drive_tables import write_array_csv, write_final_estimate

@@ -15,8 +15,8 @@ from pathlib import Path
 
 
 from ..errors import ParameterError
-from ..experiments.drive_estimation import AnomalyRow
-from ..experiments.fleet_estimation import FLEET_ESTIMATORS, find_fleet_anomalies, fused_iri
+from ..experiments.drives.estimation import AnomalyRow
+from ..experiments.drives.fleet_estimation import FLEET_ESTIMATORS, find_fleet_anomalies, fused_iri
 from ..network.results import NetworkResults
 from .drive_tables import write_array_csv, write_final_estimate
 from .fleet_report import write_iri_csv

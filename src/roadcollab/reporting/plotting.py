@@ -83,7 +83,7 @@ def plot_fusion(rows: list, path, *, title: str | None = None) -> Path:
     Parameters
     ----------
     rows : list of FusionRow
-        :meth:`~roadcollab.experiments.reproduction.ReproductionResult.fusion_rows` (MSE in (m/s)^2).
+        :meth:`~roadcollab.experiments.reproduction.study.ReproductionResult.fusion_rows` (MSE in (m/s)^2).
     path : str or Path
         Output image.
     title : str, optional
@@ -209,7 +209,7 @@ def plot_poles(example: dict, path) -> Path:
     return save_figure(fig, path)
 
 
-# --- road anomaly detection (roadcollab.experiments.anomaly_study) ----------------------------------------
+# --- road anomaly detection (roadcollab.experiments.anomalies.study) ----------------------------------------
 
 _ESTIMATOR_STYLE = {"observer_only": ("tab:gray", "s", "observer only"),
                     "collaborative": ("tab:blue", "o", "collaborative (Algorithm 1)"),

@@ -52,8 +52,8 @@ def plot_sweep(rows: Sequence, path) -> Path:
 
     Parameters
     ----------
-    rows : sequence of roadcollab.experiments.sweep.SweepRow
-        The sweep's table (:meth:`roadcollab.experiments.sweep.SweepResult.table`); MSE in (m/s)^2.
+    rows : sequence of roadcollab.experiments.sweep.study.SweepRow
+        The sweep's table (:meth:`roadcollab.experiments.sweep.study.SweepResult.table`); MSE in (m/s)^2.
     path : str or Path
         Output image (format from the suffix, 120 dpi).
 

@@ -11,9 +11,9 @@ from pathlib import Path
 import numpy as np
 
 from . import plotting
-from ..experiments.reproduction import ESTIMATORS
-from ..experiments.reproduction_iri import iri_ratios
-from ..experiments.reproduction_rows import (WINDOWED_CONTROL, BoundRow, FleetRow, FusionRow, IriRow, MseRow, RunTraces,
+from ..experiments.reproduction.study import ESTIMATORS
+from ..experiments.reproduction.iri import iri_ratios
+from ..experiments.reproduction.rows import (WINDOWED_CONTROL, BoundRow, FleetRow, FusionRow, IriRow, MseRow, RunTraces,
                                              TraceRow)
 from .records import markdown_table, output_dir, write_config, write_rows
 from .wording import plural
@@ -45,7 +45,7 @@ def headline_table(rows: list[MseRow]) -> tuple[list[str], list[tuple]]:
     Parameters
     ----------
     rows : list of MseRow
-        :meth:`~roadcollab.experiments.reproduction.ReproductionResult.table` rows.
+        :meth:`~roadcollab.experiments.reproduction.study.ReproductionResult.table` rows.
 
     Returns
     -------
@@ -63,9 +63,9 @@ def reproduction_summary(rows: list[MseRow], bound_rows: list[BoundRow] | None =
     Parameters
     ----------
     rows : list of MseRow
-        :meth:`~roadcollab.experiments.reproduction.ReproductionResult.table` rows.
+        :meth:`~roadcollab.experiments.reproduction.study.ReproductionResult.table` rows.
     bound_rows : list of BoundRow, optional
-        :meth:`~roadcollab.experiments.reproduction.ReproductionResult.bound_check` rows.
+        :meth:`~roadcollab.experiments.reproduction.study.ReproductionResult.bound_check` rows.
 
     Returns
     -------
@@ -350,7 +350,7 @@ def write_reproduction(result, out, *, command: str, elapsed: float, measured=No
 
     Parameters
     ----------
-    result : roadcollab.experiments.reproduction.ReproductionResult
+    result : roadcollab.experiments.reproduction.study.ReproductionResult
         The reproduction to report.
     out : str or Path
         Output folder (created if missing; files overwritten).

@@ -1,15 +1,15 @@
 """Outputs of ``roadcollab sweep``: ``sweep.csv``, ``sweep.png``, ``config.json`` and ``report.md``.
 
 Every statement of the report is generated from the sweep's numbers
-(:meth:`roadcollab.experiments.sweep.SweepResult.findings`); nothing is hard-coded.
+(:meth:`roadcollab.experiments.sweep.study.SweepResult.findings`); nothing is hard-coded.
 """
 
 from __future__ import annotations
 
 import dataclasses
 
-from ..experiments.sweep_findings import SweepFinding
-from ..experiments.sweep_result import SweepResult, SweepRow
+from ..experiments.sweep.findings import SweepFinding
+from ..experiments.sweep.result import SweepResult, SweepRow
 from .plotting_sweep import plot_sweep
 from .records import markdown_table, output_dir, write_config, write_rows
 from .wording import plural
@@ -92,7 +92,7 @@ def findings_markdown(findings: list[SweepFinding]) -> str:
     Parameters
     ----------
     findings : list of SweepFinding
-        From :meth:`roadcollab.experiments.sweep.SweepResult.findings`.
+        From :meth:`roadcollab.experiments.sweep.study.SweepResult.findings`.
 
     Returns
     -------
@@ -202,7 +202,7 @@ def _definition_lines(n_vehicles: int, n_runs: int) -> list[str]:
 def write_sweep(result: SweepResult, out, *, command: str, elapsed: float) -> list[SweepFinding]:
     """Write every output of ``roadcollab sweep`` to the folder ``out``.
 
-    Files: ``sweep.csv`` (one row per grid point, :class:`~roadcollab.experiments.sweep.SweepRow` columns),
+    Files: ``sweep.csv`` (one row per grid point, :class:`~roadcollab.experiments.sweep.study.SweepRow` columns),
     ``sweep.png`` (the figure of that CSV), ``config.json`` and ``report.md``.
 
     Parameters

@@ -1,0 +1,1 @@
+"""The road anomaly detection study and its calibration (``roadcollab anomalies``, ``roadcollab calibrate``)."""

@@ -1,0 +1,1 @@
+"""The reproduction of the paper's figures and tables (``roadcollab reproduce``)."""

@@ -1,0 +1,1 @@
+"""The attack and secure-aggregation studies (``roadcollab attack``)."""

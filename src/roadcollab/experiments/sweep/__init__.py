@@ -1,0 +1,1 @@
+"""The parameter sweep over the reproduction (``roadcollab sweep``)."""
