@@ -264,3 +264,22 @@ def test_an_aggregators_view_is_independent_of_the_input():
     assert _chi2_uniform(c0, cells) < crit and _chi2_uniform(c3, cells) < crit
     (z0, z3), _ = _views([0, 3], 200, zero_seeds=True)       # without the seeds the view gives the input away
     assert _chi2_uniform(z0, cells) > crit and not np.array_equal(z0, z3)
+
+
+def test_goldilocks_uint64_arithmetic_and_ntt_match_python_ints():
+    from roadcollab.privacy import _goldilocks as G
+    from roadcollab.privacy.secagg_flp import _ntt
+    p, gen = G.P, np.random.default_rng(3)
+    edge = [0, 1, 2, p - 1, p - 2, 2 ** 32 - 1, 2 ** 32, 2 ** 63, p - 2 ** 32, 2 ** 64 - 2 ** 33]
+    a = [int(v) % p for v in gen.integers(0, 2 ** 64 - 1, 3000, dtype=np.uint64)] + [e for e in edge for _ in edge]
+    b = [int(v) % p for v in gen.integers(0, 2 ** 64 - 1, 3000, dtype=np.uint64)] + edge * len(edge)
+    A, B = np.array(a, dtype=np.uint64), np.array(b, dtype=np.uint64)
+    assert [int(v) for v in G.mul(A, B)] == [x * y % p for x, y in zip(a, b)]
+    assert [int(v) for v in G.add(A, B)] == [(x + y) % p for x, y in zip(a, b)]
+    assert [int(v) for v in G.sub(A, B)] == [(x - y) % p for x, y in zip(a, b)]
+    coef = np.array([a[:16], b[:16]], dtype=object)
+    w = GOLDILOCKS.root(16)
+    fast = _ntt(coef, w, p)
+    slow = np.array([[sum(int(c) * pow(w, i * k, p) for k, c in enumerate(row)) % p for i in range(16)]
+                     for row in coef], dtype=object)
+    assert np.array_equal(fast, slow)

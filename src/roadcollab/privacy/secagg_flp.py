@@ -49,13 +49,16 @@ from __future__ import annotations
 
 import hashlib
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 from dataclasses import field as dc_field
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from .._validation import check_int, check_real
 from ..errors import ParameterError
+from . import _goldilocks
 
 __all__ = ["Field", "GOLDILOCKS", "ValidityEncoding", "Proof", "prove", "query", "decide"]
 
@@ -94,7 +97,8 @@ class Field:
         """``n`` pseudo-random elements from SHAKE128 (16 bytes each, reduced: bias ``< p / 2^128``)."""
         data = hashlib.shake_128(b"roadcollab-prio/" + label + b"/" + seed).digest(16 * n)
         words = np.frombuffer(data, dtype="<u8").astype(object).reshape(n, 2)
-        return (words[:, 0] << 64 | words[:, 1]) % self.p
+        out: np.ndarray = (words[:, 0] << 64 | words[:, 1]) % self.p
+        return out
 
     def to_bytes(self, a: np.ndarray) -> bytes:
         """Fixed-width little-endian encoding of a vector of elements."""
@@ -108,6 +112,8 @@ GOLDILOCKS = Field(2 ** 64 - 2 ** 32 + 1, 7)
 def _ntt(a: np.ndarray, w: int, p: int) -> np.ndarray:
     """Evaluations at ``w^0 .. w^(n-1)`` of the polynomials whose coefficients are the rows of ``a``."""
     n = a.shape[-1]
+    if p == _goldilocks.P and n > 1:
+        return _goldilocks.ntt(np.asarray(a).astype(np.uint64), w).astype(object)
     if n == 1:
         return a
     even, odd = _ntt(a[..., 0::2], w * w % p, p), _ntt(a[..., 1::2], w * w % p, p)
@@ -195,14 +201,14 @@ class ValidityEncoding:
         """Most inputs whose sum of ``q`` cannot wrap modulo ``p``."""
         return (self.field.p - 1) // (2 ** int(self.bits.max()) - 1 if self.bits.max() else 1)
 
-    def clip(self, u) -> tuple[np.ndarray, int]:
+    def clip(self, u: ArrayLike) -> tuple[np.ndarray, int]:
         """``u`` clipped into the box (what an honest vehicle sends) and how many coordinates were outside."""
         u = np.asarray(u, float).ravel()
         if u.shape != self.bounds.shape or not np.all(np.isfinite(u)):
             raise ParameterError(f"the input must be {self.length} finite values, got shape {u.shape}")
         return np.clip(u, -self.bounds, self.bounds), int(np.sum(np.abs(u) > self.bounds))
 
-    def encode(self, u) -> np.ndarray:
+    def encode(self, u: ArrayLike) -> np.ndarray:
         """``x = (q, bits)`` of an input inside the box, object array of length ``L + T``.
 
         Raises
@@ -217,7 +223,17 @@ class ValidityEncoding:
             q = np.where(self.bits > 0, np.rint((u + self.bounds) / self.scale), 0).astype(np.int64)
         return self.encode_raw(q)
 
-    def encode_raw(self, q, bits=None) -> np.ndarray:
+    def quantize(self, u: ArrayLike) -> np.ndarray:
+        """What the aggregate holds of an input inside the box: ``q s - B`` per coordinate, (L,) float."""
+        u, outside = self.clip(u)
+        if outside:
+            raise ParameterError(f"{outside} coordinates of the input are outside the public bounds")
+        with np.errstate(divide="ignore", invalid="ignore"):
+            q = np.where(self.bits > 0, np.rint((u + self.bounds) / self.scale), 0.0)
+        out: np.ndarray = q * self.scale - np.where(self.bits > 0, self.bounds, 0.0)
+        return out
+
+    def encode_raw(self, q: ArrayLike, bits: Sequence[int] | None = None) -> np.ndarray:
         """``x`` from integer values ``q`` and (default: the true) bits; a cheater's tool in tests."""
         q = [int(v) for v in np.asarray(q).ravel()]
         if bits is None:
@@ -227,7 +243,8 @@ class ValidityEncoding:
     def decode_sum(self, total_q: np.ndarray, n: int) -> np.ndarray:
         """``sum u`` of ``n`` inputs from the sum of their ``q`` (integers in ``[0, p)``), (L,) float."""
         t = np.array([int(v) for v in total_q], float)
-        return t * self.scale - n * self.bounds
+        out: np.ndarray = t * self.scale - n * self.bounds
+        return out
 
     def weights(self) -> np.ndarray:
         """``(L, T)``-free form of ``q_l - sum_k 2^k bit_{l,k}``: the power ``2^k`` of every bit, (T,)."""

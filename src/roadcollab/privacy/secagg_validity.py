@@ -14,10 +14,13 @@ is needed). Threat model and costs: docs/security-secagg.md.
 from __future__ import annotations
 
 import hashlib
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from dataclasses import field as dc_field
+from typing import Any
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from .._validation import check_int
 from ..errors import MessageError, ParameterError
@@ -100,8 +103,8 @@ def signed_bytes(session: bytes, vehicle: int, part_a: bytes, part_b: bytes) -> 
     return _h(b"roadcollab-prio-submission", session, _id(vehicle), part_a, part_b)
 
 
-def submit(enc: ValidityEncoding, u, session: bytes, vehicle: int, rng: np.random.Generator, *,
-           x: np.ndarray | None = None, identity=None) -> Submission:
+def submit(enc: ValidityEncoding, u: ArrayLike, session: bytes, vehicle: int, rng: np.random.Generator, *,
+           x: np.ndarray | None = None, identity: Any = None) -> Submission:
     """An honest vehicle's submission of ``u`` (clipped into the box first by the caller).
 
     Parameters
@@ -161,7 +164,7 @@ class ValidityAggregator:
     enc: ValidityEncoding
     verify_key: bytes
     leader: bool
-    shares: dict = dc_field(default_factory=dict)
+    shares: dict[int, np.ndarray] = dc_field(default_factory=dict)
 
     def _share(self, sub: Submission, session: bytes) -> tuple[np.ndarray, Proof, bytes, bytes]:
         f, enc = self.enc.field, self.enc
@@ -182,7 +185,7 @@ class ValidityAggregator:
         own = _h(b"part-B", hp.blind, session, _id(sub.vehicle), hp.seed)
         return x, proof, own, hp.peer_part
 
-    def prepare(self, sub: Submission, session: bytes, trust=None, certificate=None) -> VerifierShare:
+    def prepare(self, sub: Submission, session: bytes, trust: Any = None, certificate: Any = None) -> VerifierShare:
         """This aggregator's verifier share for ``sub`` (kept for :meth:`accept`).
 
         Raises
@@ -220,7 +223,7 @@ class ValidityAggregator:
             return "the peer's verifier share has the wrong length"
         return decide(self.enc, (own.values + np.asarray(other.values, dtype=object)) % self.enc.field.p)
 
-    def aggregate_share(self, accepted) -> np.ndarray:
+    def aggregate_share(self, accepted: Iterable[int]) -> np.ndarray:
         """The sum of this aggregator's ``q`` shares over ``accepted``, (L,) object ndarray."""
         total = np.zeros(self.enc.length, dtype=object)
         for i in accepted:
@@ -242,8 +245,8 @@ class ValidatedAggregate:
     """
 
     total: np.ndarray | None
-    accepted: tuple
-    refused: dict
+    accepted: tuple[int, ...]
+    refused: dict[int, str]
 
     @property
     def average(self) -> np.ndarray | None:
@@ -251,8 +254,9 @@ class ValidatedAggregate:
         return None if self.total is None else self.total / len(self.accepted)
 
 
-def run_validated_aggregation(enc: ValidityEncoding, submissions: dict, session: bytes, *, verify_key: bytes,
-                              min_inputs: int = 2, trust=None, certificates=None) -> ValidatedAggregate:
+def run_validated_aggregation(enc: ValidityEncoding, submissions: dict[int, Submission], session: bytes, *, verify_key: bytes,
+                              min_inputs: int = 2, trust: Any = None,
+                              certificates: dict[int, Any] | None = None) -> ValidatedAggregate:
     """Both aggregators in-process: verify every submission on the shares, exchange verifier shares, sum
     the accepted ``q`` shares and combine them (the only values ``A`` and ``B`` reveal to each other).
 
@@ -301,8 +305,9 @@ def run_validated_aggregation(enc: ValidityEncoding, submissions: dict, session:
     return ValidatedAggregate(enc.decode_sum(q, len(accepted)), tuple(accepted), refused)
 
 
-def run_validated_session(fleet, inputs: dict, session: bytes, enc: ValidityEncoding, *, verify_key: bytes,
-                          rng=None, tamper=None) -> ValidatedAggregate:
+def run_validated_session(fleet: Any, inputs: dict[int, ArrayLike], session: bytes, enc: ValidityEncoding, *, verify_key: bytes,
+                          rng: Any = None,
+                          tamper: Callable[[int, Submission], Submission] | None = None) -> ValidatedAggregate:
     """A validated aggregation among the certified vehicles of ``fleet`` (:class:`~.secagg_active_run.SecAggFleet`).
 
     Each vehicle clips its input into the public box, records in its ledger that its input of ``session``
