@@ -283,3 +283,20 @@ def test_goldilocks_uint64_arithmetic_and_ntt_match_python_ints():
     slow = np.array([[sum(int(c) * pow(w, i * k, p) for k, c in enumerate(row)) % p for i in range(16)]
                      for row in coef], dtype=object)
     assert np.array_equal(fast, slow)
+
+
+def test_an_aggregator_releases_one_sum_share_per_session():
+    from roadcollab.privacy.secagg_messages import AggregationRefused
+    from roadcollab.privacy.secagg_validity import ValidityAggregator
+    enc = _enc(4)
+    subs = _subs(enc, _honest(enc, n=3))
+    b = ValidityAggregator(enc, KEY, False)
+    for sub in subs.values():
+        b.prepare(sub, SESSION)
+    with pytest.raises(AggregationRefused, match="at least 3"):
+        b.aggregate_share([1, 2], min_inputs=3)
+    with pytest.raises(AggregationRefused, match="checked"):
+        b.aggregate_share([1, 2, 9], min_inputs=3)
+    b.aggregate_share([1, 2, 3], min_inputs=3)
+    with pytest.raises(AggregationRefused, match="already released"):     # differencing within a session
+        b.aggregate_share([1, 2], min_inputs=2)

@@ -165,6 +165,7 @@ class ValidityAggregator:
     verify_key: bytes
     leader: bool
     shares: dict[int, np.ndarray] = dc_field(default_factory=dict)
+    released: bool = False
 
     def _share(self, sub: Submission, session: bytes) -> tuple[np.ndarray, Proof, bytes, bytes]:
         f, enc = self.enc.field, self.enc
@@ -223,8 +224,22 @@ class ValidityAggregator:
             return "the peer's verifier share has the wrong length"
         return decide(self.enc, (own.values + np.asarray(other.values, dtype=object)) % self.enc.field.p)
 
-    def aggregate_share(self, accepted: Iterable[int]) -> np.ndarray:
-        """The sum of this aggregator's ``q`` shares over ``accepted``, (L,) object ndarray."""
+    def aggregate_share(self, accepted: Iterable[int], min_inputs: int = 2) -> np.ndarray:
+        """The sum of this aggregator's ``q`` shares over ``accepted``, (L,) object ndarray: once per session
+        (two sums over sets that differ by one vehicle would give that vehicle's input away) and only over
+        at least ``min_inputs`` vehicles whose proof this aggregator checked. In memory only (not persisted).
+
+        Raises
+        ------
+        AggregationRefused
+            A sum was already released, fewer than ``min_inputs`` vehicles, or one not checked here.
+        """
+        accepted = sorted(set(accepted))
+        if self.released:
+            raise AggregationRefused("this aggregator already released its sum share for this session")
+        if len(accepted) < min_inputs or any(i not in self.shares for i in accepted):
+            raise AggregationRefused(f"a sum share needs at least {min_inputs} vehicles whose proofs were checked")
+        self.released = True
         total = np.zeros(self.enc.length, dtype=object)
         for i in accepted:
             total = (total + self.shares[i]) % self.enc.field.p
@@ -301,7 +316,7 @@ def run_validated_aggregation(enc: ValidityEncoding, submissions: dict[int, Subm
             accepted.append(i)
     if len(accepted) < check_int("min_inputs", min_inputs, low=1):
         return ValidatedAggregate(None, tuple(accepted), refused)
-    q = (a.aggregate_share(accepted) + b.aggregate_share(accepted)) % enc.field.p
+    q = (a.aggregate_share(accepted, min_inputs) + b.aggregate_share(accepted, min_inputs)) % enc.field.p
     return ValidatedAggregate(enc.decode_sum(q, len(accepted)), tuple(accepted), refused)
 
 
