@@ -78,13 +78,25 @@ class SpectralBox:
         return ValidityEncoding(np.concatenate([full.ravel(), imag.ravel()]), self.resolution)
 
     def to_vector(self, Z: ArrayLike) -> np.ndarray:
-        """``u`` of a spectrum ``(n_bins, 2)``; inactive bins and the DC/Nyquist imaginary parts dropped to 0."""
+        """``u`` of a spectrum ``(n_bins, 2)``; inactive bins and the DC/Nyquist imaginary parts dropped to 0.
+
+        Parameters
+        ----------
+        Z : (n_bins, 2) complex array_like
+            Spectrum (rfft of the padded grid), m/s.
+        """
         Z = np.where(np.asarray(self.active)[:, None], np.asarray(Z, complex), 0)
         Z[[0, -1]] = Z[[0, -1]].real
         return np.concatenate([Z.real.ravel(), Z.imag.ravel()])
 
     def from_vector(self, u: ArrayLike) -> np.ndarray:
-        """The spectrum ``(n_bins, 2)`` of ``u``."""
+        """The spectrum ``(n_bins, 2)`` of ``u``.
+
+        Parameters
+        ----------
+        u : (4 n_bins,) array_like
+            From :meth:`to_vector` (or an aggregate of such vectors).
+        """
         u = np.asarray(u, float)
         h = u.size // 2
         out: np.ndarray = (u[:h] + 1j * u[h:]).reshape(-1, 2)

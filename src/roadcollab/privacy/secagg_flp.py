@@ -84,24 +84,52 @@ class Field:
         return (self.p.bit_length() + 7) // 8
 
     def root(self, n: int) -> int:
-        """A primitive ``n``-th root of unity (``n`` a power of two dividing ``p - 1``)."""
+        """A primitive ``n``-th root of unity (``n`` a power of two dividing ``p - 1``).
+
+        Parameters
+        ----------
+        n : int
+            Order.
+        """
         if n & (n - 1) or (self.p - 1) % n:
             raise ParameterError(f"the field has no primitive {n}-th root of unity (p = {self.p})")
         return pow(self.generator, (self.p - 1) // n, self.p)
 
     def inv(self, a: int) -> int:
-        """``a^-1`` in ``F_p``."""
+        """``a^-1`` in ``F_p``.
+
+        Parameters
+        ----------
+        a : int
+            Non-zero element.
+        """
         return pow(int(a), self.p - 2, self.p)
 
     def elements(self, seed: bytes, label: bytes, n: int) -> np.ndarray:
-        """``n`` pseudo-random elements from SHAKE128 (16 bytes each, reduced: bias ``< p / 2^128``)."""
+        """``n`` pseudo-random elements from SHAKE128 (16 bytes each, reduced: bias ``< p / 2^128``).
+
+        Parameters
+        ----------
+        seed : bytes
+            XOF seed.
+        label : bytes
+            Domain separation.
+        n : int
+            Elements.
+        """
         data = hashlib.shake_128(b"roadcollab-prio/" + label + b"/" + seed).digest(16 * n)
         words = np.frombuffer(data, dtype="<u8").astype(object).reshape(n, 2)
         out: np.ndarray = (words[:, 0] << 64 | words[:, 1]) % self.p
         return out
 
     def to_bytes(self, a: np.ndarray) -> bytes:
-        """Fixed-width little-endian encoding of a vector of elements."""
+        """Fixed-width little-endian encoding of a vector of elements.
+
+        Parameters
+        ----------
+        a : (n,) object ndarray
+            Elements in ``[0, p)``.
+        """
         w = self.nbytes
         return b"".join(int(v).to_bytes(w, "little") for v in a)
 
@@ -202,7 +230,13 @@ class ValidityEncoding:
         return (self.field.p - 1) // (2 ** int(self.bits.max()) - 1 if self.bits.max() else 1)
 
     def clip(self, u: ArrayLike) -> tuple[np.ndarray, int]:
-        """``u`` clipped into the box (what an honest vehicle sends) and how many coordinates were outside."""
+        """``u`` clipped into the box (what an honest vehicle sends) and how many coordinates were outside.
+
+        Parameters
+        ----------
+        u : (L,) array_like
+            Input, finite.
+        """
         u = np.asarray(u, float).ravel()
         if u.shape != self.bounds.shape or not np.all(np.isfinite(u)):
             raise ParameterError(f"the input must be {self.length} finite values, got shape {u.shape}")
@@ -210,6 +244,11 @@ class ValidityEncoding:
 
     def encode(self, u: ArrayLike) -> np.ndarray:
         """``x = (q, bits)`` of an input inside the box, object array of length ``L + T``.
+
+        Parameters
+        ----------
+        u : (L,) array_like
+            Input inside the box.
 
         Raises
         ------
@@ -224,7 +263,13 @@ class ValidityEncoding:
         return self.encode_raw(q)
 
     def quantize(self, u: ArrayLike) -> np.ndarray:
-        """What the aggregate holds of an input inside the box: ``q s - B`` per coordinate, (L,) float."""
+        """What the aggregate holds of an input inside the box: ``q s - B`` per coordinate, (L,) float.
+
+        Parameters
+        ----------
+        u : (L,) array_like
+            Input inside the box.
+        """
         u, outside = self.clip(u)
         if outside:
             raise ParameterError(f"{outside} coordinates of the input are outside the public bounds")
@@ -234,14 +279,30 @@ class ValidityEncoding:
         return out
 
     def encode_raw(self, q: ArrayLike, bits: Sequence[int] | None = None) -> np.ndarray:
-        """``x`` from integer values ``q`` and (default: the true) bits; a cheater's tool in tests."""
+        """``x`` from integer values ``q`` and (default: the true) bits; a cheater's tool in tests.
+
+        Parameters
+        ----------
+        q : (L,) array_like of int
+            Offset values.
+        bits : sequence of int, optional
+            ``T`` bits (any field elements); default the bits of ``q``.
+        """
         q = [int(v) for v in np.asarray(q).ravel()]
         if bits is None:
             bits = [(v >> k) & 1 for v, b in zip(q, self.bits) for k in range(int(b))]
         return np.array(q + [int(b) for b in bits], dtype=object) % self.field.p
 
     def decode_sum(self, total_q: np.ndarray, n: int) -> np.ndarray:
-        """``sum u`` of ``n`` inputs from the sum of their ``q`` (integers in ``[0, p)``), (L,) float."""
+        """``sum u`` of ``n`` inputs from the sum of their ``q`` (integers in ``[0, p)``), (L,) float.
+
+        Parameters
+        ----------
+        total_q : (L,) array_like of int
+            Combined sum of the ``q``.
+        n : int
+            Inputs summed.
+        """
         t = np.array([int(v) for v in total_q], float)
         out: np.ndarray = t * self.scale - n * self.bounds
         return out
@@ -359,7 +420,14 @@ def query(enc: ValidityEncoding, x: np.ndarray, proof: Proof, rho: np.ndarray, r
 
 
 def decide(enc: ValidityEncoding, verifier: np.ndarray) -> str:
-    """``""`` if the joint verifier (sum of both shares) accepts, else what failed."""
+    """``""`` if the joint verifier (sum of both shares) accepts, else what failed.
+
+    Parameters
+    ----------
+    enc : ValidityEncoding
+    verifier : (2c + 3,) object ndarray
+        Sum of both aggregators' :func:`query` results.
+    """
     p, c = enc.field.p, enc.chunk
     v = verifier % p
     w, g_r, out, check = v[:2 * c], v[2 * c], v[2 * c + 1], v[2 * c + 2]

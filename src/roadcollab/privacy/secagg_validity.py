@@ -81,7 +81,12 @@ class Submission:
     signature: bytes = b""
 
     def nbytes(self, enc: ValidityEncoding) -> tuple[int, int]:
-        """Bytes sent to ``A`` and to ``B`` (without transport headers, certificate and signature)."""
+        """Bytes sent to ``A`` and to ``B`` (without transport headers, certificate and signature).
+
+        Parameters
+        ----------
+        enc : ValidityEncoding
+        """
         w = enc.field.nbytes
         a = w * (self.leader.x.size + self.leader.proof.elements.size) + 16 + 32
         return a, 16 + 16 + 32
@@ -99,7 +104,15 @@ def _joint(enc: ValidityEncoding, part_a: bytes, part_b: bytes) -> tuple[bytes, 
 
 
 def signed_bytes(session: bytes, vehicle: int, part_a: bytes, part_b: bytes) -> bytes:
-    """What a vehicle signs: the session, its id and both joint-randomness parts (they bind both shares)."""
+    """What a vehicle signs: the session, its id and both joint-randomness parts (they bind both shares).
+
+    Parameters
+    ----------
+    session : bytes
+    vehicle : int
+    part_a, part_b : bytes
+        Joint-randomness parts.
+    """
     return _h(b"roadcollab-prio-submission", session, _id(vehicle), part_a, part_b)
 
 
@@ -187,7 +200,16 @@ class ValidityAggregator:
         return x, proof, own, hp.peer_part
 
     def prepare(self, sub: Submission, session: bytes, trust: Any = None, certificate: Any = None) -> VerifierShare:
-        """This aggregator's verifier share for ``sub`` (kept for :meth:`accept`).
+        """This aggregator's verifier share for ``sub`` (its ``q`` share kept for :meth:`aggregate_share`).
+
+        Parameters
+        ----------
+        sub : Submission
+        session : bytes
+        trust : FleetTrust, optional
+            Check the signature against ``certificate``.
+        certificate : Certificate, optional
+            The vehicle's (with ``trust``).
 
         Raises
         ------
@@ -215,7 +237,15 @@ class ValidityAggregator:
         return r, f.elements(seed, b"s", self.enc.length)
 
     def check(self, own: VerifierShare, other: VerifierShare) -> str:
-        """``""`` if the vehicle's input is valid, else why not (both aggregators reach the same answer)."""
+        """``""`` if the vehicle's input is valid, else why not (both aggregators reach the same answer).
+
+        Parameters
+        ----------
+        own : VerifierShare
+            This aggregator's.
+        other : VerifierShare
+            The peer's (untrusted).
+        """
         if own.vehicle != other.vehicle:
             raise MessageError("verifier shares of two different vehicles")
         if own.joint != other.joint:
@@ -228,6 +258,13 @@ class ValidityAggregator:
         """The sum of this aggregator's ``q`` shares over ``accepted``, (L,) object ndarray: once per session
         (two sums over sets that differ by one vehicle would give that vehicle's input away) and only over
         at least ``min_inputs`` vehicles whose proof this aggregator checked. In memory only (not persisted).
+
+        Parameters
+        ----------
+        accepted : iterable of int
+            Vehicles whose proofs checked.
+        min_inputs : int
+            ``k``.
 
         Raises
         ------
