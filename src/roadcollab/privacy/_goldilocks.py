@@ -55,7 +55,7 @@ def mul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 
 
 def ntt(a: np.ndarray, w: int) -> np.ndarray:
-    """Evaluations at ``w^0 .. w^(n-1)`` of the polynomials whose coefficients are the rows of ``a`` (uint64)."""
+    """Evaluations at ``w^0, ..., w^(n-1)`` of the polynomials whose coefficients are the rows of ``a`` (uint64)."""
     n = a.shape[-1]
     if n == 1:
         return a

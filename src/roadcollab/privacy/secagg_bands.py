@@ -8,7 +8,7 @@ values. The bound of bin ``k``, track ``t`` is
 
 ``S`` the road model's prior second moment per bin, ``W`` the band weight, ``C`` the expected inversion
 error of an honest vehicle (the public nominal models and sensor noise,
-:attr:`~roadcollab.collaboration.guard.ReceiverGuard` ``_inversion_error``; the largest over the fleet), so
+:class:`~roadcollab.collaboration.guard.ReceiverGuard` (its ``_inversion_error``); the largest over the fleet), so
 ``B / kappa`` is the standard deviation of one real part of an honest message, maximised over the band.
 The bins of the inactive part of the grid and the imaginary parts of the DC and Nyquist bins get a bound
 of 0 (they are sent as 0 and proven to be 0).

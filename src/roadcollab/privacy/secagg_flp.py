@@ -138,7 +138,7 @@ GOLDILOCKS = Field(2 ** 64 - 2 ** 32 + 1, 7)
 
 
 def _ntt(a: np.ndarray, w: int, p: int) -> np.ndarray:
-    """Evaluations at ``w^0 .. w^(n-1)`` of the polynomials whose coefficients are the rows of ``a``."""
+    """Evaluations at ``w^0, ..., w^(n-1)`` of the polynomials whose coefficients are the rows of ``a``."""
     n = a.shape[-1]
     if p == _goldilocks.P and n > 1:
         return _goldilocks.ntt(np.asarray(a).astype(np.uint64), w).astype(object)
@@ -151,7 +151,7 @@ def _ntt(a: np.ndarray, w: int, p: int) -> np.ndarray:
 
 
 def _intt(a: np.ndarray, w: int, f: Field) -> np.ndarray:
-    """Coefficients of the polynomials whose values at ``w^0 .. w^(n-1)`` are the rows of ``a``."""
+    """Coefficients of the polynomials whose values at ``w^0, ..., w^(n-1)`` are the rows of ``a``."""
     n = a.shape[-1]
     return _ntt(a, f.inv(w), f.p) * f.inv(n) % f.p
 
@@ -376,7 +376,7 @@ def _lagrange(f: Field, P: int, r: int) -> np.ndarray:
 
 def query(enc: ValidityEncoding, x: np.ndarray, proof: Proof, rho: np.ndarray, r: int, s: np.ndarray,
           leader: bool) -> np.ndarray:
-    """One aggregator's verifier share: ``(w_1(r) .. w_2c(r), g(r), sum_i g(alpha^i), sum check)``.
+    """One aggregator's verifier share: ``(w_1(r), ..., w_2c(r), g(r), sum_i g(alpha^i), sum check)``.
 
     Parameters
     ----------
