@@ -112,7 +112,8 @@ def test_one_malicious_vehicle_cannot_steer_the_robust_map():
     """Against the plain (count-weighted) mean the attacks work; against weighted Huber with
     corroboration they do not (MSE within 1.5 x honest, no fake anomaly, none erased)."""
     rows = fusion_poisoning_rows(AnomalyStudyConfig(), 0, n_runs=1,
-                                 strategies=("scale_1e3", "count", "fake_pothole", "erase_potholes"))
+                                 strategies=("scale_1e3", "count", "fake_pothole", "erase_potholes"),
+                                 targets=("mean", "robust"))
     by = {(r.strategy, r.target): r for r in rows}
     for s in ("scale_1e3", "count", "fake_pothole", "erase_potholes"):
         robust = by[s, "fused_robust"]

@@ -199,12 +199,8 @@ def test_a_tampered_sealed_share_is_refused_by_its_recipient():
     assert 2 not in r.self_mask_shares and fleet.vehicles[1].complaints[0][0] == 2
 
 
-@pytest.mark.xfail(strict=True, reason="issue 20 section 2: bounded influence needs input validity proofs or a "
-                                       "two-server check; not built (docs/security-secagg.md)")
-def test_one_vehicle_cannot_move_the_aggregate_by_more_than_clip_over_n():
-    zs = {i + 1: z for i, z in enumerate(_inputs())}
-    fleet = SecAggFleet(N, SPEC)
-    bad = fleet.vehicles[5]
+def _poisoned_y(fleet, vehicle):
+    bad = fleet.vehicles[vehicle]
     honest_mask = bad.mask_input
 
     def poisoned(z, measured):
@@ -212,9 +208,43 @@ def test_one_vehicle_cannot_move_the_aggregate_by_more_than_clip_over_n():
         y = m.y + np.uint64(2 ** 62)                 # outside every clipped input's range
         return dataclasses.replace(m, y=y)
     bad.mask_input = poisoned
+
+
+def test_without_the_validity_check_one_vehicle_moves_the_masked_aggregate_at_will():
+    """The single-aggregator protocol alone: the clip is the honest vehicles' only (the gap closed below)."""
+    zs = {i + 1: z for i, z in enumerate(_inputs())}
+    fleet = SecAggFleet(N, SPEC)
+    _poisoned_y(fleet, 5)
     run = run_active_session(fleet, zs, session_id(9, 0), rng=9)
     honest = np.mean([_quantised(z, SPEC) for z in zs.values()], axis=0)
-    assert run.aggregate is None or np.max(np.abs(run.aggregate.result.average - honest)) <= 2 * SPEC.clip / N
+    assert np.max(np.abs(run.aggregate.result.average - honest)) > 1e4 * SPEC.clip / N
+
+
+@pytest.mark.parametrize("where", ["share", "input"])
+def test_one_vehicle_cannot_move_the_aggregate_by_more_than_clip_over_n(where):
+    """With the two-aggregator validity proof (privacy.secagg_validity), the box [-clip, clip] is enforced
+    inside the protocol: 2^62 ring units on the vehicle's share, or inside its input with a proof made for
+    it, are refused and the vehicle is named."""
+    from roadcollab.privacy.secagg_flp import ValidityEncoding
+    from roadcollab.privacy.secagg_validity import run_validated_session, submit
+    zs = {i + 1: z for i, z in enumerate(_inputs())}
+    fleet = SecAggFleet(N, SPEC)
+    enc = ValidityEncoding(np.full(zs[1].size, SPEC.clip), SPEC.resolution)
+    session, p = session_id(9, 0), enc.field.p
+
+    def poisoned(i, sub):
+        if i != 5:
+            return sub
+        if where == "share":
+            x = (sub.leader.x + 2 ** 62) % p
+            return dataclasses.replace(sub, leader=dataclasses.replace(sub.leader, x=x))
+        x = enc.encode(zs[5].ravel())
+        x[:enc.length] = (x[:enc.length] + 2 ** 62) % p
+        return submit(enc, None, session, 5, np.random.default_rng(5), x=x, identity=fleet.vehicles[5].identity)
+    run = run_validated_session(fleet, zs, session, enc, verify_key=bytes(32), rng=9, tamper=poisoned)
+    honest = np.mean([_quantised(z, SPEC) for z in zs.values()], axis=0)
+    assert set(run.refused) == {5} and run.refused[5].startswith("vehicle 5")
+    assert run.total is None or np.max(np.abs(run.average.reshape(honest.shape) - honest)) <= 2 * SPEC.clip / N
 
 
 def test_every_flipped_byte_and_truncation_of_signed_messages_is_refused():

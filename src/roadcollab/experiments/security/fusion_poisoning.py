@@ -18,6 +18,12 @@ Two fusion nodes are compared on the same messages:
   (:meth:`~roadcollab.collaboration.guard.ReceiverGuard.substitute`: implausible bands are replaced by
   its own inversion), measured at vehicle 1; anomalies as for ``robust`` (vehicles may still report
   their own detections for corroboration).
+- ``secagg_valid``: as ``secagg_guarded``, but every input is proven inside a public box per band
+  (:mod:`roadcollab.privacy.secagg_validity`, :class:`~roadcollab.privacy.secagg_bands.SpectralBox`:
+  ``kappa`` x the honest message's standard deviation from the road prior and the public inversion error),
+  so the malicious vehicle sends its strategy clipped into the box (unclipped it is refused). The node
+  computes what the protocol reveals (the sum of the quantised accepted inputs; the proofs themselves are
+  exercised in tests/test_secagg_validity.py); ``refused`` counts inputs that were outside the box.
 
 Strategies (the attacker knows its own honest ``z``, the true anomalies and the fleet size ``n``):
 ``scale_10``, ``scale_1e3`` (``z`` times a factor), ``negate``, ``tone`` (a 2 Hz sine of 10 x the
@@ -29,6 +35,7 @@ depth) and ``erase_potholes`` (minus ``n`` times the signature of every true ano
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 
 import numpy as np
@@ -36,6 +43,7 @@ import numpy as np
 from ..._validation import check_int
 from ...collaboration.guard import ReceiverGuard
 from ...collaboration.robust_fusion import RobustFusion, fuse_inversions
+from ...privacy.secagg_bands import SpectralBox
 from ...privacy.secagg_messages import SecAggSpec
 from ...detection.corroboration import DEFAULT_MIN_VOTES, corroborate, min_votes_for
 from ...detection.detector import MAX_ROAD_VELOCITY, Detection, detect_anomalies
@@ -51,7 +59,7 @@ __all__ = ["FUSION_STRATEGIES", "FUSION_TARGETS", "PoisoningSummary", "fusion_po
 
 FUSION_STRATEGIES = ("scale_10", "scale_1e3", "negate", "tone", "noise_3x", "extreme", "count", "fake_pothole",
                      "erase_potholes")
-FUSION_TARGETS = ("mean", "robust", "secagg_guarded")
+FUSION_TARGETS = ("mean", "robust", "secagg_guarded", "secagg_valid")
 _FAKE_DEPTH = 0.05       # m
 _FAKE_LENGTH = 0.5       # m
 _TOLERANCE = 1.0         # m, as the anomaly study
@@ -104,6 +112,7 @@ class _Run:
     own: list                  # each vehicle's own detections (honest)
     Ys: list                   # each vehicle's record spectrum
     guard: ReceiverGuard       # vehicle 1's guard (the receiver of the aggregate)
+    box: object = None         # (SpectralBox, ValidityEncoding) of the secagg_valid node
 
     @property
     def grid(self):
@@ -205,13 +214,42 @@ def _secagg_node(run: _Run, msgs: list[InversionMessage]) -> tuple[np.ndarray, i
     return run.grid.irfft(Z), int(report.refused)
 
 
+def validity_box(pipe: FleetPipeline, guard: ReceiverGuard, kappa: float = 6.0):
+    """The public box of the ``secagg_valid`` node: ``(SpectralBox, ValidityEncoding)`` (module docstring)."""
+    g = pipe.grid
+    S = np.real(np.einsum("ktt->kt", pipe.road_moment))
+    guards = [guard] + [ReceiverGuard(e, pipe.road_moment, pipe.config.sensor_noise_std) for e in pipe.estimators[1:]]
+    C = np.max([np.real(np.einsum("ktt->kt", gd._inversion_error(pipe.road_moment))) for gd in guards], axis=0)
+    box = SpectralBox(g.active, np.sqrt((g.weight[g.active, None] ** 2 * S + C) / 2), tuple(guard.bands), kappa=kappa)
+    return box, box.encoding()
+
+
+def _secagg_valid_node(run: _Run, msgs: list[InversionMessage]) -> tuple[np.ndarray, int]:
+    """The validated secure aggregate (module docstring), then vehicle 1's guard as ``_secagg_node``."""
+    box, enc = run.box
+    us, outside = [], 0
+    for m in msgs:
+        with np.errstate(over="ignore", invalid="ignore"):
+            u = box.to_vector(run.grid.rfft(m.z))
+        if not np.all(np.isfinite(u)):      # cannot be encoded at all: not counted
+            outside += 1
+            continue
+        u, out = enc.clip(u)
+        outside += out > 0
+        us.append(enc.quantize(u))
+    agg = run.grid.irfft(box.from_vector(np.mean(us, axis=0)))
+    est = run.pipe.estimators[0]
+    Z, report = run.guard.substitute(run.message(agg, len(us)), run.Ys[0], est.invert(run.Ys[0], posterior=True))
+    return run.grid.irfft(Z), int(outside)
+
+
 def _reported(target: str, run: _Run, zf: np.ndarray, own: list) -> list[Detection]:
     dets = run.detect(zf)
     if target == "mean":
         return dets
     # The robust node's map needs f + 1 of n votes (f = its breakdown), so a silent coalition it withstands
     # cannot erase what the honest vehicles see (min_votes_for); secure aggregation keeps the fixed default.
-    votes = min_votes_for(len(own)) if target == "robust" else DEFAULT_MIN_VOTES
+    votes = min_votes_for(len(own)) if target == "robust" else DEFAULT_MIN_VOTES      # both secagg targets
     return corroborate(dets, own, min_votes=votes, tolerance=_TOLERANCE)
 
 
@@ -223,7 +261,7 @@ def _score(run: _Run, zf: np.ndarray) -> float:
 
 
 def fusion_poisoning_rows(config: AnomalyStudyConfig, seed: int, *, n_runs: int = 4, malicious: int = 4,
-                          strategies=FUSION_STRATEGIES, pipe=None) -> list[PoisoningSummary]:
+                          strategies=FUSION_STRATEGIES, pipe=None, targets=FUSION_TARGETS) -> list[PoisoningSummary]:
     """Measure every strategy of one malicious vehicle against both fusion nodes.
 
     Parameters
@@ -240,29 +278,36 @@ def fusion_poisoning_rows(config: AnomalyStudyConfig, seed: int, *, n_runs: int 
         Subset of :data:`FUSION_STRATEGIES`.
     pipe : FleetPipeline, optional
         The pipeline of ``config.experiment`` and ``seed`` if already built.
+    targets : sequence of str
+        Subset of :data:`FUSION_TARGETS`.
 
     Returns
     -------
     list of PoisoningSummary
-        Targets ``fused_mean``, ``fused_robust`` and ``fused_secagg_guarded`` per strategy.
+        Targets ``fused_{target}`` per strategy.
     """
     n_runs = check_int("n_runs", n_runs, low=1)
     exp = config.experiment
     malicious = check_int("malicious", malicious, low=0, high=exp.n_vehicles - 1)
-    bad = [s for s in strategies if s not in FUSION_STRATEGIES]
+    bad = [t for t in targets if t not in FUSION_TARGETS] + [s for s in strategies if s not in FUSION_STRATEGIES]
     if bad:
-        raise ParameterError(f"strategies must be among {FUSION_STRATEGIES}, got {bad}")
+        raise ParameterError(f"strategies must be among {FUSION_STRATEGIES} and targets among {FUSION_TARGETS}, "
+                             f"got {bad}")
     pipe = FleetPipeline(exp, fleet_and_run_seeds(exp, seed)[0]) if pipe is None else pipe
     run_seeds = SeedPlan(seed).runs(n_runs)
     road_spec = config.road_spec()
     # Vehicle 1's guard is per-vehicle setup (posterior plants, expected discrepancy): built once.
     guard = ReceiverGuard(pipe.estimators[0], pipe.road_moment, exp.sensor_noise_std)
-    acc = {(s, t): [] for s in strategies for t in FUSION_TARGETS}
+    acc = {(s, t): [] for s in strategies for t in targets}
+    box = validity_box(pipe, guard) if "secagg_valid" in targets else None
+    nodes = {"mean": _mean_node, "robust": _robust_node, "secagg_guarded": _secagg_node,
+             "secagg_valid": _secagg_valid_node}
     for r in range(n_runs):
-        run = _honest_run(pipe, run_seeds[r], road_spec, guard)
+        run = dataclasses.replace(_honest_run(pipe, run_seeds[r], road_spec, guard), box=box)
         rng = np.random.default_rng(run_stream(run_seeds[r], "privacy"))
         honest = [run.message(z) for z in run.z]
-        for target, node in (("mean", _mean_node), ("robust", _robust_node), ("secagg_guarded", _secagg_node)):
+        for target in targets:
+            node = nodes[target]
             zf_h, _ = node(run, honest)
             rep_h = _reported(target, run, zf_h, run.own)
             mse_h = _score(run, zf_h)
