@@ -10,12 +10,8 @@ import pytest
 
 from roadcollab import MessageError, ParameterError
 from roadcollab.experiments.drives.fleet_estimation import estimate_fleet
-from roadcollab.experiments.drives.mixed_fleet import MIXED_SPEEDS, simulate_drive
-from roadcollab.io.profiles import measured_road
-from roadcollab.models.vehicle import FleetSpec, sample_fleet
 from roadcollab.network.agent import VehicleAgent
 from roadcollab.network.engine import VehicleEngine
-from roadcollab.network.memory import run_in_memory
 from roadcollab.network.messages import Topics, decode_contribution, encode_contribution, seal
 from roadcollab.network.plan import RoadPlan
 from roadcollab.network.results import results_from_store
@@ -26,20 +22,18 @@ from roadcollab.wire.identity import FleetAuthority, VehicleIdentity
 
 
 @pytest.fixture(scope="module")
-def drives():
-    road = measured_road(rng=1)
-    fleet = sample_fleet(4, FleetSpec(), rng=2)
-    return [simulate_drive(road, fleet[j], sp, start=5.0 + 2 * j, rng=10 + j) for j, sp in enumerate(MIXED_SPEEDS)]
+def drives(mixed_drives):
+    return list(mixed_drives)   # tests/conftest.py: built once per session
 
 
 @pytest.fixture(scope="module")
-def plan(drives):
-    return RoadPlan(fleet_id="t", min_speed=min(float(d.speeds().min()) for d in drives))
+def plan(mixed_plan):
+    return mixed_plan
 
 
-def test_in_memory_run_equals_estimate_fleet(drives, plan):
+def test_in_memory_run_equals_estimate_fleet(drives, mixed_clear_run):
     est = estimate_fleet(drives)
-    store, broker = run_in_memory(drives, plan)
+    store, broker = mixed_clear_run
     r = results_from_store(store)
     assert np.array_equal(r.position, est.position)
     for k in ("single", "inversion", "collaborative", "fused"):

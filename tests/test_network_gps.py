@@ -69,9 +69,20 @@ def _network_run(root, paths, network, name):
     return url, hellos
 
 
-def test_networked_segments_and_anomalies_land_where_map_puts_them(sim):
-    root, on_main, on_side, network = sim
+@pytest.fixture(scope="module")
+def clear_run(sim):
+    """The clear networked run of the three drives on ``main``: ``(road store path, hellos, its segments
+    as written, keyed by (from_m, to_m))``, the segments read before any test adds to the store."""
+    root, on_main, _, network = sim
     url, hellos = _network_run(root, on_main, network, "net")
+    with RoadStore.open(url) as s:
+        segments = {(m.from_m, m.to_m): m for m in s.segments()}
+    return url, hellos, segments
+
+
+def test_networked_segments_and_anomalies_land_where_map_puts_them(sim, clear_run):
+    root, on_main, on_side, network = sim
+    url, hellos, _ = clear_run
     assert sorted(hellos) == ["v1", "v2", "v3"]
     for h in hellos.values():                              # the hello carries the placement
         assert h["road_id"] == "main" and h["road_direction"] == 1 and h["gps_fixes"] >= 50
@@ -317,14 +328,13 @@ def test_alignment_to_the_waiting_message_undoes_a_known_shift(sim):
     assert {c.segment for c in again.contributions(waiting)} <= set(moved.segments)
 
 
-def test_a_secure_aggregation_fleet_on_a_road_writes_the_clear_fleets_segments(sim):
+def test_a_secure_aggregation_fleet_on_a_road_writes_the_clear_fleets_segments(sim, clear_run):
     """The same three drives on ``main`` fused by secure aggregation (rounds of 3, k = t = 2): the road store
     holds the same segments, geometry and IRI as the clear run (the sums differ by the 2^-40 m fixed point)."""
     from roadcollab.geo.network import read_network
     from roadcollab.network.aggregation import AggregationPolicy
 
     root, on_main, _, network = sim
-    clear_url, _ = _network_run(root, on_main, network, "clear2")
     road = FleetRoad(read_network(network), "main")
     drives = [clean_drive(d)[0] for d in load_drives(on_main)]
     vmin = min(float(road.place(d)[0].speeds().min()) for d in drives)
@@ -340,8 +350,7 @@ def test_a_secure_aggregation_fleet_on_a_road_writes_the_clear_fleets_segments(s
     svc.close()
     with RoadStore.open(url) as s:
         sec = {(m.from_m, m.to_m): m for m in s.segments()}
-    with RoadStore.open(clear_url) as s:
-        ref = {(m.from_m, m.to_m): m for m in s.segments()}
+    ref = clear_run[2]
     assert sec.keys() == ref.keys() and sec
     for k, m in ref.items():
         assert np.array_equal(sec[k].lonlat, m.lonlat)

@@ -15,16 +15,12 @@ import pytest
 
 from roadcollab import MessageError, ParameterError
 from roadcollab.cli.main import main
-from roadcollab.experiments.drives.mixed_fleet import MIXED_SPEEDS, simulate_drive
-from roadcollab.io.profiles import measured_road
-from roadcollab.models.vehicle import FleetSpec, sample_fleet
 from roadcollab.network.agent import VehicleAgent
 from roadcollab.network.aggregation import AggregationPolicy, segment_input, sums_from_total
 from roadcollab.network.engine import VehicleEngine
 from roadcollab.network.fleetdir import load_aggregation
 from roadcollab.network.memory import _pump_all, run_in_memory
 from roadcollab.network.messages import Topics, encode_contribution, seal
-from roadcollab.network.plan import RoadPlan
 from roadcollab.network.relaykey import RelayKey
 from roadcollab.network.results import results_from_store
 from roadcollab.network.rounds import SecureRounds
@@ -39,20 +35,18 @@ POLICY = AggregationPolicy(mode="secure", round_size=4, min_inputs=3, threshold=
 
 
 @pytest.fixture(scope="module")
-def drives():
-    road = measured_road(rng=1)
-    fleet = sample_fleet(4, FleetSpec(), rng=2)
-    return [simulate_drive(road, fleet[j], sp, start=5.0 + 2 * j, rng=10 + j) for j, sp in enumerate(MIXED_SPEEDS)]
+def drives(mixed_drives):
+    return list(mixed_drives)   # tests/conftest.py: built once per session
 
 
 @pytest.fixture(scope="module")
-def plan(drives):
-    return RoadPlan(fleet_id="t", min_speed=min(float(d.speeds().min()) for d in drives))
+def plan(mixed_plan):
+    return mixed_plan
 
 
 @pytest.fixture(scope="module")
-def clear(drives, plan):
-    return results_from_store(run_in_memory(drives, plan)[0])
+def clear(mixed_clear_run):
+    return results_from_store(mixed_clear_run[0])
 
 
 def _rel(a, b):

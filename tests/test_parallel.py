@@ -52,6 +52,21 @@ class _CountChunks:
         return [(os.getpid(), counter.calls) for _ in indices]
 
 
+def test_two_runners_do_not_share_state():
+    """Each run owns its shared object (a study's cache): two runs, serial or on a pool, never see each
+    other's, the workers' changes stay in the workers, and the parent keeps no worker state."""
+    from roadcollab.experiments import runner
+
+    a, b = _Counter(), _Counter()
+    assert [c for _, c in map_runs(_CountChunks(), 3, shared=a)] == [1, 2, 3]
+    assert [c for _, c in map_runs(_CountChunks(), 2, shared=b)] == [1, 2]
+    pa = map_runs(_CountChunks(), 2, workers=1, chunk_size=1, shared=a)
+    pb = map_runs(_CountChunks(), 2, workers=1, chunk_size=1, shared=b)
+    assert [c for _, c in pa] == [4, 5] and [c for _, c in pb] == [3, 4]   # each from its own object's state
+    assert {p for p, _ in pa}.isdisjoint({p for p, _ in pb}) and os.getpid() not in {p for p, _ in pa}
+    assert (a.calls, b.calls) == (3, 2)
+    assert runner._WORKER == {}
+
 def test_pool_propagates_task_errors():
     with pytest.raises(ParameterError, match="run 3 refused"):
         map_runs(_Refuse(), 5, workers=2, chunk_size=1)
