@@ -29,7 +29,7 @@ import numpy as np
 import numpy.typing as npt
 import scipy.linalg
 
-from ._cert_kernel import eigen_certificate, schur_certificate
+from ._cert_kernel import schur_lyapunov as _compiled_schur_lyapunov
 from .kernels import kernel_path
 
 __all__ = ["LYAPUNOV_RTOL", "spectral_radius_and_gain"]
@@ -51,27 +51,6 @@ def _verified_gain(A: np.ndarray, X: np.ndarray) -> float:
     if not (resid <= LYAPUNOV_RTOL * scale and ev[0] > 0.0):
         return math.inf
     return float(math.sqrt(ev[-1] / ev[0]))
-
-
-def _checked_gain(X: np.ndarray, resid: float, scale: float) -> float:
-    """:func:`_verified_gain` from a residual and scale computed elsewhere (the compiled path,
-    :mod:`~roadcollab.lti._cert_kernel`; ``X`` symmetrised, NaN residual for a non-finite ``X``)."""
-    if not resid <= LYAPUNOV_RTOL * scale:
-        return math.inf
-    ev = np.linalg.eigvalsh(X)
-    if not ev[0] > 0.0:
-        return math.inf
-    return float(math.sqrt(ev[-1] / ev[0]))
-
-
-def _eigen_gain(A: np.ndarray, lam: np.ndarray, V: np.ndarray) -> float:
-    """The verified gain from the eigendecomposition (inf if it fails), on the path in effect."""
-    try:
-        if kernel_path() == "compiled":
-            return _checked_gain(*eigen_certificate(A, lam, V))
-        return _verified_gain(A, _eigen_lyapunov(lam, V))
-    except (np.linalg.LinAlgError, ValueError):
-        return math.inf
 
 
 def _eigen_lyapunov(lam: np.ndarray, V: np.ndarray) -> np.ndarray:
@@ -101,8 +80,8 @@ def _schur_lyapunov(R: np.ndarray, U: np.ndarray) -> np.ndarray:
 def _schur_gain(A: np.ndarray, schur: tuple[np.ndarray, np.ndarray]) -> float:
     """The verified gain from :func:`_schur_lyapunov` (inf if it fails)."""
     try:
-        if kernel_path() == "compiled":     # one compiled pass: 0.24 -> 0.06 ms for an order-22 T~ (docs/speed.md)
-            return _checked_gain(*schur_certificate(A, *schur))
+        if kernel_path() == "compiled":     # the Stein solve compiled (docs/speed.md, "Third pass")
+            return _verified_gain(A, _compiled_schur_lyapunov(*schur))
         return _verified_gain(A, _schur_lyapunov(*schur))
     except (np.linalg.LinAlgError, ValueError):
         return math.inf
@@ -156,7 +135,10 @@ def spectral_radius_and_gain(A: npt.ArrayLike, *,
             radius = float(np.max(np.abs(lam)))
             if not radius < 1.0:
                 return radius, math.inf
-            gain = _eigen_gain(A, lam, V)
+            try:
+                gain = _verified_gain(A, _eigen_lyapunov(lam, V))
+            except (np.linalg.LinAlgError, ValueError):
+                gain = math.inf
             if not math.isfinite(gain) and schur is not None:
                 try:
                     gain = _schur_gain(A, schur())
