@@ -176,3 +176,38 @@ def test_paper_segments_on_both_paths_leave_the_same_generator_state_and_the_sam
         for a, b in zip(steps["compiled"], steps["reference"]):
             ref = b.result.estimate
             assert np.max(np.abs(a.result.estimate - ref)) <= 1e-9 * np.max(np.abs(ref))
+
+
+@needs_numba
+def test_compiled_certificate_and_schur_form_agree_with_the_reference():
+    """The compiled Schur form is one (unitary, triangular, backward stable); the compiled Lyapunov
+    certificate gives the reference's radius and gain up to the solutions' error, and refuses what
+    the reference refuses."""
+    import scipy.linalg
+
+    from roadcollab.lti._cert_kernel import complex_schur
+    from roadcollab.lti.stability import spectral_radius_and_gain
+
+    rng = np.random.default_rng(3)
+    for n in (1, 2, 5, 12, 22):
+        for close in (False, True):
+            A = _system(rng, n, close)[0]
+            T, U = complex_schur(A)
+            assert not np.tril(T, -1).any()
+            assert np.linalg.norm(U @ T @ U.conj().T - A) <= 1e-14 * n * np.linalg.norm(A)
+            assert np.linalg.norm(U.conj().T @ U - np.eye(n)) <= 1e-14 * n
+            schur = scipy.linalg.schur(A, output="complex")
+            with kernels.use_kernels("reference"):
+                r0, g0 = spectral_radius_and_gain(A, schur=schur)
+            with kernels.use_kernels("compiled"):
+                for sch in (schur, (T, U)):
+                    r1, g1 = spectral_radius_and_gain(A, schur=sch)
+                    # Two verified solutions of the same equation (residual <= 1e-8 relative): equal
+                    # gains up to the solutions' own error, as test_blockdiag's Schur-vs-eigen check;
+                    # radii from two Schur forms, eigenvalue pairs 1e-4 apart (condition ~1e4).
+                    assert abs(r0 - r1) <= 1e-10 and np.isfinite(g1) and abs(g0 - g1) <= 1e-6 * g0
+    jordan = 0.99 * np.eye(64) + np.diag(np.ones(63), 1)
+    jordan[-1, 0] = 1e-16        # computed radius 0.99, true radius 1.55: no certificate
+    with kernels.use_kernels("compiled"):
+        assert spectral_radius_and_gain(jordan, schur=scipy.linalg.schur(jordan, output="complex"))[1] == np.inf
+        assert spectral_radius_and_gain(jordan, schur=complex_schur(jordan))[1] == np.inf

@@ -4,6 +4,9 @@ from __future__ import annotations
 
 import numpy as np
 
+from ._bin_kernel import inv2, matvec2
+from .kernels import kernel_path
+
 __all__ = ["inv2x2", "matvec", "matmul", "sigma_max_2x2", "condition_2x2", "receiver_z"]
 
 
@@ -26,6 +29,10 @@ def inv2x2(M: np.ndarray) -> np.ndarray:
     M = np.asarray(M)
     if M.dtype.kind not in "fc":
         M = M.astype(float)         # np.reciprocal of integers would truncate
+    if kernel_path() == "compiled":
+        inv = inv2(M)
+        if inv is not None:
+            return inv
     a, b, c, d = M[..., 0, 0], M[..., 0, 1], M[..., 1, 0], M[..., 1, 1]
     r = np.reciprocal(a * d - b * c)
     out = np.empty_like(M)
@@ -53,6 +60,10 @@ def matvec(M: np.ndarray, x: np.ndarray) -> np.ndarray:
     """
     if M.shape[-2:] != (2, 2):
         return np.einsum("kij,kj->ki", M, x)
+    if kernel_path() == "compiled":      # one compiled pass over the bins (docs/speed.md, "Third pass")
+        y = matvec2(M, x)
+        if y is not None:
+            return y
     out = np.empty(x.shape, dtype=np.result_type(M, x))
     x0, x1 = x[:, 0], x[:, 1]
     out[:, 0] = M[:, 0, 0] * x0 + M[:, 0, 1] * x1

@@ -9,7 +9,11 @@ Two paths compute the same quantities:
 - ``"compiled"``: the same evaluations as loops compiled by numba, tiles of bins with real and
   imaginary parts apart, the ``Psi`` draw's rejection loop and realisation
   (:mod:`roadcollab.privacy._draw_kernel`, from the same random generator, leaving the same state) and
-  ``Psi``'s responses from its poles and residues. They differ from the reference by round-off only.
+  ``Psi``'s responses from its poles and residues, a receiver's complex Schur form (real Schur form and
+  compiled rotations) and the triangular Stein solve of its Lyapunov certificate
+  (:mod:`roadcollab.lti._cert_kernel`), and the per-bin 2x2 products and inverses
+  (:mod:`roadcollab.lti._bin_kernel`). They differ from the reference by round-off only (the Schur form
+  is another valid one; the certificate's residual is checked either way).
 
 The default is ``"reference"`` (numpy). The compiled path passes the 300-segment exactness test and
 makes ``paper`` about 1.4-1.9x faster per segment, but every process that uses it pays 1.2-1.5 s of

@@ -29,6 +29,9 @@ import numpy as np
 import numpy.typing as npt
 import scipy.linalg
 
+from ._cert_kernel import schur_lyapunov as _compiled_schur_lyapunov
+from .kernels import kernel_path
+
 __all__ = ["LYAPUNOV_RTOL", "spectral_radius_and_gain"]
 
 #: Largest relative residual of the Lyapunov solution ``A^T X A - X + I``.
@@ -77,6 +80,8 @@ def _schur_lyapunov(R: np.ndarray, U: np.ndarray) -> np.ndarray:
 def _schur_gain(A: np.ndarray, schur: tuple[np.ndarray, np.ndarray]) -> float:
     """The verified gain from :func:`_schur_lyapunov` (inf if it fails)."""
     try:
+        if kernel_path() == "compiled":     # the Stein solve compiled (docs/speed.md, "Third pass")
+            return _verified_gain(A, _compiled_schur_lyapunov(*schur))
         return _verified_gain(A, _schur_lyapunov(*schur))
     except (np.linalg.LinAlgError, ValueError):
         return math.inf

@@ -1,0 +1,170 @@
+"""Compiled (numba) parts of a receiver's stability certificate and Schur form (the ``"compiled"`` path
+of :mod:`~roadcollab.lti.kernels`).
+
+- *The Lyapunov solve.* The certificate is the one of :mod:`~roadcollab.lti.stability`: a solution
+  ``X`` of ``A^T X A - X = -I`` whose residual is checked against ``A`` itself. Here ``X`` comes from
+  the complex Schur form ``A = U R U^H`` by a triangular Stein solve (Bartels-Stewart without a
+  second factorisation): ``R^H Y R - Y = -I`` column by column, column ``j`` from the lower
+  triangular system ``(R_jj R^H - I) y_j = -e_j - R^H sum_{l<j} y_l R_lj``, then ``X = Re(U Y U^H)``.
+  How ``X`` was found does not matter to the certificate: only its checked residual and eigenvalues.
+- *The complex Schur form* from LAPACK's real one (``dgees``, about half the time of ``zgees`` at
+  n = 22) and one Givens rotation per 2x2 block (as ``scipy.linalg.rsf2csf``, compiled).
+
+Plain loops over real pairs: numba's array expressions cost seconds of first-run compilation each.
+Measurements in docs/speed.md, "Third pass".
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+import scipy.linalg
+
+from .kernels import compiled_available, jit_options
+
+__all__ = ["schur_lyapunov", "complex_schur"]
+
+_KERNEL: dict[str, Any] = {}
+
+#: The functions compiled by :func:`_build` (rebound in place, so compiled callers find compiled callees).
+_COMPILED_NAMES = ("_stein_schur", "_real_to_complex")
+
+
+def _build() -> dict[str, Any]:
+    """The compiled functions (``{}`` values ``None`` without numba); numba is imported on first use."""
+    if _KERNEL:
+        return _KERNEL
+    if not compiled_available():
+        _KERNEL.update(schur=None, rsf2csf=None)
+        return _KERNEL
+    import numba
+
+    jit = numba.njit(**jit_options())
+    for name in _COMPILED_NAMES:
+        globals()[name] = jit(globals()[name])
+    _KERNEL.update(schur=globals()["_stein_schur"], rsf2csf=globals()["_real_to_complex"])
+    return _KERNEL
+
+
+def _stein_schur(R: np.ndarray) -> np.ndarray:   # pragma: no cover - compiled
+    """``Y`` of ``R^H Y R - Y = -I`` for an upper triangular ``R`` (module docstring). Complex numbers
+    as real pairs, plain loops: no array expressions, which cost seconds of first-run compilation."""
+    n = R.shape[0]
+    Rr = np.empty((n, n))
+    Ri = np.empty((n, n))                           # R^H column k = conj(R row k)
+    for i in range(n):
+        for j in range(n):
+            Rr[i, j] = R[i, j].real
+            Ri[i, j] = R[i, j].imag
+    Yr = np.zeros((n, n))                           # row j = column j of Y
+    Yi = np.zeros((n, n))
+    vr = np.empty(n)
+    vi = np.empty(n)
+    hr = np.empty(n)
+    hi = np.empty(n)
+    for j in range(n):
+        for i in range(n):
+            vr[i] = 0.0
+            vi[i] = 0.0
+            hr[i] = 0.0
+            hi[i] = 0.0
+        for l in range(j):                          # v = sum_{l<j} y_l R_lj
+            a, b = Rr[l, j], Ri[l, j]
+            for i in range(n):
+                vr[i] += Yr[l, i] * a - Yi[l, i] * b
+                vi[i] += Yr[l, i] * b + Yi[l, i] * a
+        hr[j] = -1.0                                # h = -e_j - R^H v
+        for k in range(n):
+            a, b = vr[k], vi[k]
+            for i in range(k, n):                   # (R^H)_ik = conj(R_ki)
+                hr[i] -= Rr[k, i] * a + Ri[k, i] * b
+                hi[i] -= Rr[k, i] * b - Ri[k, i] * a
+        pr, pi = Rr[j, j], Ri[j, j]
+        for k in range(n):                          # (R_jj R^H - I) y = h, forward substitution
+            dr = pr * Rr[k, k] + pi * Ri[k, k] - 1.0      # R_jj conj(R_kk) - 1
+            di = pi * Rr[k, k] - pr * Ri[k, k]
+            q = 1.0 / (dr * dr + di * di)
+            yr = (hr[k] * dr + hi[k] * di) * q
+            yi = (hi[k] * dr - hr[k] * di) * q
+            Yr[j, k] = yr
+            Yi[j, k] = yi
+            cr = pr * yr - pi * yi                  # c = R_jj y_k
+            ci = pr * yi + pi * yr
+            for i in range(k + 1, n):
+                hr[i] -= Rr[k, i] * cr + Ri[k, i] * ci
+                hi[i] -= Rr[k, i] * ci - Ri[k, i] * cr
+    Y = np.empty((n, n), dtype=np.complex128)
+    for j in range(n):
+        for k in range(n):
+            Y[k, j] = complex(Yr[j, k], Yi[j, k])
+    return Y
+
+
+def _real_to_complex(T: np.ndarray, Z: np.ndarray) -> None:   # pragma: no cover - compiled
+    """Real Schur form ``(T, Z)`` (complex copies) to complex Schur form in place: one Givens rotation per
+    2x2 block, as ``scipy.linalg.rsf2csf``."""
+    n = T.shape[0]
+    eps = np.finfo(np.float64).eps
+    for m in range(n - 1, 0, -1):
+        if abs(T[m, m - 1]) > eps * (abs(T[m - 1, m - 1]) + abs(T[m, m])):
+            a, b, c, d = T[m - 1, m - 1], T[m - 1, m], T[m, m - 1], T[m, m]
+            h = 0.5 * (a - d)
+            mu = h + np.sqrt(h * h + b * c)          # an eigenvalue of the block, minus d
+            r = np.sqrt(abs(mu) ** 2 + abs(c) ** 2)
+            gc = mu / r
+            gs = c / r
+            # G = [[conj(gc), gs], [-gs, gc]]; rows m-1, m of T from column m-1 on: G @ T
+            for j in range(m - 1, n):
+                t0, t1 = T[m - 1, j], T[m, j]
+                T[m - 1, j] = np.conj(gc) * t0 + gs * t1
+                T[m, j] = -gs * t0 + gc * t1
+            # columns m-1, m of T (rows up to m) and of Z: X @ G^H, G^H = [[gc, -conj(gs)], [conj(gs), conj(gc)]]
+            for i in range(m + 1):
+                t0, t1 = T[i, m - 1], T[i, m]
+                T[i, m - 1] = t0 * gc + t1 * np.conj(gs)
+                T[i, m] = -t0 * np.conj(gs) + t1 * np.conj(gc)
+            for i in range(n):
+                t0, t1 = Z[i, m - 1], Z[i, m]
+                Z[i, m - 1] = t0 * gc + t1 * np.conj(gs)
+                Z[i, m] = -t0 * np.conj(gs) + t1 * np.conj(gc)
+        T[m, m - 1] = 0.0
+
+
+def complex_schur(A: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """A complex Schur form ``A = U T U^H`` from LAPACK's real Schur form (``dgees``, half the time of
+    ``zgees`` at n = 22) and one compiled Givens rotation per 2x2 block. A valid complex Schur form
+    (unitary ``U``, upper triangular ``T``), not the one ``zgees`` returns.
+
+    Parameters
+    ----------
+    A : (n, n) real ndarray
+        Finite.
+
+    Returns
+    -------
+    T, U : (n, n) complex ndarray
+    """
+    Tr, Zr = scipy.linalg.schur(np.asarray(A, dtype=float), output="real")
+    T = Tr.astype(np.complex128)
+    U = Zr.astype(np.complex128)
+    _build()["rsf2csf"](T, U)
+    return T, U
+
+
+def schur_lyapunov(R: np.ndarray, U: np.ndarray) -> np.ndarray:
+    """``X`` of ``A^T X A - X = -I`` from ``A = U R U^H``: the triangular Stein solve compiled, then
+    ``X = Re(U Y U^H)`` (BLAS). The caller verifies ``X`` (its residual against ``A`` itself).
+
+    Parameters
+    ----------
+    R, U : (n, n) complex ndarray
+        ``R`` upper triangular.
+
+    Returns
+    -------
+    (n, n) ndarray
+    """
+    Y = _build()["schur"](np.ascontiguousarray(R, complex))
+    X: np.ndarray = np.real(U @ Y @ U.conj().T)
+    return X
