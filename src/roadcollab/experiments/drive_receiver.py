@@ -33,6 +33,7 @@ with the honest message (:func:`~roadcollab.detection.scoring.new_false_detectio
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import cast
 
 import numpy as np
 
@@ -42,12 +43,16 @@ from ..detection.scoring import new_false_detections
 from ..lti.batch2x2 import inv2x2, matmul, matvec
 from .config import ExperimentConfig
 from .distance_maps import band_limit_stretch, elevation_to_distance
-from .drive_estimation import integrate_elevation
+from ..collaboration.guard import ReceiverGuard
+from ..collaboration.relay import Relay
+from ..estimation.grid import SegmentGrid
+from .drive_estimation import _attach_guards, _drive_estimators, integrate_elevation
+from .poisoning import _add_to_z
 from .drive_simulation import simulate_drives
 from .fleet_estimation import invert_drive, received_spectra, velocity_from_spectra
 from .receiver_attacks import coherent_dz
 
-__all__ = ["DRIVE_ATTACKS", "DriveReceiverRow", "drive_receiver_rows", "honest_refusals"]
+__all__ = ["DRIVE_ATTACKS", "DriveReceiverRow", "drive_receiver_rows", "honest_refusals", "time_grid_rows"]
 
 DRIVE_ATTACKS = ("honest", "scale_1e6", "coherent_up", "coherent_down", "fake_pothole_09", "fake_pothole_full")
 
@@ -264,3 +269,92 @@ def honest_refusals(seeds=(0, 1, 2), *, vehicles: int = 10, guard: str = "class"
             rm += sum(r.whole_message_refused for r in reports)
             nm += len(reports)
     return rb, nb, rm, nm
+
+
+def time_grid_rows(seeds=(0, 1, 2), *, vehicles: int = 3, guard: str | None = "class", road: str = "measured",
+                   attacks=DRIVE_ATTACKS, edge_s: float = 2.0) -> list[DriveReceiverRow]:
+    """:data:`DRIVE_ATTACKS` against drive 2 on the time-grid path (drives sharing one time grid:
+    :func:`~roadcollab.experiments.drive_estimation.estimate_drives`, what ``roadcollab estimate`` runs on
+    them), the lie added to the ``z`` of drive 1's exchange message (its ``e``).
+
+    Parameters
+    ----------
+    seeds, vehicles, guard, road, attacks
+        As :func:`drive_receiver_rows`.
+    edge_s : float
+        Seconds left out of the score at either end.
+
+    Returns
+    -------
+    list of DriveReceiverRow
+        Scored on band-limited road velocity (m/s) against the truth sampled at the drive's positions.
+    """
+    rows = []
+    for seed in seeds:
+        sim = simulate_drives(vehicles=vehicles, road=road, seed=seed)
+        drives = [s.drive for s in sim.drives]
+        d = drives[1]
+        cfg = ExperimentConfig()
+        grid = SegmentGrid(d.n_samples, d.sample_rate, band_low_hz=cfg.band_low_hz)
+        cars = _drive_estimators(drives[:2], grid, speed=d.speed, sample_rate=d.sample_rate, gamma=cfg.gamma,
+                                 band_low_hz=cfg.band_low_hz)
+        windows = [(0, d.n_samples, 0, d.n_samples)]
+        _attach_guards(drives[:2], cars, windows, road=guard or "class", speed=d.speed, sample_rate=d.sample_rate,
+                       gamma=cfg.gamma, band_low_hz=cfg.band_low_hz)
+        probe = cast(ReceiverGuard, cars[1].guard)      # attached by _attach_guards
+        if guard is None:
+            cars[1].guard = None
+        Ys = [grid.rfft(x.accel) for x in drives[:2]]
+        honest = Relay([cars[0]], "none", unguarded=True).step(0, drives[0].accel, Y=Ys[0]).message
+        h = np.stack([np.interp(d.positions, sim.road.distance, sim.road.elevation[:, c]) for c in range(2)], axis=1)
+        w = np.zeros_like(h)
+        w[:-1] = np.diff(h, axis=0) * d.sample_rate
+        truth = grid.band_limited(grid.rfft(w), d.n_samples)
+        k = int(edge_s * d.sample_rate)
+        inner = np.zeros(d.n_samples, bool)
+        inner[k:d.n_samples - k] = True
+        act = grid.active
+        z = cars[0].invert(Ys[0])[act]
+        obs = _mse(grid.band_limited(cars[1].estimate(None, Y=Ys[1]).W_obs, d.n_samples), truth, inner)
+        x0 = 0.5 * (d.positions[0] + d.positions[-1])
+        dets_h = None
+        for attack in ("honest",) + tuple(a for a in attacks if a != "honest"):
+            if attack == "honest":
+                dz = np.zeros((grid.nfft, 2))
+            elif attack == "scale_1e6":
+                Z = np.zeros((grid.n_bins, 2), complex)
+                Z[act] = (1e6 - 1.0) * z
+                dz = grid.irfft(Z)
+            elif attack in ("coherent_up", "coherent_down"):
+                dz = (1.0 if attack == "coherent_up" else -1.0) * coherent_dz(probe, z, 0.8 * probe.threshold)
+            else:
+                shape = _pothole_z(_Car(cars[1], d), 0, d.n_samples, x0)
+                if attack == "fake_pothole_full":
+                    Z = np.zeros((grid.n_bins, 2), complex)
+                    Z[act] = shape
+                    dz = grid.irfft(Z)
+                else:
+                    dz = coherent_dz(probe, shape, 0.9 * probe.threshold, cap=1.0)
+            msg = _add_to_z(honest, dz, cars[0])
+            step = Relay(cars[1:], "none", unguarded=guard is None).step(0, d.accel, msg, Y=Ys[1])
+            with np.errstate(all="ignore"):
+                vel = grid.band_limited(step.result.W_hat, d.n_samples)
+            ok = bool(np.isfinite(vel).all())
+            dets = detect_anomalies(vel, positions=d.positions, speed=d.speed, sample_rate=d.sample_rate) if ok else []
+            if attack == "honest":
+                dets_h = dets
+            rep = step.guard
+            nb = 0 if rep is None else len(probe.bands)
+            if attack in attacks:
+                rows.append(DriveReceiverRow(attack, int(seed), guard or "none", _mse(vel, truth, inner) / obs,
+                                             new_false_detections(dets, dets_h, sim.road.anomalies) if ok else -1,
+                                             0 if rep is None else len(rep.refused_bands), nb))
+    return rows
+
+
+class _Car:
+    """What :func:`_pothole_z` reads of a vehicle (``rec.car``, ``drive``) for an estimator and its drive."""
+
+    def __init__(self, car, drive) -> None:
+        self.rec = type("rec", (), {"car": car})()
+        self.drive = drive
