@@ -12,22 +12,22 @@ windows directly (:func:`~roadcollab.experiments.fleet_estimation.received_spect
 invertible in band, so any such ``z`` is some elevation on distance), knowing the receiver's guard
 (bands, ``v_b``, threshold) and the honest ``z``:
 
-==================== ==============================================================================
-``honest``           drive 1's inversion as sent
-``scale_1e6``        ``z x 1e6``
-``coherent_up``      ``z`` plus ``a_b z`` per guard band to expected statistic ``0.8 x threshold``
-                     (:func:`~roadcollab.experiments.receiver_attacks.coherent_dz`)
-``coherent_down``    the same with ``- a_b z``
-``fake_pothole_09``  a 5 cm, 0.5 m pothole (left track, full depth in the receiver's estimate:
-                     ``(I - D P_hat)^-1 W p``) at the middle of the drive, scaled per band to expected
-                     statistic ``0.9 x threshold`` (at most full depth), added to ``z``
-``fake_pothole_full`` the same pothole at full depth in every band (whatever the statistic)
-==================== ==============================================================================
+====================== ==============================================================================
+``honest``             drive 1's inversion as sent
+``scale_1e6``          ``z x 1e6``
+``coherent_up``        ``z`` plus ``a_b z`` per guard band to expected statistic ``0.8 x threshold``
+                       (:func:`~roadcollab.experiments.receiver_attacks.coherent_dz`)
+``coherent_down``      the same with ``- a_b z``
+``fake_pothole_09``    a 5 cm, 0.5 m pothole (left track, full depth in the receiver's estimate:
+                       ``(I - D P_hat)^-1 W p``) at the middle of the drive, scaled per band to expected
+                       statistic ``0.9 x threshold`` (at most full depth), added to ``z``
+``fake_pothole_full``  the same pothole at full depth in every band (whatever the statistic)
+====================== ==============================================================================
 
-Scores: MSE of the receiver's collaborative elevation against the band-limited truth on its distance grid
-(interior, ``edge_m`` from either end), over its observer-only (``single``) MSE; fake anomalies are
-detections in the receiver's collaborative road velocity that match neither a true anomaly nor a detection
-with the honest message (:func:`~roadcollab.detection.scoring.new_false_detections`).
+                       Scores: MSE of the receiver's collaborative elevation against the band-limited truth on its distance grid
+                       (interior, ``edge_m`` from either end), over its observer-only (``single``) MSE; fake anomalies are
+                       detections in the receiver's collaborative road velocity that match neither a true anomaly nor a detection
+                       with the honest message (:func:`~roadcollab.detection.scoring.new_false_detections`).
 """
 
 from __future__ import annotations
