@@ -37,7 +37,7 @@ STUDIES_ALLOWED = {
     "bench": set(),
     "anomalies": set(),
     "reproduction": {"drives"},
-    "security": {"anomalies"},
+    "security": {"anomalies", "drives"},
     "sweep": {"reproduction"},
 }
 #: Imports allowed inside functions: optional or heavy third-party modules only.

@@ -34,13 +34,13 @@ def _detector_config() -> dict | None:
 
 
 def _time_grid(drives, out, *, command: str, segment_length: float, t0: float, cleaning: list[dict],
-               notes: list[str]) -> dict:
+               notes: list[str], guard: str | None) -> dict:
     """The drives share one time grid: relay in time as the simulations do, then IRI of the fused elevation."""
     from ..experiments.drives.estimation import estimate_drives, find_anomalies
     from ..models.iri import iri_segments
     from ..reporting.drives_report import write_estimates
 
-    est = estimate_drives(drives)
+    est = estimate_drives(drives, guard=guard)
     note = None
     try:
         anomalies = find_anomalies(est)
@@ -63,17 +63,17 @@ def _stretches_note(stretches) -> str:
 
 
 def _distance_grid(drives, out, *, command: str, segment_length: float, align: bool, max_offset: float,
-                   spacing: float, t0: float, notes: list[str], cleaning: list[dict]) -> dict:
+                   spacing: float, t0: float, notes: list[str], cleaning: list[dict], guard: str | None) -> dict:
     """Drives on different grids (or aligned): every estimate on one distance grid."""
     from ..experiments.drives.fleet_estimation import drive_stretches, estimate_fleet, find_fleet_anomalies, fused_iri
     from ..reporting.fleet_report import write_fleet_estimates
 
     if align:
-        est = estimate_fleet(drives, spacing=spacing, align=align, max_offset=max_offset)
+        est = estimate_fleet(drives, spacing=spacing, align=align, max_offset=max_offset, guard=guard)
     else:  # the networked run's per-segment engine, over the in-memory transport (equal to estimate_fleet)
         from ..network.memory import estimate_fleet_in_memory
 
-        est = estimate_fleet_in_memory(drives, spacing=spacing)
+        est = estimate_fleet_in_memory(drives, spacing=spacing, guard=guard)
     notes = list(notes)
     stretches = drive_stretches(drives, segment_length, est.offsets)
     if len(stretches) > 1:
@@ -98,7 +98,7 @@ def _distance_grid(drives, out, *, command: str, segment_length: float, align: b
 
 def estimate_command(drive_paths: list[str], out_dir, *, command: str, limits: FileLimits | None = None,
                      segment_length: float = 100.0, align: bool = False, max_offset: float = 10.0,
-                     spacing: float = 0.05) -> dict:
+                     spacing: float = 0.05, guard: str | None = "class") -> dict:
     """Everything ``roadcollab estimate`` does: read, estimate, detect, IRI, write.
 
     Every drive is cleaned first (:func:`roadcollab.io.drive_clean.clean_drive`: isolated spikes
@@ -125,6 +125,10 @@ def estimate_command(drive_paths: list[str], out_dir, *, command: str, limits: F
         Largest offset between two drives searched, m.
     spacing : float
         Step of the distance grid, m.
+    guard : {"class", "own"} or None
+        Road prior of every vehicle's receiver guard (:mod:`roadcollab.collaboration.drive_guard`): every
+        received message goes through it; None: unguarded, the paper's Algorithm 1 (``--unguarded-receive``).
+        Recorded in ``config.json`` as ``receiver_guard``.
 
     Returns
     -------
@@ -153,10 +157,11 @@ def estimate_command(drive_paths: list[str], out_dir, *, command: str, limits: F
         described = [c.describe(d.sample_rate) for d, c in cleaned]
         if common_time_grid(drives) and not align:
             summary = _time_grid(drives, out, command=command, segment_length=segment_length, t0=t0, notes=notes,
-                                 cleaning=described)
+                                 cleaning=described, guard=guard)
         else:
             summary = _distance_grid(drives, out, command=command, segment_length=segment_length, align=align,
-                                     max_offset=max_offset, spacing=spacing, t0=t0, notes=notes, cleaning=described)
+                                     max_offset=max_offset, spacing=spacing, t0=t0, notes=notes, cleaning=described,
+                                     guard=guard)
     return {**summary, "out_dir": str(out_dir), "spikes_repaired": [c.n_spikes for c in cleanings]}
 
 
@@ -187,8 +192,41 @@ def add_estimate_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--grid-step", type=GRID_STEP, default=0.05, metavar="M",
                         help="step of the distance grid for drives at different speeds, m (default 0.05; "
                              f"{help_range(GRID_STEP)})")
+    add_guard_options(parser)
     add_limit_options(parser, "each drive CSV")
     add_check(parser, _check)
+
+
+def add_guard_options(parser: argparse.ArgumentParser) -> None:
+    """``--guard-road`` and the named opt-out ``--unguarded-receive`` (``estimate`` and ``vehicle``).
+
+    Parameters
+    ----------
+    parser : argparse.ArgumentParser
+        The parser the options are added to.
+    """
+    parser.add_argument("--guard-road", choices=("class", "own"), default="class",
+                        help="road prior of the receiver guard every received message goes through: 'class' (the "
+                             "ISO 8608 class the estimators are designed for, C; default) or 'own' (the vehicle's own "
+                             "inversion)")
+    parser.add_argument("--unguarded-receive", action="store_true",
+                        help="apply received messages without the receiver guard (the paper's Algorithm 1; a "
+                             "well-formed lie then steers the estimate); recorded in config.json")
+
+
+def receiver_guard(args: argparse.Namespace) -> str | None:
+    """The guard road prior of ``args``, None with ``--unguarded-receive``.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        Parsed options of :func:`add_guard_options`.
+
+    Returns
+    -------
+    str or None
+    """
+    return None if args.unguarded_receive else args.guard_road
 
 
 def _check(args: argparse.Namespace) -> str | None:
@@ -250,7 +288,7 @@ def run(args: argparse.Namespace, command_line: str) -> int:
     """
     summary = estimate_command(args.drive, args.out, command=command_line, limits=file_limits(args),
                                segment_length=args.segment_length, align=args.align, max_offset=args.max_offset,
-                               spacing=args.grid_step)
+                               spacing=args.grid_step, guard=receiver_guard(args))
     for note in summary.get("notes", []):
         print(f"note: {note}")
     n = summary["n_drives"]

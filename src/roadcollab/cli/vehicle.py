@@ -11,6 +11,7 @@ from pathlib import Path
 
 from ._arguments import help_range, ranged
 from ._common import add_limit_options, command_parser, file_limits
+from .estimate import add_guard_options, receiver_guard
 
 _TIMEOUT = ranged("timeout", 0.1, 86_400, "s")
 
@@ -45,6 +46,7 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
     p.add_argument("--broker", required=True, metavar="URL", help="mqtt://HOST:PORT")
     p.add_argument("--timeout", type=_TIMEOUT, default=300.0, metavar="S",
                    help=f"give up after S seconds (default 300; {help_range(_TIMEOUT)})")
+    add_guard_options(p)
     add_limit_options(p, "the drive CSV")
     return p
 
@@ -123,13 +125,16 @@ def run(args: argparse.Namespace, command_line: str) -> int:
     policy = load_aggregation(args.fleet)
     rounds, relay = _secure_side(folder, identity, trust, plan, policy)
     index = int(args.id[1:]) - 1 if args.id[1:].isdigit() else 0
+    if args.unguarded_receive:
+        print(f"{args.id}: --unguarded-receive: waiting messages are applied without the receiver guard", flush=True)
     road_fields, realign = _place_on_road(args.fleet, plan, drive), None
     if road_fields is not None:
         from ..network.fleetroad import align_to_waiting
 
         drive, road_fields = road_fields
         realign = partial(align_to_waiting, index=index)
-    agent = VehicleAgent(VehicleEngine(drive, plan, index=index), identity, trust, hello_extra=road_fields,
+    agent = VehicleAgent(VehicleEngine(drive, plan, index=index, guard=receiver_guard(args)), identity, trust,
+                         hello_extra=road_fields,
                          realign=realign, rounds=rounds, relay_key=relay)
 
     def contributed() -> None:

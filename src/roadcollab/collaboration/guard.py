@@ -75,7 +75,7 @@ from ..errors import MessageError, ParameterError
 from ..lti.batch2x2 import condition_2x2, inv2x2, matmul
 from ..wire.message import ExchangeMessage, InversionMessage
 from .algorithm1 import CollaborativeEstimator
-from .guard_gains import bounded_gains
+from .guard_gains import bounded_gains, third_octave_bands
 
 __all__ = ["GuardReport", "ReceiverGuard", "fleet_guards", "third_octave_bands"]
 
@@ -113,41 +113,6 @@ class GuardReport:
     def refused(self) -> bool:
         """True if any band (or the whole message) was refused."""
         return self.whole_message_refused or bool(self.refused_bands)
-
-
-def third_octave_bands(freqs: np.ndarray, *, min_bins: int = 16) -> list[np.ndarray]:
-    """Partition bins into third-octave bands, merged upwards until each has ``min_bins`` bins.
-
-    Parameters
-    ----------
-    freqs : (K,) ndarray
-        Increasing positive bin frequencies, Hz.
-    min_bins : int
-        Fewest bins per band (the last band absorbs a short remainder).
-
-    Returns
-    -------
-    list of (n_b,) int ndarray
-        Bin indices of each band, in order; together every index once.
-    """
-    min_bins = check_int("min_bins", min_bins, low=1)
-    freqs = np.asarray(freqs, dtype=float)
-    if freqs.ndim != 1 or freqs.size == 0 or not np.all(freqs > 0) or np.any(np.diff(freqs) <= 0):
-        raise ParameterError(f"freqs must be increasing positive frequencies, got shape {freqs.shape}")
-    band_id = np.floor(3.0 * np.log2(freqs / freqs[0]) + 1e-9).astype(int)
-    bands: list[np.ndarray] = []
-    current: list[int] = []
-    for b in np.unique(band_id):
-        current.extend(np.flatnonzero(band_id == b).tolist())
-        if len(current) >= min_bins:
-            bands.append(np.array(current))
-            current = []
-    if current:
-        if bands:
-            bands[-1] = np.concatenate([bands[-1], current])
-        else:
-            bands.append(np.array(current))
-    return bands
 
 
 class ReceiverGuard:
@@ -286,6 +251,11 @@ class ReceiverGuard:
         bad = self._bad_bins(message)
         if bad.all():
             return self._refuse_all(f"T ill-conditioned (cond > {self.max_condition:g}) or not finite on every bin")
+        return self._check_z(z, Y, bad)
+
+    def _check_z(self, z: np.ndarray, Y: np.ndarray, bad: np.ndarray) -> tuple[np.ndarray, GuardReport]:
+        """:meth:`check` of a received ``z`` on the active bins (``bad``: bins refused beforehand)."""
+        est = self.estimator
         act = est.grid.active
         z_own = est.invert(Y)[act]
         with np.errstate(all="ignore"):
@@ -365,7 +335,40 @@ class ReceiverGuard:
             Finite feed-forward spectrum.
         report : GuardReport
         """
-        z, report = self.check(message, Y)
+        return self._feedforward(*self.check(message, Y), Y, sender)
+
+    def feedforward_z(self, z: np.ndarray, Y: np.ndarray, *, sender=None) -> tuple[np.ndarray, GuardReport]:
+        """:meth:`feedforward` of a received road-velocity spectrum instead of a message.
+
+        The recorded-drive path (:func:`~roadcollab.experiments.drives.fleet_estimation.collaborative_velocity`)
+        receives the previous vehicle's elevation on distance; sent through this vehicle's time base it is
+        ``z`` directly (no ``T`` to check), and it is judged and combined exactly as a message's ``z``.
+
+        Parameters
+        ----------
+        z : (K_active, 2) complex ndarray
+            The received band-limited road-velocity spectrum on the active bins, m/s per bin of the
+            unnormalised DFT (non-finite values are refused, not used).
+        Y : (K, 2) complex ndarray
+            The receiver's own record spectrum on the grid.
+        sender : hashable, optional
+            As :meth:`feedforward`.
+
+        Returns
+        -------
+        Wf : (K, 2) complex ndarray
+            Finite feed-forward spectrum.
+        report : GuardReport
+        """
+        K = int(self.estimator.grid.active.sum())
+        z = np.asarray(z)
+        if z.shape != (K, 2):
+            return self._feedforward(*self._refuse_all(f"z must have shape ({K}, 2), got {z.shape}"), Y, sender)
+        return self._feedforward(*self._check_z(z.astype(complex), Y, np.zeros(K, bool)), Y, sender)
+
+    def _feedforward(self, z: np.ndarray, report: GuardReport, Y: np.ndarray, sender
+                     ) -> tuple[np.ndarray, GuardReport]:
+        """The bounded combination of the checked ``z`` (:meth:`feedforward`)."""
         if not self.bounded:
             return self.estimator.wf_from_active_z(z), report
         if sender is not None and not report.whole_message_refused:

@@ -22,9 +22,11 @@ from typing import Sequence
 
 import numpy as np
 
+from .._validation import check_int
+from ..errors import ParameterError
 from ..lti.batch2x2 import matmul, sigma_max_2x2
 
-__all__ = ["bounded_gains"]
+__all__ = ["bounded_gains", "third_octave_bands"]
 
 
 def bounded_gains(estimator, S: np.ndarray, C: np.ndarray, bands: Sequence[np.ndarray], band_expected: np.ndarray,
@@ -76,3 +78,38 @@ def bounded_gains(estimator, S: np.ndarray, C: np.ndarray, bands: Sequence[np.nd
             g = min(g, (np.sqrt(rho) - 1.0) / (beta - 1.0))
         gains[i] = g
     return gains
+
+
+def third_octave_bands(freqs: np.ndarray, *, min_bins: int = 16) -> list[np.ndarray]:
+    """Partition bins into third-octave bands, merged upwards until each has ``min_bins`` bins.
+
+    Parameters
+    ----------
+    freqs : (K,) ndarray
+        Increasing positive bin frequencies, Hz.
+    min_bins : int
+        Fewest bins per band (the last band absorbs a short remainder).
+
+    Returns
+    -------
+    list of (n_b,) int ndarray
+        Bin indices of each band, in order; together every index once.
+    """
+    min_bins = check_int("min_bins", min_bins, low=1)
+    freqs = np.asarray(freqs, dtype=float)
+    if freqs.ndim != 1 or freqs.size == 0 or not np.all(freqs > 0) or np.any(np.diff(freqs) <= 0):
+        raise ParameterError(f"freqs must be increasing positive frequencies, got shape {freqs.shape}")
+    band_id = np.floor(3.0 * np.log2(freqs / freqs[0]) + 1e-9).astype(int)
+    bands: list[np.ndarray] = []
+    current: list[int] = []
+    for b in np.unique(band_id):
+        current.extend(np.flatnonzero(band_id == b).tolist())
+        if len(current) >= min_bins:
+            bands.append(np.array(current))
+            current = []
+    if current:
+        if bands:
+            bands[-1] = np.concatenate([bands[-1], current])
+        else:
+            bands.append(np.array(current))
+    return bands

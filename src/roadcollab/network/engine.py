@@ -25,7 +25,7 @@ import numpy as np
 from ..errors import ParameterError
 from ..experiments.drives.distance_maps import band_limit_stretch, covered, elevation_to_distance
 from ..experiments.drives.estimation import integrate_elevation
-from ..experiments.drives.fleet_estimation import collaborative_velocity, invert_drive
+from ..experiments.drives.fleet_estimation import GUARD_ROAD_DEFAULT, collaborative_velocity, invert_drive
 from ..io.drives import Drive
 from .plan import RoadPlan
 
@@ -117,6 +117,10 @@ class VehicleEngine:
         The fleet's grid, segments and design.
     index : int
         0-based vehicle number (only names the design's Vehicle).
+    guard : {"class", "own"} or None
+        Road prior of the receiver guard every waiting elevation goes through
+        (:func:`~roadcollab.experiments.drives.fleet_estimation.invert_drive`); None: unguarded, the named opt-out
+        (``roadcollab vehicle --unguarded-receive``).
 
     Raises
     ------
@@ -125,11 +129,12 @@ class VehicleEngine:
         band-limited estimates are blank, as in estimate_fleet).
     """
 
-    def __init__(self, drive: Drive, plan: RoadPlan, *, index: int = 0) -> None:
+    def __init__(self, drive: Drive, plan: RoadPlan, *, index: int = 0, guard: str | None = GUARD_ROAD_DEFAULT
+                 ) -> None:
         if not isinstance(drive, Drive):
             raise ParameterError(f"drive must be a Drive, got {type(drive).__name__}")
-        self.drive, self.plan = drive, plan
-        self.rec = invert_drive(drive, gamma=plan.gamma, band_low_hz=plan.band_low_hz, index=index)
+        self.drive, self.plan, self.guard = drive, plan, guard
+        self.rec = invert_drive(drive, gamma=plan.gamma, band_low_hz=plan.band_low_hz, index=index, guard=guard)
         dx = plan.spacing
         # The indices distance_grid gives for this drive alone: the grid is multiples of dx, so a
         # drive's points are the same whichever other drives share the grid.

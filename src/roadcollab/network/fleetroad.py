@@ -49,6 +49,7 @@ from ..geo.network import RoadNetwork, read_network
 from ..geo.segments import segment_bounds, segment_lonlat
 from ..io.drives import Drive
 from ..models.iri import IRISegments, iri
+from ..experiments.drives.fleet_estimation import GUARD_ROAD_DEFAULT
 from .engine import VehicleEngine
 from .plan import RoadPlan
 
@@ -339,15 +340,16 @@ def align_to_waiting(engine: VehicleEngine, waiting: dict, *, index: int = 0, ma
         return engine
     d = engine.drive
     moved = dataclasses.replace(d, positions=d.positions - lag, start_m=float(d.positions[0] - lag))
-    return _Announced(moved, engine.plan, index=index, announced=engine.segments)
+    return _Announced(moved, engine.plan, index=index, announced=engine.segments, guard=engine.guard)
 
 
 class _Announced(VehicleEngine):
     """A realigned engine: it contributes only on the segments the hello announced (the service refuses
     others); a segment the shift moved it off is then "empty" for the agent."""
 
-    def __init__(self, drive: Drive, plan: RoadPlan, *, index: int, announced: list[int]) -> None:
-        super().__init__(drive, plan, index=index)
+    def __init__(self, drive: Drive, plan: RoadPlan, *, index: int, announced: list[int],
+                 guard: str | None = GUARD_ROAD_DEFAULT) -> None:
+        super().__init__(drive, plan, index=index, guard=guard)
         self.announced = frozenset(announced)
 
     def contributions(self, waiting: dict | None = None) -> list:

@@ -17,7 +17,7 @@ import numpy as np
 from ..errors import ParameterError
 from ..experiments.config import ExperimentConfig
 from ..experiments.drives.distance_maps import distance_grid
-from ..experiments.drives.fleet_estimation import FleetEstimates
+from ..experiments.drives.fleet_estimation import GUARD_ROAD_DEFAULT, FleetEstimates
 from ..wire.identity import FleetAuthority, VehicleIdentity
 from ..privacy.secagg_store import SessionLedger
 from .agent import VehicleAgent
@@ -58,7 +58,7 @@ def _pump_all(service: Service, svc, cars: dict, agents: dict, offline, limit: i
 
 def run_in_memory(drives, plan: RoadPlan, *, store: ServiceStore | None = None, authority: FleetAuthority | None = None,
                   on_fused=None, road=None, aggregation: AggregationPolicy | None = None, offline=(),
-                  timeouts: int = 50) -> tuple[ServiceStore, MemoryBroker]:
+                  timeouts: int = 50, guard: str | None = GUARD_ROAD_DEFAULT) -> tuple[ServiceStore, MemoryBroker]:
     """Every drive through the service over the in-memory transport, in order.
 
     Parameters
@@ -82,6 +82,9 @@ def run_in_memory(drives, plan: RoadPlan, *, store: ServiceStore | None = None, 
         Secure aggregation: vehicles that vanish once they have contributed (they answer no round message).
     timeouts : int
         Secure aggregation: service timeouts at most (each closes every open phase with what arrived).
+    guard : {"class", "own"} or None
+        Every vehicle's receiver guard road prior (:class:`~roadcollab.network.engine.VehicleEngine`); None:
+        unguarded (the opt-out).
 
     Returns
     -------
@@ -104,14 +107,15 @@ def run_in_memory(drives, plan: RoadPlan, *, store: ServiceStore | None = None, 
         svc.subscribe(f)
     if rounds is not None:
         return _run_secure(drives, plan, store, authority, service, broker, svc, aggregation, set(offline), timeouts,
-                           road)
+                           road, guard)
     for j, d in enumerate(drives):
         extra = realign = None
         if road is not None:
             d, extra = road.place(d)
             realign = functools.partial(align_to_waiting, index=j)
-        agent = VehicleAgent(VehicleEngine(d, plan, index=j), VehicleIdentity.enroll(authority, f"v{j + 1}"),
-                             authority.trust(), hello_extra=extra, realign=realign)
+        agent = VehicleAgent(VehicleEngine(d, plan, index=j, guard=guard),
+                             VehicleIdentity.enroll(authority, f"v{j + 1}"), authority.trust(), hello_extra=extra,
+                             realign=realign)
         car = broker.client()
         for f in agent.subscriptions:
             car.subscribe(f)
@@ -123,7 +127,8 @@ def run_in_memory(drives, plan: RoadPlan, *, store: ServiceStore | None = None, 
     return store, broker
 
 
-def _run_secure(drives, plan, store, authority, service, broker, svc, policy, offline, timeouts, road=None):
+def _run_secure(drives, plan, store, authority, service, broker, svc, policy, offline, timeouts, road=None,
+                guard=GUARD_ROAD_DEFAULT):
     trust = authority.trust()
     relay = RelayKey.generate()
     agents, cars = {}, {}
@@ -134,7 +139,7 @@ def _run_secure(drives, plan, store, authority, service, broker, svc, policy, of
         if road is not None:
             d, extra = road.place(d)
             realign = functools.partial(align_to_waiting, index=j)
-        agent = VehicleAgent(VehicleEngine(d, plan, index=j), ident, trust, rounds=rounds, relay_key=relay,
+        agent = VehicleAgent(VehicleEngine(d, plan, index=j, guard=guard), ident, trust, rounds=rounds, relay_key=relay,
                              hello_extra=extra, realign=realign)
         car = broker.client()
         for f in agent.subscriptions:
@@ -158,7 +163,8 @@ def _run_secure(drives, plan, store, authority, service, broker, svc, policy, of
 
 
 def estimate_fleet_in_memory(drives, *, spacing: float = 0.05, gamma: float | None = None,
-                             band_low_hz: float | None = None) -> FleetEstimates:
+                             band_low_hz: float | None = None, guard: str | None = GUARD_ROAD_DEFAULT
+                             ) -> FleetEstimates:
     """:func:`~roadcollab.experiments.drives.fleet_estimation.estimate_fleet` (unaligned, no fleet prior) through
     the service and the vehicles over the in-memory transport: what ``roadcollab estimate`` runs.
 
@@ -174,6 +180,8 @@ def estimate_fleet_in_memory(drives, *, spacing: float = 0.05, gamma: float | No
         Distance grid step, m.
     gamma, band_low_hz : float, optional
         Observer parameter and band edge (Hz); default the ExperimentConfig defaults.
+    guard : {"class", "own"} or None
+        Every vehicle's receiver guard road prior, as ``estimate_fleet(..., guard=)``; None: unguarded.
 
     Returns
     -------
@@ -190,9 +198,10 @@ def estimate_fleet_in_memory(drives, *, spacing: float = 0.05, gamma: float | No
     vmin = min(float(d.speeds().min()) for d in drives)
     plan = RoadPlan(fleet_id="estimate", spacing=spacing, segment_length=spacing * max(16, round(100.0 / spacing)),
                     min_speed=vmin, band_low_hz=band_low_hz, gamma=gamma)
-    store, _ = run_in_memory(drives, plan)
+    store, _ = run_in_memory(drives, plan, guard=guard)
     r = results_from_store(store)
     V = len(drives)
     return FleetEstimates(drives=list(drives), position=r.position, spacing=float(spacing), elevation=r.elevation,
                           offsets=np.zeros(V), offset_peaks=np.full(V, np.nan), band_low_per_m=plan.band_low_per_m,
-                          band_low_hz=float(band_low_hz), gamma=float(gamma), aligned=False)
+                          band_low_hz=float(band_low_hz), gamma=float(gamma), aligned=False,
+                          receiver_guard=guard or "none")

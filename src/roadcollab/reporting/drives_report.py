@@ -124,6 +124,7 @@ def _write_config_json(est: DriveEstimates, path: Path, *, command: str, notes: 
                              "note": "noise model of ExperimentConfig(speed, sample_rate, sensor_noise_std)"},
         "anomaly_detector": detector_config,
         "n_windows": est.n_windows,
+        "receiver_guard": est.receiver_guard,
         "cleaning": cleaning,
     }
     extra = {"notes": notes}

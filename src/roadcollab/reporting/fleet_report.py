@@ -162,7 +162,8 @@ def write_fleet_estimates(est: FleetEstimates, out, *, command: str, anomalies: 
         np.where(est.coverage[:, None] > 0, 0.0, np.nan))))
     config = {"drives": [d.describe() for d in est.drives], "grid": "distance", "spacing_m": est.spacing,
               "band_low_per_m": est.band_low_per_m, "band_low_hz": est.band_low_hz, "gamma": est.gamma,
-              "aligned": est.aligned, "offsets_m": est.offsets.tolist(), "cleaning": cleaning}
+              "aligned": est.aligned, "offsets_m": est.offsets.tolist(), "cleaning": cleaning,
+              "receiver_guard": est.receiver_guard}
     write_config(out / "config.json", command=command, seed=None, config=config,
                  extra={"notes": notes, **({"elapsed_s": elapsed} if elapsed is not None else {})})
     band_note = (f"The elevation holds wavelengths below about {1 / est.band_low_per_m:.3g} m only; the Golden Car "

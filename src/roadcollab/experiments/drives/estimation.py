@@ -1,7 +1,7 @@
 """Road estimates from recorded drives: the relay of Algorithm 1 down the drives, elevations, anomalies.
 
 The drives are read by :mod:`roadcollab.io.drives`; this module runs the estimators on them exactly
-as the in-memory pipeline (:func:`roadcollab.experiments.reproduction.study.run_estimates`) does.
+as the in-memory pipeline (:func:`roadcollab.experiments.reproduction.run_estimates`) does.
 
 Processing
 ----------
@@ -12,14 +12,14 @@ Processing
 * One :class:`~roadcollab.collaboration.algorithm1.CollaborativeEstimator` per drive with
   ``Vehicle(index=j, true_params=p, estimated_params=p)`` (the true parameters of a real car are
   unknown; only the estimated ones are used, ``oracle=False``), observer gamma and band edge from
-  the :class:`~roadcollab.experiments.reproduction.study.ExperimentConfig` defaults (512, 0.5 Hz), on
+  the :class:`~roadcollab.experiments.reproduction.ExperimentConfig` defaults (512, 0.5 Hz), on
   ``SegmentGrid(n_samples, sample_rate, band_low_hz=0.5)``.
 * Per drive ``k``: ``single`` = the vehicle's own observer ``D_k y_k``; ``collaborative`` =
   Algorithm 1 with the message of drive ``k - 1`` (drive 1: the observer only, so equal to
   ``single``); ``fused`` = the running average of the band-limited inversions ``z`` of drives
   1..k (:meth:`~roadcollab.collaboration.algorithm1.CollaborativeEstimator.fused_message`).
 * Every road-velocity output is band-limited by the grid's band weight ``W`` exactly as
-  :func:`~roadcollab.experiments.reproduction.study.run_estimates` does (DC and everything well below 0.5 Hz is
+  :func:`~roadcollab.experiments.reproduction.run_estimates` does (DC and everything well below 0.5 Hz is
   invisible to accelerometers and is not estimated).
 * Elevation: :func:`integrate_elevation` of the band-limited road velocity, mean removed. It is
   defined only up to a slow drift: wavelengths above ``speed / 0.5 Hz`` (30 m at 15 m/s) are not
@@ -40,6 +40,7 @@ import numpy as np
 
 from ..._validation import check_int, check_positive, check_signal
 from ...collaboration.algorithm1 import CollaborativeEstimator
+from ...collaboration.drive_guard import GUARD_ROAD_DEFAULT, drive_fleet_prior, drive_guard
 from ...collaboration.relay import Relay
 from ...detection.detector import DetectorSpec, detect_anomalies
 from ...errors import FileFormatError, ParameterError
@@ -159,6 +160,8 @@ class DriveEstimates:
         velocity (m/s) and its elevation (m), columns ``[left, right]``.
     gamma, band_low_hz : float
         Observer parameter and band edge used.
+    receiver_guard : str
+        The receiver guards' road prior (``"class"``, ``"own"``) or ``"none"`` (``guard=None``, the opt-out).
     n_windows : int
         Overlapping windows the record was estimated in (1: in one piece).
     """
@@ -175,6 +178,7 @@ class DriveEstimates:
     gamma: float
     band_low_hz: float
     n_windows: int = 1
+    receiver_guard: str = GUARD_ROAD_DEFAULT
 
     @property
     def truncated(self) -> bool:
@@ -293,14 +297,15 @@ def window_slices(n: int, length: int, margin: int) -> list[tuple[int, int, int,
     return out
 
 
-def _relay_window(drives: list[Drive], cars: list, grid: SegmentGrid, lo: int, hi: int) -> dict:
-    """Band-limited single, collaborative and fused road velocities (m/s) of samples ``[lo, hi)``."""
+def _relay_window(drives: list[Drive], cars: list, grid: SegmentGrid, lo: int, hi: int, *, unguarded: bool) -> dict:
+    """Band-limited single, collaborative and fused road velocities (m/s) of samples ``[lo, hi)``, every
+    message through the cars' attached guards unless ``unguarded``."""
     n = hi - lo
     ys = [d.accel[lo:hi] for d in drives]
     Ys = [grid.rfft(y) for y in ys]
     try:
-        plain = Relay(cars, "none", unguarded=True).run(ys, spectra=Ys)
-        fused = Relay(cars, "fused").run(ys, spectra=Ys)
+        plain = Relay(cars, "none", unguarded=unguarded).run(ys, spectra=Ys)
+        fused = Relay(cars, "fused", unguarded=unguarded).run(ys, spectra=Ys)
     except (ValueError, np.linalg.LinAlgError, ArithmeticError) as err:  # a degenerate model mid-relay
         raise FileFormatError(f"{', '.join(str(d.params_path) for d in drives)}: the relay failed on these "
                               f"drives' vehicle models ({type(err).__name__}: {err}); check the [vehicle] "
@@ -310,11 +315,24 @@ def _relay_window(drives: list[Drive], cars: list, grid: SegmentGrid, lo: int, h
             "fused": np.array([grid.band_limited(s.estimate_spectrum, n) for s in fused])}
 
 
+def _attach_guards(drives: list[Drive], cars: list, windows: list, *, road: str, speed: float, sample_rate: float,
+                   gamma: float, band_low_hz: float) -> None:
+    """Every car's receiver guard from its drive's own priors (:mod:`roadcollab.collaboration.drive_guard`)."""
+    for d, car in zip(drives, cars):
+        if car.fleet is None:
+            car.fleet = drive_fleet_prior(d.params)
+        noise = ExperimentConfig(speed=speed, sample_rate=sample_rate, sensor_noise_std=d.sensor_noise_std,
+                                 gamma=gamma, band_low_hz=band_low_hz).noise_model()
+        spectra = [car.grid.rfft(d.accel[lo:hi]) for lo, hi, _, _ in windows] if road == "own" else ()
+        drive_guard(car, noise, d.sensor_noise_std, road=road, spectra=spectra)
+
+
 def estimate_drives(drives: list[Drive], *, gamma: float | None = None, band_low_hz: float | None = None,
-                    window: int | None = None, margin_s: float | None = None) -> DriveEstimates:
+                    window: int | None = None, margin_s: float | None = None,
+                    guard: str | None = GUARD_ROAD_DEFAULT) -> DriveEstimates:
     """Run the single-vehicle, collaborative (Algorithm 1) and fused estimators down the drives.
 
-    Relays through the same engine as :func:`roadcollab.experiments.reproduction.study.run_estimates`
+    Relays through the same engine as :func:`roadcollab.experiments.reproduction.run_estimates`
     (:class:`roadcollab.collaboration.relay.Relay`, same estimator design, grid and band limiting), so
     simulated drives give the in-memory estimates.
 
@@ -325,12 +343,16 @@ def estimate_drives(drives: list[Drive], *, gamma: float | None = None, band_low
         others go to :func:`roadcollab.experiments.drives.fleet_estimation.estimate_fleet`.
     gamma, band_low_hz : float, optional
         Observer parameter and band edge (Hz). Default: the
-        :class:`~roadcollab.experiments.reproduction.study.ExperimentConfig` defaults (512, 0.5 Hz).
+        :class:`~roadcollab.experiments.reproduction.ExperimentConfig` defaults (512, 0.5 Hz).
     window : int, optional
         Longest record estimated in one piece, samples (default :data:`DEFAULT_WINDOW`); a longer
         one is estimated in overlapping windows of this length (:func:`window_slices`).
     margin_s : float, optional
         Overlap on either side of a window's core, s (default ``DEFAULT_MARGIN_PERIODS / band_low_hz``).
+    guard : {"class", "own"} or None
+        Road prior of every vehicle's receiver guard (:func:`_attach_guards`): each received message (the
+        relay's exchange and the fused running average) goes through it; None: the paper's Algorithm 1
+        unguarded (``roadcollab estimate --unguarded-receive``).
 
     Returns
     -------
@@ -363,15 +385,18 @@ def estimate_drives(drives: list[Drive], *, gamma: float | None = None, band_low
     cars = _drive_estimators(drives, grid, speed=speed, sample_rate=fs, gamma=gamma, band_low_hz=band_low_hz)
     velocity = {k: np.zeros((len(drives), n, 2)) for k in ESTIMATORS}
     windows = window_slices(n, length, margin)
+    if guard is not None:
+        _attach_guards(drives, cars, windows, road=guard, speed=speed, sample_rate=fs, gamma=gamma,
+                       band_low_hz=band_low_hz)
     for lo, hi, c0, c1 in windows:
-        part = _relay_window(drives, cars, grid, lo, hi)
+        part = _relay_window(drives, cars, grid, lo, hi, unguarded=guard is None)
         for k in ESTIMATORS:
             velocity[k][:, c0:c1] = part[k][:, c0 - lo:c1 - lo]
     elevation = {k: np.array([integrate_elevation(x, fs) for x in v]) for k, v in velocity.items()}
     t = np.arange(n) / fs
     return DriveEstimates(drives=list(drives), sample_rate=fs, speed=speed, start_m=d0.start_m, n_samples=n, time=t,
                           positions=d0.start_m + speed * t, velocity=velocity, elevation=elevation, gamma=float(gamma),
-                          band_low_hz=float(band_low_hz), n_windows=len(windows))
+                          band_low_hz=float(band_low_hz), n_windows=len(windows), receiver_guard=guard or "none")
 
 
 def find_anomalies(est: DriveEstimates, spec=None) -> list[AnomalyRow]:

@@ -1,7 +1,7 @@
 """Road estimates from drives at different speeds, rates and starts, on one uniform distance grid.
 
 Approach (kernels in :mod:`roadcollab.experiments.drives.distance_maps`)
--------------------------------------------------------------------------
+------------------------------------------------------------------
 A vehicle's suspension is time-invariant in its own time, not in distance, so **every inversion
 runs in the vehicle's own time base**: vehicle ``j`` is designed (Lemma 1) at a constant speed,
 its mean speed, on ``SegmentGrid(N_j, rate_j)``; its observer ``D_j y_j``, its offline inversion
@@ -42,47 +42,22 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ...collaboration.algorithm1 import CollaborativeEstimator
+from ...collaboration.drive_guard import GUARD_ROAD_DEFAULT
 from ...detection.detector import DetectorSpec, detect_anomalies
-from ...errors import FileFormatError, ParameterError
-from ...estimation.grid import SegmentGrid
+from ...errors import ParameterError
 from ...io.drives import Drive
 from ...models.iri import IRISegments, iri_segments
-from ...models.vehicle import FleetSpec, Vehicle
+from ...models.vehicle import FleetSpec
 from ..config import ExperimentConfig
-from .distance_maps import band_limit_stretch, covered, distance_grid, elevation_at, elevation_to_distance, \
-    estimate_offset
-from .estimation import AnomalyRow, integrate_elevation, window_plan, window_slices
+from .distance_maps import band_limit_stretch, covered, distance_grid, elevation_to_distance, estimate_offset
+from .estimation import AnomalyRow, integrate_elevation
+from .relay import VehicleRecord, collaborative_velocity, invert_drive, received_spectra, velocity_from_spectra
 
 __all__ = ["FLEET_ESTIMATORS", "FleetEstimates", "VehicleRecord", "invert_drive", "estimate_fleet",
            "find_fleet_anomalies", "fused_iri", "drive_stretches", "covered_runs",
-           "collaborative_velocity"]
+           "collaborative_velocity", "received_spectra", "velocity_from_spectra", "GUARD_ROAD_DEFAULT"]
 
 FLEET_ESTIMATORS = ("single", "inversion", "collaborative", "fused")
-
-
-@dataclass(frozen=True, eq=False)
-class VehicleRecord:
-    """One drive's estimator and its estimates in its own time base.
-
-    Attributes
-    ----------
-    car : CollaborativeEstimator
-        Designed at the drive's mean speed on ``SegmentGrid(L, rate)``, ``L`` the window length
-        (``N`` for a record of at most one window).
-    windows : list of (lo, hi, c0, c1)
-        The windows and cores of :func:`~roadcollab.experiments.drives.estimation.window_slices`.
-    w_single, w_inversion : (N, 2) ndarray
-        Observer and offline-inversion road velocities, m/s.
-    w_posterior : (N, 2) ndarray or None
-        Posterior-mean inversion (only with a fleet prior), m/s.
-    """
-
-    car: CollaborativeEstimator
-    windows: list
-    w_single: np.ndarray
-    w_inversion: np.ndarray
-    w_posterior: np.ndarray | None
 
 
 @dataclass(frozen=True, eq=False)
@@ -109,6 +84,8 @@ class FleetEstimates:
         Band edge in time and observer parameter.
     aligned : bool
         True if the offsets were estimated.
+    receiver_guard : str
+        The receiver guards' road prior (``"class"``, ``"own"``) or ``"none"`` (``guard=None``, the opt-out).
     """
 
     drives: list
@@ -121,6 +98,7 @@ class FleetEstimates:
     band_low_hz: float
     gamma: float
     aligned: bool
+    receiver_guard: str = GUARD_ROAD_DEFAULT
 
     @property
     def fused(self) -> np.ndarray:
@@ -133,104 +111,9 @@ class FleetEstimates:
         return np.sum([covered(e) for e in self.elevation["inversion"]], axis=0)
 
 
-def invert_drive(drive: Drive, *, gamma: float, band_low_hz: float, fleet: FleetSpec | None = None,
-                 index: int = 0, window: int | None = None, margin_s: float | None = None) -> VehicleRecord:
-    """Design vehicle ``index``'s estimator for one drive and invert its record in its own time.
-
-    Parameters
-    ----------
-    drive : Drive
-    gamma, band_low_hz : float
-        Observer parameter and band edge (Hz).
-    fleet : FleetSpec, optional
-        A fleet prior; if given, the posterior-mean inversion is also computed.
-    index : int
-        0-based vehicle number.
-    window, margin_s : int and float, optional
-        Longest record inverted in one piece (samples) and the windows' margin (s), as
-        :func:`~roadcollab.experiments.drives.estimation.estimate_drives`.
-
-    Returns
-    -------
-    VehicleRecord
-
-    Raises
-    ------
-    FileFormatError
-        The design rejects the vehicle's parameters (message starts with the parameters file).
-    """
-    n, fs = drive.n_samples, drive.sample_rate
-    length, margin = window_plan(n, fs, band_low_hz, window, margin_s)
-    grid = SegmentGrid(length, fs, band_low_hz=band_low_hz)
-    try:
-        cfg = ExperimentConfig(speed=drive.speed, sample_rate=fs, sensor_noise_std=drive.sensor_noise_std,
-                               gamma=gamma, band_low_hz=band_low_hz)
-        vehicle = Vehicle(index=index, true_params=drive.params, estimated_params=drive.params)
-        car = CollaborativeEstimator(vehicle, cfg.noise_model(), grid, gamma=gamma, fleet=fleet)
-    except ParameterError as err:
-        raise ParameterError(f"{drive.params_path}: {err}") from None
-    except (ValueError, np.linalg.LinAlgError, ArithmeticError) as err:  # e.g. "Singular matrix"
-        raise FileFormatError(f"{drive.params_path}: no estimator can be designed for this vehicle at "
-                              f"{drive.speed:g} m/s and {fs:g} Hz ({type(err).__name__}: {err}); check the "
-                              "[vehicle] parameters") from None
-    single, inversion = np.zeros((n, 2)), np.zeros((n, 2))
-    post = np.zeros((n, 2)) if fleet is not None else None
-    windows = window_slices(n, length, margin)
-    # Every road velocity passes W_reg (DC regularisation, corner band_low_hz / 2) in its own window
-    # before the windows are joined: what is below it (a window's own drift) is not observed and
-    # must not leak across window joints. The band limit on distance (from band_low_hz at the
-    # slowest speed) comes after; W W_reg is within 0.5 % of W in band.
-    reg = grid.reg_weight[:, None]
-    for lo, hi, c0, c1 in windows:
-        Y = grid.rfft(drive.accel[lo:hi])
-        core = slice(c0 - lo, c1 - lo)
-        single[c0:c1] = grid.irfft(reg * car.estimate(None, Y=Y).W_obs, length)[core]
-        inversion[c0:c1] = grid.irfft(reg * car.invert(Y), length)[core]
-        if post is not None:
-            post[c0:c1] = grid.irfft(reg * car.invert(Y, posterior=True), length)[core]
-    return VehicleRecord(car=car, windows=windows, w_single=single, w_inversion=inversion, w_posterior=post)
-
-
 def _to_grid(drive: Drive, w: np.ndarray, x: np.ndarray, shift: float) -> np.ndarray:
     """Elevation of a road velocity in the drive's time base, on the distance grid ``x`` (NaN outside)."""
     return elevation_to_distance(drive.positions + shift, integrate_elevation(w, drive.sample_rate), x)
-
-
-def collaborative_velocity(rec: VehicleRecord, drive: Drive, x: np.ndarray, previous: np.ndarray, shift: float
-                           ) -> np.ndarray:
-    """Algorithm 1's road velocity with the previous drive's elevation sent through distance.
-
-    The one implementation :func:`estimate_fleet` and the networked engine
-    (:class:`roadcollab.network.engine.VehicleEngine`) share, window by window as :func:`invert_drive`.
-
-    Parameters
-    ----------
-    rec : VehicleRecord
-        This vehicle's estimator and windows.
-    drive : Drive
-        This vehicle's drive.
-    x : (m,) ndarray
-        Distance grid of ``previous``, m.
-    previous : (m, 2) ndarray
-        The previous vehicle's band-limited elevation on ``x``, m (NaN where it did not pass).
-    shift : float
-        Start offset applied to this drive's positions, m.
-
-    Returns
-    -------
-    (N, 2) ndarray
-        Road velocity in this vehicle's time base, m/s.
-    """
-    grid = rec.car.grid
-    h = elevation_at(x, previous, drive.positions + shift)
-    w = np.zeros_like(h)
-    w[:-1] = np.diff(h, axis=0) * drive.sample_rate       # w[k] = (h[k + 1] - h[k]) rate, this vehicle's time
-    out = np.zeros_like(h)
-    for lo, hi, c0, c1 in rec.windows:
-        Z = grid.reg_weight[:, None] * grid.rfft(w[lo:hi])
-        W_hat = rec.car.estimate(None, Y=grid.rfft(drive.accel[lo:hi]), Wf=rec.car.wf_from_z(Z)).W_hat
-        out[c0:c1] = grid.irfft(grid.reg_weight[:, None] * W_hat, hi - lo)[c0 - lo:c1 - lo]   # as invert_drive
-    return out
 
 
 def _align(band_inv: list[np.ndarray], dx: float, max_offset: float) -> tuple[np.ndarray, np.ndarray]:
@@ -269,7 +152,8 @@ def _running_mean(stack: list[np.ndarray]) -> np.ndarray:
 
 def estimate_fleet(drives: list[Drive], *, spacing: float = 0.05, align: bool = False, max_offset: float = 10.0,
                    gamma: float | None = None, band_low_hz: float | None = None, fleet: FleetSpec | None = None,
-                   window: int | None = None, margin_s: float | None = None) -> FleetEstimates:
+                   window: int | None = None, margin_s: float | None = None,
+                   guard: str | None = GUARD_ROAD_DEFAULT) -> FleetEstimates:
     """Every drive's estimates and the fused elevation on one uniform distance grid (module docstring).
 
     Parameters
@@ -290,6 +174,8 @@ def estimate_fleet(drives: list[Drive], *, spacing: float = 0.05, align: bool = 
     window, margin_s : int and float, optional
         Longest record inverted in one piece (samples) and the windows' margin (s), as
         :func:`~roadcollab.experiments.drives.estimation.estimate_drives`.
+    guard : {"class", "own"} or None
+        Road prior of every drive's receiver guard (:func:`invert_drive`); None: unguarded (the opt-out).
 
     Returns
     -------
@@ -306,7 +192,7 @@ def estimate_fleet(drives: list[Drive], *, spacing: float = 0.05, align: bool = 
     gamma = base.gamma if gamma is None else gamma
     band_low_hz = base.band_low_hz if band_low_hz is None else band_low_hz
     recs = [invert_drive(d, gamma=gamma, band_low_hz=band_low_hz, fleet=fleet, index=j, window=window,
-                         margin_s=margin_s) for j, d in enumerate(drives)]
+                         margin_s=margin_s, guard=guard) for j, d in enumerate(drives)]
     n_low = band_low_hz / min(float(d.speeds().min()) for d in drives)
     pad = max_offset if align else 0.0
     x = distance_grid([d.positions[0] - pad for d in drives], [d.positions[-1] + pad for d in drives], spacing)
@@ -327,7 +213,8 @@ def estimate_fleet(drives: list[Drive], *, spacing: float = 0.05, align: bool = 
                  "fused": _running_mean(fuse_from)}
     return FleetEstimates(drives=list(drives), position=x, spacing=float(spacing), elevation=elevation,
                           offsets=offsets, offset_peaks=peaks, band_low_per_m=float(n_low),
-                          band_low_hz=float(band_low_hz), gamma=float(gamma), aligned=bool(align))
+                          band_low_hz=float(band_low_hz), gamma=float(gamma), aligned=bool(align),
+                          receiver_guard=guard or "none")
 
 
 def find_fleet_anomalies(est: FleetEstimates, spec: DetectorSpec | None = None) -> list[AnomalyRow]:
