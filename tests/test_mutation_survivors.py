@@ -86,3 +86,48 @@ def test_detector_confidence_is_the_stated_logistic_of_the_snr():
     expected = 1.0 / (1.0 + np.exp(-(snr - mid) / scale))
     np.testing.assert_allclose(spec.confidence(snr), expected, rtol=1e-12)
     assert spec.confidence(mid) == 0.5
+
+
+# --- detector._merge_tracks (third pass, docs/mutation.md): the stated pairing rule of the module docstring,
+# step 5: left/right detections whose centers are within merge_tolerance pair closest first; a pair is cross-talk
+# when the weaker depth is *below* crosstalk_ratio times the stronger; else it merges if the kinds agree; a
+# detection pairs at most once; the rest are reported one-sided. Candidates are (snr, kind, start, length, depth).
+
+def _cand(center, depth=0.05, kind="pothole", length=0.5, snr=8.0):
+    return (snr, kind, center - 0.5 * length, length, depth)
+
+
+def _sides(dets):
+    return sorted((d.side, d.position) for d in dets)
+
+
+def test_merge_pairs_the_closest_centers_first_and_each_detection_once():
+    from roadcollab.detection.detector import DetectorSpec, _merge_tracks
+    spec = DetectorSpec()
+    # Right candidates 0.25 m and 0.375 m from the left one (both within 0.5 m): the closer one merges.
+    out = _merge_tracks([[_cand(10.0)], [_cand(9.625), _cand(10.25)]], spec)
+    assert _sides(out) == [("both", 10.125), ("right", 9.625)]
+    # A pair skipped because its left member is taken does not end the pairing: a later, farther pair merges.
+    out = _merge_tracks([[_cand(10.0), _cand(30.0)], [_cand(9.625), _cand(10.25), _cand(30.4375)]], spec)
+    assert _sides(out) == [("both", 10.125), ("both", 30.21875), ("right", 9.625)]
+
+
+def test_merge_keeps_the_sides_apart_when_checking_what_is_taken():
+    from roadcollab.detection.detector import DetectorSpec, _merge_tracks
+    # Left 0 pairs with right 1 first; left 1 must still pair with right 0 (index 1 is taken only on the right).
+    out = _merge_tracks([[_cand(10.0), _cand(20.0)], [_cand(20.125), _cand(10.0625)]], DetectorSpec())
+    assert _sides(out) == [("both", 10.03125), ("both", 20.0625)]
+
+
+def test_merge_tolerance_and_crosstalk_ratio_boundaries():
+    from roadcollab.detection.detector import DetectorSpec, _merge_tracks
+    spec = DetectorSpec()
+    far = spec.merge_tolerance          # 0.5 m, exact in binary: centers exactly that far apart merge
+    assert _sides(_merge_tracks([[_cand(10.0)], [_cand(10.0 + far)]], spec)) == [("both", 10.0 + far / 2)]
+    # Weaker depth exactly crosstalk_ratio times the stronger: not below it, so not cross-talk: merged.
+    d = 0.5
+    out = _merge_tracks([[_cand(10.0, depth=d)], [_cand(10.0, depth=spec.crosstalk_ratio * d)]], spec)
+    assert _sides(out) == [("both", 10.0)]
+    # Just below it: cross-talk, only the stronger side is reported.
+    out = _merge_tracks([[_cand(10.0, depth=d)], [_cand(10.0, depth=0.99 * spec.crosstalk_ratio * d)]], spec)
+    assert _sides(out) == [("left", 10.0)]

@@ -16,8 +16,8 @@ import matplotlib.pyplot as plt  # noqa: E402
 __all__ = ["plt", "save_figure", "legend_outside"]
 
 
-def save_figure(fig, path) -> Path:
-    """Lay out ``fig``, write it to ``path`` at 120 dpi and close it.
+def save_figure(fig, path, *, dpi: float = 120, tight: bool = True) -> Path:
+    """Lay out ``fig``, write it to ``path`` (120 dpi by default) and close it.
 
     Parameters
     ----------
@@ -25,6 +25,10 @@ def save_figure(fig, path) -> Path:
         The finished figure.
     path : str or Path
         Output image (format from the suffix).
+    dpi : float
+        Resolution, dots per inch.
+    tight : bool
+        Apply ``tight_layout`` first (False for figures laid out by a layout engine of their own).
 
     Returns
     -------
@@ -32,8 +36,9 @@ def save_figure(fig, path) -> Path:
         ``path``.
     """
     path = Path(path)
-    fig.tight_layout()
-    fig.savefig(path, dpi=120)
+    if tight:
+        fig.tight_layout()
+    fig.savefig(path, dpi=dpi)
     plt.close(fig)
     return path
 
