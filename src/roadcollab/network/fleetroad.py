@@ -247,6 +247,11 @@ def check_hello(plan: RoadPlan, hello: dict) -> None:
     ------
     MessageError
     """
+    if plan.road_id == "*":                              # every road of the network (network/fleetlanes.py)
+        if hello.get("road_id") != "*":
+            raise MessageError(f"hello: fleet {plan.fleet_id!r} surveys every road of its network; expected "
+                               f"road_id '*' (a drive placed on its roads by its GPS), got {hello.get('road_id')!r}")
+        return
     if plan.road_id and (hello.get("road_id") != plan.road_id or hello.get("road_direction") != 1):
         raise MessageError(f"hello: fleet {plan.fleet_id!r} surveys road {plan.road_id!r} forward; expected "
                            f"road_id {plan.road_id!r} and road_direction 1 (a drive placed on it by its GPS), got "

@@ -23,6 +23,7 @@ from ..privacy.secagg_store import SessionLedger
 from .agent import VehicleAgent
 from .aggregation import AggregationPolicy
 from .engine import VehicleEngine
+from .fleetlanes import LaneEngine, MultiLaneEngine, NetworkLanes, align_lanes
 from .fleetroad import align_to_waiting
 from .plan import RoadPlan
 from .relaykey import RelayKey
@@ -72,10 +73,12 @@ def run_in_memory(drives, plan: RoadPlan, *, store: ServiceStore | None = None, 
         Default: a throwaway authority (the identities never leave the process).
     on_fused : callable, optional
         The service's hook (:class:`~roadcollab.network.service.Service`), e.g. a ``RoadSync``.
-    road : FleetRoad, optional
+    road : FleetRoad or NetworkLanes, optional
         The fleet's road (``plan.road_id``): each vehicle places its GPS drive on it first
         (:meth:`~roadcollab.network.fleetroad.FleetRoad.place`) and aligns it to the waiting messages
-        (:func:`~roadcollab.network.fleetroad.align_to_waiting`), as ``roadcollab vehicle`` does.
+        (:func:`~roadcollab.network.fleetroad.align_to_waiting`), as ``roadcollab vehicle`` does; or
+        every road of the fleet's network (plan ``road_id`` ``*``): each vehicle on every lane it passed
+        (:mod:`roadcollab.network.fleetlanes`).
     aggregation : AggregationPolicy, optional
         Default: in the clear.
     offline : iterable of str
@@ -106,11 +109,8 @@ def run_in_memory(drives, plan: RoadPlan, *, store: ServiceStore | None = None, 
         return _run_secure(drives, plan, store, authority, service, broker, svc, aggregation, set(offline), timeouts,
                            road)
     for j, d in enumerate(drives):
-        extra = realign = None
-        if road is not None:
-            d, extra = road.place(d)
-            realign = functools.partial(align_to_waiting, index=j)
-        agent = VehicleAgent(VehicleEngine(d, plan, index=j), VehicleIdentity.enroll(authority, f"v{j + 1}"),
+        engine, extra, realign = _placed_engine(d, plan, road, j)
+        agent = VehicleAgent(engine, VehicleIdentity.enroll(authority, f"v{j + 1}"),
                              authority.trust(), hello_extra=extra, realign=realign)
         car = broker.client()
         for f in agent.subscriptions:
@@ -123,6 +123,19 @@ def run_in_memory(drives, plan: RoadPlan, *, store: ServiceStore | None = None, 
     return store, broker
 
 
+def _placed_engine(d, plan: RoadPlan, road, j: int):
+    """``(engine, hello_extra, realign)`` of vehicle ``j``'s drive: on the fleet's road, on every lane of its
+    network (:class:`~roadcollab.network.fleetlanes.NetworkLanes`), or on its own distance axis."""
+    if road is None:
+        return VehicleEngine(d, plan, index=j), None, None
+    if isinstance(road, NetworkLanes):
+        placed = road.place(d)
+        engine = MultiLaneEngine([LaneEngine(pd, plan, keep, index=j) for _lane, pd, keep in placed])
+        return engine, road.hello_fields(placed), functools.partial(align_lanes, index=j)
+    d, extra = road.place(d)
+    return VehicleEngine(d, plan, index=j), extra, functools.partial(align_to_waiting, index=j)
+
+
 def _run_secure(drives, plan, store, authority, service, broker, svc, policy, offline, timeouts, road=None):
     trust = authority.trust()
     relay = RelayKey.generate()
@@ -130,12 +143,9 @@ def _run_secure(drives, plan, store, authority, service, broker, svc, policy, of
     for j, d in enumerate(drives):
         ident = VehicleIdentity.enroll(authority, f"v{j + 1}")
         rounds = RoundAgent(ident, trust, policy.spec, SessionLedger(), f"rc/{plan.fleet_id}", {})
-        extra = realign = None
-        if road is not None:
-            d, extra = road.place(d)
-            realign = functools.partial(align_to_waiting, index=j)
-        agent = VehicleAgent(VehicleEngine(d, plan, index=j), ident, trust, rounds=rounds, relay_key=relay,
-                             hello_extra=extra, realign=realign)
+        engine, extra, realign = _placed_engine(d, plan, road, j)
+        agent = VehicleAgent(engine, ident, trust, rounds=rounds, relay_key=relay, hello_extra=extra,
+                             realign=realign)
         car = broker.client()
         for f in agent.subscriptions:
             car.subscribe(f)
