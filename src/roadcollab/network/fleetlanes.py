@@ -41,7 +41,8 @@ from ..io.drives import Drive
 from .engine import VehicleEngine
 from .plan import RoadPlan
 
-__all__ = ["ALL_ROADS", "LANE_MARGIN", "NetworkLanes", "LaneEngine", "MultiLaneEngine", "align_lanes"]
+__all__ = ["ALL_ROADS", "LANE_MARGIN", "NetworkLanes", "LaneEngine", "MultiLaneEngine", "align_lanes",
+           "placed_engine"]
 
 #: ``road_id`` of a plan whose fleet surveys every road of its network.
 ALL_ROADS = "*"
@@ -302,3 +303,37 @@ def align_lanes(engine: MultiLaneEngine, waiting: dict, *, index: int = 0) -> Mu
         moved = dataclasses.replace(d, positions=d.positions - lag, start_m=float(d.positions[0] - lag))
         out.append(LaneEngine(moved, e.plan, (e.keep[0] - lag, e.keep[1] - lag), index=index, announced=e.segments))
     return MultiLaneEngine(out)
+
+
+def placed_engine(drive: Drive, plan: RoadPlan, road, index: int) -> tuple:
+    """A vehicle's engine, hello fields and realignment for the fleet's kind of road.
+
+    Parameters
+    ----------
+    drive : Drive
+        The vehicle's drive (with GPS for a fleet on a road or a network).
+    plan : RoadPlan
+    road : FleetRoad, NetworkLanes or None
+        :meth:`~roadcollab.network.fleetroad.FleetRoad.load` of the fleet folder.
+    index : int
+        Vehicle number.
+
+    Returns
+    -------
+    (engine, hello_extra, realign)
+        On the fleet's road (:meth:`~roadcollab.network.fleetroad.FleetRoad.place`,
+        :func:`~roadcollab.network.fleetroad.align_to_waiting`), on every lane of its network
+        (:class:`MultiLaneEngine`, :func:`align_lanes`), or on the drive's own axis (``None, None``).
+    """
+    import functools
+
+    from .fleetroad import align_to_waiting
+
+    if road is None:
+        return VehicleEngine(drive, plan, index=index), None, None
+    if isinstance(road, NetworkLanes):
+        placed = road.place(drive)
+        engine = MultiLaneEngine([LaneEngine(pd, plan, keep, index=index) for _lane, pd, keep in placed])
+        return engine, road.hello_fields(placed), functools.partial(align_lanes, index=index)
+    d, extra = road.place(drive)
+    return VehicleEngine(d, plan, index=index), extra, functools.partial(align_to_waiting, index=index)

@@ -10,7 +10,6 @@ a phase times out only when no message moves (``offline`` vehicles receive nothi
 
 from __future__ import annotations
 
-import functools
 
 import numpy as np
 
@@ -22,9 +21,7 @@ from ..wire.identity import FleetAuthority, VehicleIdentity
 from ..privacy.secagg_store import SessionLedger
 from .agent import VehicleAgent
 from .aggregation import AggregationPolicy
-from .engine import VehicleEngine
-from .fleetlanes import LaneEngine, MultiLaneEngine, NetworkLanes, align_lanes
-from .fleetroad import align_to_waiting
+from .fleetlanes import placed_engine
 from .plan import RoadPlan
 from .relaykey import RelayKey
 from .results import results_from_store
@@ -109,7 +106,7 @@ def run_in_memory(drives, plan: RoadPlan, *, store: ServiceStore | None = None, 
         return _run_secure(drives, plan, store, authority, service, broker, svc, aggregation, set(offline), timeouts,
                            road)
     for j, d in enumerate(drives):
-        engine, extra, realign = _placed_engine(d, plan, road, j)
+        engine, extra, realign = placed_engine(d, plan, road, j)
         agent = VehicleAgent(engine, VehicleIdentity.enroll(authority, f"v{j + 1}"),
                              authority.trust(), hello_extra=extra, realign=realign)
         car = broker.client()
@@ -123,19 +120,6 @@ def run_in_memory(drives, plan: RoadPlan, *, store: ServiceStore | None = None, 
     return store, broker
 
 
-def _placed_engine(d, plan: RoadPlan, road, j: int):
-    """``(engine, hello_extra, realign)`` of vehicle ``j``'s drive: on the fleet's road, on every lane of its
-    network (:class:`~roadcollab.network.fleetlanes.NetworkLanes`), or on its own distance axis."""
-    if road is None:
-        return VehicleEngine(d, plan, index=j), None, None
-    if isinstance(road, NetworkLanes):
-        placed = road.place(d)
-        engine = MultiLaneEngine([LaneEngine(pd, plan, keep, index=j) for _lane, pd, keep in placed])
-        return engine, road.hello_fields(placed), functools.partial(align_lanes, index=j)
-    d, extra = road.place(d)
-    return VehicleEngine(d, plan, index=j), extra, functools.partial(align_to_waiting, index=j)
-
-
 def _run_secure(drives, plan, store, authority, service, broker, svc, policy, offline, timeouts, road=None):
     trust = authority.trust()
     relay = RelayKey.generate()
@@ -143,7 +127,7 @@ def _run_secure(drives, plan, store, authority, service, broker, svc, policy, of
     for j, d in enumerate(drives):
         ident = VehicleIdentity.enroll(authority, f"v{j + 1}")
         rounds = RoundAgent(ident, trust, policy.spec, SessionLedger(), f"rc/{plan.fleet_id}", {})
-        engine, extra, realign = _placed_engine(d, plan, road, j)
+        engine, extra, realign = placed_engine(d, plan, road, j)
         agent = VehicleAgent(engine, ident, trust, rounds=rounds, relay_key=relay, hello_extra=extra,
                              realign=realign)
         car = broker.client()

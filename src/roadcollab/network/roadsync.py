@@ -204,6 +204,8 @@ class RoadSync:
                 road, s, m = self.road.lane_at(row.position_m)
                 if not 0.0 <= m <= self.road.length(road):
                     continue
+                # the vehicles behind it are those on its lane (the view counts the whole fleet)
+                V = max(min(V, int(r.coverage[int(np.argmin(np.abs(r.position - row.position_m)))])), 1)
             else:
                 road, s, m = self.road_id, 1, row.position_m
             near = [a for a in stored if a[:2] == (road, s) and a[3] == row.kind and abs(a[2] - m) <= 2.0]
