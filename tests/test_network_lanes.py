@@ -20,8 +20,8 @@ from roadcollab.geo.projection import geodesic_m
 from roadcollab.io.drive_clean import clean_drive
 from roadcollab.io.drives import load_drives
 from roadcollab.network.fleetdir import load_plan
-from roadcollab.network.fleetlanes import ALL_ROADS, NetworkLanes
-from roadcollab.network.fleetroad import ROAD_FILE, FleetRoad, check_hello, file_sha256
+from roadcollab.network.fleetlanes import ALL_ROADS, NetworkLanes, load_road
+from roadcollab.network.fleetroad import ROAD_FILE, check_hello, file_sha256
 from roadcollab.network.memory import run_in_memory
 from roadcollab.network.plan import RoadPlan
 from roadcollab.network.roadsync import RoadSync
@@ -119,4 +119,38 @@ def test_enroll_without_road_id_is_a_fleet_on_every_road(runs, tmp_path, capsys)
     assert "on every road of" in capsys.readouterr().out
     plan = load_plan(tmp_path / "f")
     assert plan.road_id == ALL_ROADS and (tmp_path / "f" / ROAD_FILE).is_file()
-    assert isinstance(FleetRoad.load(tmp_path / "f", plan), NetworkLanes)
+    assert isinstance(load_road(tmp_path / "f", plan), NetworkLanes)
+
+
+@pytest.mark.slow
+def test_enroll_serve_fleet_export_over_mqtt_on_every_road(runs, tmp_path, capsys):
+    """``enroll --network`` (no ``--road-id``), ``serve --roads`` with its embedded broker, ``fleet`` with the
+    three drives: the road store holds the in-memory run's lanes, segments and IRI (to 1e-9), and ``export
+    --fleet`` writes every road's segments with their geometry."""
+    from netkit import free_port, rc, start_serve, stop
+
+    root = runs["network"].parent
+    paths = [str(root / f"drive{j}.csv") for j in DRIVES]
+    rc("enroll", "--fleet", tmp_path / "fleet", "--vehicles", 3, "--fleet-id", "t", "--min-speed",
+       runs["plan"].min_speed, "--network", runs["network"])
+    port = free_port()
+    serve = start_serve(tmp_path / "fleet", tmp_path / "s.sqlite", tmp_path / "serve.log", listen=port,
+                        extra=["--roads", tmp_path / "roads.sqlite"])
+    try:
+        rc("fleet", "--fleet", tmp_path / "fleet", *sum((["--drive", d] for d in paths), []), "--broker",
+           f"mqtt://127.0.0.1:{port}", "--timeout", 120, timeout=300)
+    finally:
+        assert stop(serve) == 0
+    with RoadStore.open(tmp_path / "roads.sqlite") as s:
+        segs = {(x.road_id, x.direction, x.from_m): x for x in s.segments()}
+    assert segs.keys() == runs["net"].keys()
+    for k, x in segs.items():
+        assert np.isclose(x.iri_m_per_km, runs["net"][k].iri_m_per_km, rtol=1e-9), k
+        assert x.n_vehicles == runs["net"][k].n_vehicles
+    capsys.readouterr()
+    assert main(["export", "--store", str(tmp_path / "s.sqlite"), "--fleet", str(tmp_path / "fleet"), "--out",
+                 str(tmp_path / "out")]) == 0
+    assert f"every road: {len(segs)} segments" in capsys.readouterr().out
+    fc = json.loads((tmp_path / "out" / "segments.geojson").read_text())
+    got = {(f["properties"]["road_id"], f["properties"]["direction"], f["properties"]["from_m"]) for f in fc["features"]}
+    assert got == set(segs)

@@ -121,11 +121,10 @@ def run(args: argparse.Namespace, command_line: str) -> int:
     policy = load_aggregation(args.fleet)
     rounds, relay = _secure_side(folder, identity, trust, plan, policy)
     index = int(args.id[1:]) - 1 if args.id[1:].isdigit() else 0
-    from ..network.fleetlanes import placed_engine
-    from ..network.fleetroad import FleetRoad
+    from ..network.fleetlanes import load_road, placed_engine
 
     # on the fleet's road, on every road of its network, or on the drive's own axis (network/fleetlanes.py)
-    engine, road_fields, realign = placed_engine(drive, plan, FleetRoad.load(args.fleet, plan), index)
+    engine, road_fields, realign = placed_engine(drive, plan, load_road(args.fleet, plan), index)
     agent = VehicleAgent(engine, identity, trust, hello_extra=road_fields, realign=realign, rounds=rounds,
                          relay_key=relay)
 

@@ -28,21 +28,25 @@ vehicle and segment).
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 
-from ..errors import ParameterError
+from ..errors import FileFormatError, ParameterError
+from ..experiments.distance_maps import estimate_offset
 from ..geo.matching import lonlat_at, road_passes
-from ..geo.network import RoadNetwork
+from ..geo.network import RoadNetwork, read_network
 from ..geo.segments import segment_bounds, segment_lonlat
 from ..io.drives import Drive
 from .engine import VehicleEngine
+from .fleetroad import MAX_OFFSET, ROAD_FILE, FleetRoad, align_to_waiting, file_sha256
 from .plan import RoadPlan
 
 __all__ = ["ALL_ROADS", "LANE_MARGIN", "NetworkLanes", "LaneEngine", "MultiLaneEngine", "align_lanes",
-           "placed_engine"]
+           "placed_engine", "load_road"]
 
 #: ``road_id`` of a plan whose fleet surveys every road of its network.
 ALL_ROADS = "*"
@@ -277,9 +281,6 @@ def align_lanes(engine: MultiLaneEngine, waiting: dict, *, index: int = 0) -> Mu
     index : int
         Vehicle number.
     """
-    from .fleetroad import MAX_OFFSET
-    from ..experiments.distance_maps import estimate_offset
-
     out = []
     for e in engine.engines:
         mine = set(e.segments)
@@ -325,10 +326,6 @@ def placed_engine(drive: Drive, plan: RoadPlan, road, index: int) -> tuple:
         :func:`~roadcollab.network.fleetroad.align_to_waiting`), on every lane of its network
         (:class:`MultiLaneEngine`, :func:`align_lanes`), or on the drive's own axis (``None, None``).
     """
-    import functools
-
-    from .fleetroad import align_to_waiting
-
     if road is None:
         return VehicleEngine(drive, plan, index=index), None, None
     if isinstance(road, NetworkLanes):
@@ -337,3 +334,31 @@ def placed_engine(drive: Drive, plan: RoadPlan, road, index: int) -> tuple:
         return engine, road.hello_fields(placed), functools.partial(align_lanes, index=index)
     d, extra = road.place(drive)
     return VehicleEngine(d, plan, index=index), extra, functools.partial(align_to_waiting, index=index)
+
+
+def load_road(folder, plan: RoadPlan) -> "FleetRoad | NetworkLanes | None":
+    """The road(s) of a fleet folder's plan: None without a road, a :class:`FleetRoad` on one road, a
+    :class:`NetworkLanes` on every road (``road_id`` :data:`ALL_ROADS`).
+
+    Parameters
+    ----------
+    folder : str or Path
+        The fleet folder.
+    plan : RoadPlan
+        Its plan.
+
+    Raises
+    ------
+    FileFormatError
+        The network file is missing, not a network, or not the one enrolled.
+    """
+    if plan.road_id != ALL_ROADS:
+        return FleetRoad.load(folder, plan)
+    path = Path(folder) / ROAD_FILE
+    if not path.is_file():
+        raise FileFormatError(f"{path}: missing; fleet {plan.fleet_id!r} surveys every road of the network enrolled "
+                              "with it ('roadcollab enroll --network FILE')")
+    if file_sha256(path) != plan.road_sha256:
+        raise FileFormatError(f"{path}: not the network fleet {plan.fleet_id!r} was enrolled with (SHA-256 differs "
+                              f"from road_sha256 {plan.road_sha256[:12]}... of fleet.toml)")
+    return NetworkLanes(read_network(path), plan.segment_length)

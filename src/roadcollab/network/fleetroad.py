@@ -104,8 +104,8 @@ class FleetRoad:
 
     @classmethod
     def load(cls, folder, plan: RoadPlan) -> "FleetRoad | None":
-        """The road of a fleet folder's plan; None for a fleet without a road; a
-        :class:`~roadcollab.network.fleetlanes.NetworkLanes` for a fleet on every road (``road_id`` ``*``).
+        """The road of a fleet folder's plan; None for a fleet without a road (a fleet on every road:
+        :func:`roadcollab.network.fleetlanes.load_road`).
 
         Parameters
         ----------
@@ -129,10 +129,9 @@ class FleetRoad:
             raise FileFormatError(f"{path}: not the network fleet {plan.fleet_id!r} was enrolled with (SHA-256 "
                                   f"differs from road_sha256 {plan.road_sha256[:12]}... of fleet.toml)")
         network = read_network(path)
-        if plan.road_id == "*":                         # every road of the network
-            from .fleetlanes import NetworkLanes
-
-            return NetworkLanes(network, plan.segment_length)   # type: ignore[return-value]
+        if plan.road_id == "*":
+            raise ParameterError(f"{path}: fleet {plan.fleet_id!r} surveys every road of its network (load it with "
+                                 "roadcollab.network.fleetlanes.load_road)")
         try:
             check_road(network, plan.road_id, str(path))
         except ParameterError as err:
