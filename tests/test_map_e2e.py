@@ -96,15 +96,15 @@ def _iri_errors(city):
 def test_iri_within_10_percent_on_the_through_roads(city):
     """main (forward), cross and service: 5-8 vehicles, 2 on service."""
     errors = _iri_errors(city)
-    assert len(errors) >= 18                      # 19 of 27 lane segments: the record ends lose 30 m each
+    assert len(errors) >= 20                      # 21 of 30 lane segments: the record ends lose 30 m each
     through = {k: v for k, v in errors.items() if k[0] in ("main", "cross", "service") and k[1] == 1}
     assert len(through) == 13
     assert max(abs(v) for v in through.values()) <= 0.10, through
 
 
 @pytest.mark.xfail(strict=True, reason="issue 21's done-when missed on the T-junction's lanes: side forward "
-                   "(3 vehicles) +12 % and +15 %, side and main backward (2 vehicles) -10.5 % to -13 %; single "
-                   "vehicles there are -20 % to +24 % off (docs/map.md)")
+                   "(3 vehicles) +12.2 % to +15.3 %, side and main backward (2 vehicles) -10.5 % to -13.4 %; single "
+                   "vehicles there are -21 % to +24 % off (docs/map.md)")
 def test_every_segment_iri_within_10_percent(city):
     errors = _iri_errors(city)
     assert max(abs(v) for v in errors.values()) <= 0.10, errors
