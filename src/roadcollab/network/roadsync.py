@@ -77,12 +77,13 @@ class RoadSync:
         if road is not None and road.road_id != service_store.plan.road_id:
             raise ParameterError(f"road {road.road_id!r} is not the road of the store's plan "
                                  f"({service_store.plan.road_id!r})")
-        self.road = road
         self.road_id = service_store.plan.fleet_id if road is None else road.road_id
-        self.lanes = isinstance(road, NetworkLanes)
+        self.net: NetworkLanes | None = road if isinstance(road, NetworkLanes) else None
+        self.road: FleetRoad | None = road if isinstance(road, FleetRoad) else None
+        self.lanes = self.net is not None
         self._last: dict[tuple, tuple[float, int]] = {
             (s.road_id, s.direction, s.from_m): (s.iri_m_per_km, s.n_vehicles) for s in roads.segments()
-            if s.road_id == self.road_id or (self.lanes and s.road_id in road.network.roads)}
+            if s.road_id == self.road_id or (self.net is not None and s.road_id in self.net.network.roads)}
         self._dirty, self._t = False, -np.inf
         self.written_segments = self.written_anomalies = 0
 
@@ -110,8 +111,8 @@ class RoadSync:
         except ParameterError:                 # nothing applied yet
             return 0, 0
         view = r.fleet_view()
-        if self.lanes:
-            n_seg = sum(self._segments(r, iri, lane) for lane, iri in self._lane_iri(r))
+        if self.net is not None:
+            n_seg = sum(self._segments(r, iri, lane) for lane, iri in self._lane_iri(r, self.net))
         else:
             if self.road is None:
                 iri, _ = fused_iri(view, self.segment_length)
@@ -127,11 +128,10 @@ class RoadSync:
         self.written_anomalies += n_an
         return n_seg, n_an
 
-    def _lane_iri(self, r) -> list:
+    def _lane_iri(self, r, lanes: NetworkLanes) -> list:
         """``((road_id, direction, origin), IRISegments on the axis)`` of every lane the fused profile covers:
         ``map``'s segments of the road, in the lane coordinate (reversed for direction -1)."""
         out = []
-        lanes = self.road
         for road, s in lanes.lanes:
             o, length = lanes.origin(road, s), lanes.length(road)
             bounds = [(a, b) if s > 0 else (length - b, length - a)
@@ -163,10 +163,10 @@ class RoadSync:
         road, s, o = (self.road_id, 1, 0.0) if lane is None else lane
         for ua, ub, value in zip(iri.start.tolist(), iri.end.tolist(), iri.mean.tolist()):
             a, b = ua + o, ub + o                    # on the axis
-            if lane is None or s > 0:
+            if self.net is None or s > 0:
                 m_a, m_b = ua, ub
             else:                                     # the road's measure of a backward lane's stretch
-                length = self.road.length(road)
+                length = self.net.length(road)
                 m_a, m_b = length - ub, length - ua
             key = (road, s, m_a)
             inside = (r.position >= a) & (r.position < b)
@@ -179,12 +179,12 @@ class RoadSync:
             if len(own) >= 2:
                 half = 1.96 * float(np.std(own, ddof=1)) / np.sqrt(len(own))
                 lo, hi = max(value - half, 0.0), value + half
-            if self.road is None:
-                geometry = np.zeros((0, 2))
-            elif lane is None:
+            if self.net is not None:
+                geometry = self.net.segment_lonlat(road, m_a, m_b)
+            elif self.road is not None:
                 geometry = self.road.segment_lonlat(m_a, m_b)
             else:
-                geometry = self.road.segment_lonlat(road, m_a, m_b)
+                geometry = np.zeros((0, 2))
             self.roads.record_segment(road, s, m_a, m_b, geometry, value, iri_low=lo, iri_high=hi,
                                       n_vehicles=max(k, 1), profile=r.fused[inside], profile_spacing_m=r.spacing,
                                       source=self.source)
@@ -194,15 +194,16 @@ class RoadSync:
 
     def _anomalies(self, r, anomalies) -> int:
         # (road_id, direction, measure_m, kind, [votes]) of the stored anomalies on this fleet's road(s)
-        mine = (lambda rid: rid in self.road.network.roads) if self.lanes else (lambda rid: rid == self.road_id)
+        net = self.net
+        roads = set(net.network.roads) if net is not None else {self.road_id}
         stored: list[tuple[str, int, float, str, list[int]]] = [
-            (a.road_id, a.direction, a.measure_m, a.kind, [a.votes]) for a in self.roads.anomalies() if mine(a.road_id)]
+            (a.road_id, a.direction, a.measure_m, a.kind, [a.votes]) for a in self.roads.anomalies() if a.road_id in roads]
         n = 0
         for row in anomalies:
             V = max(int(row.vehicle), 1)
-            if self.lanes:
-                road, s, m = self.road.lane_at(row.position_m)
-                if not 0.0 <= m <= self.road.length(road):
+            if net is not None:
+                road, s, m = net.lane_at(row.position_m)
+                if not 0.0 <= m <= net.length(road):
                     continue
                 # the vehicles behind it are those on its lane (the view counts the whole fleet)
                 V = max(min(V, int(r.coverage[int(np.argmin(np.abs(r.position - row.position_m)))])), 1)
@@ -212,12 +213,12 @@ class RoadSync:
             new = V - (max(a[4][0] for a in near) if near else 0)
             if new <= 0:
                 continue
-            if self.road is None:
-                lon, lat = 0.0, 0.0
-            elif self.lanes:
-                lon, lat = self.road.lonlat(road, m)
-            else:
+            if net is not None:
+                lon, lat = net.lonlat(road, m)
+            elif self.road is not None:
                 lon, lat = self.road.lonlat(m)
+            else:
+                lon, lat = 0.0, 0.0
             self.roads.record_anomaly(road, s, m, lon, lat, row.kind, row.side, row.depth_m, votes=new,
                                       source=self.source)
             if near:
