@@ -28,8 +28,8 @@ m), in its forward direction:
 Drives without GPS in a fleet without a road are unchanged (the plan has no road keys, the hello no
 road fields): the distance-axis equality with ``roadcollab estimate`` holds as before.
 
-Not done: the fleet's road is one road in its forward direction (a route over several roads, or the
-other lane, is another fleet); the network fleet does not align drives by cross-correlation, nor drop
+The fleet's road is one road in its forward direction; a fleet on every road and both directions is
+:mod:`roadcollab.network.fleetlanes` (``enroll --network FILE`` without ``--road-id``). Not done here: the network fleet does not align drives by cross-correlation, nor drop
 each record's first and last 30 m as ``map`` does (the positions come from the GPS offset alone).
 """
 

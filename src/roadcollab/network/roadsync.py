@@ -25,7 +25,9 @@ A fleet on a road (``enroll --network FILE --road-id ID``, :mod:`roadcollab.netw
 road's measure as its distance axis: ``road_id`` is that road, the segments are ``roadcollab map``'s
 (fixed in the road's measure, only those the fused profile covers whole, :func:`~roadcollab.network.fleetroad.road_iri`),
 each with its LineString (``[lon, lat]``, RFC 7946 order), and each anomaly has its lon/lat on the road.
-A fleet without a road (drives without GPS) keeps its distance axis: segments from the start of each
+A fleet on every road of its network (:mod:`roadcollab.network.fleetlanes`) writes each lane's segments
+keyed ``(road_id, direction, from_m)``, cut from the lane's stretch of the fused profile, and each anomaly
+on its lane (votes: the vehicles on that lane). A fleet without a road (drives without GPS) keeps its distance axis: segments from the start of each
 covered stretch (``export``'s), empty geometry and anomalies at lon/lat 0.
 """
 
