@@ -12,9 +12,11 @@ def test_simulate_drives_gps_writes_the_city(tmp_path):
     out = tmp_path / "city"
     assert main(["simulate-drives", "--gps", "--out", str(out)]) == 0
     net = json.loads((out / "network.geojson").read_text())
-    assert {f["properties"]["road_id"] for f in net["features"]} == {"main", "cross", "service"}
+    assert {f["properties"]["road_id"] for f in net["features"]} == {"main", "cross", "service", "side"}
     truth = json.loads((out / "truth.json").read_text())
-    assert len(truth["potholes"]) == 5 and truth["gps_sigma_m"] == 3.0
+    assert len(truth["potholes"]) == 8 and truth["gps_sigma_m"] == 3.0
+    assert len(sorted(out.glob("drive*.csv"))) == 12
+    assert truth["routes"][7] == [["main", 0.0, 300.0], ["side", 0.0, 400.0]]    # a turn at the T-junction
     d = load_drive(out / "drive4.csv")                      # the drive at 13-17 m/s carries a speed column
     assert d.speed_source == "speed_mps column" and d.gps.n_fixes > 100 and abs(d.gps.rate_hz - 5.0) < 0.01
     assert "roadcollab map --drive" in (out / "README.md").read_text()

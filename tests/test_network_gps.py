@@ -198,7 +198,7 @@ def test_enroll_copies_the_network_and_every_party_checks_it(sim, tmp_path, caps
     err = capsys.readouterr().err
     assert "--road-id: no road 'nope'" in err and err.count("\n") == 1
     assert main(["enroll", "--fleet", str(tmp_path / "h"), "--vehicles", "2", "--road-id", "main"]) == 2
-    assert "--network and --road-id go together" in capsys.readouterr().err
+    assert "--road-id needs --network" in capsys.readouterr().err
     assert not (tmp_path / "g").exists() and not (tmp_path / "h").exists()
 
 

@@ -77,23 +77,31 @@ def _add_road_options(p) -> None:
     p.add_argument("--network", metavar="FILE", default=None,
                    help="road network GeoJSON (as 'roadcollab map --network'), copied into the fleet: with "
                         "--road-id, the vehicles place their GPS drives on that road and 'serve --roads' writes "
-                        "its segments' geometry (default: no road, the drives' own distance axis)")
+                        "its segments' geometry; without, on every road and direction they travel (default: no "
+                        "road, the drives' own distance axis)")
     p.add_argument("--road-id", metavar="ID", default=None,
-                   help="the road of --network the fleet surveys, in its forward direction")
+                   help="the one road of --network the fleet surveys, in its forward direction (default: every "
+                        "road, both directions)")
 
 
 def _road_of(args) -> tuple[dict, bytes | None]:
     """The plan's road fields and the network file's bytes of ``--network``/``--road-id`` (({}, None) without)."""
     from ..errors import ParameterError
 
-    if (args.network is None) != (args.road_id is None):
-        raise ParameterError("--network and --road-id go together (the fleet's road in its network)")
+    if args.network is None and args.road_id is not None:
+        raise ParameterError("--road-id needs --network (the fleet's road in its network)")
     if args.network is None:
         return {}, None
     from ..geo.network import read_network
+    from ..network.fleetlanes import ALL_ROADS
     from ..network.fleetroad import check_road, file_sha256
 
-    check_road(read_network(args.network), args.road_id, "--road-id")
+    network_roads = read_network(args.network)
+    if args.road_id is None:
+        with open(args.network, "rb") as fh:
+            network = fh.read()
+        return {"road_id": ALL_ROADS, "road_sha256": file_sha256(args.network)}, network
+    check_road(network_roads, args.road_id, "--road-id")
     with open(args.network, "rb") as fh:
         network = fh.read()
     return {"road_id": args.road_id, "road_sha256": file_sha256(args.network)}, network
@@ -107,6 +115,8 @@ def _write_road(args, plan, network: bytes | None) -> str:
 
     with open(f"{args.fleet}/{ROAD_FILE}", "xb") as fh:
         fh.write(network)
+    if plan.road_id == "*":
+        return f" on every road of {args.network}"
     return f" on road {plan.road_id!r} of {args.network}"
 
 

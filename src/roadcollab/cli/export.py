@@ -49,11 +49,11 @@ def _fleet_road(args, plan):
         return None
     from ..errors import ParameterError
     from ..network.fleetdir import load_plan
-    from ..network.fleetroad import FleetRoad
+    from ..network.fleetlanes import load_road
 
     if load_plan(args.fleet) != plan:
         raise ParameterError(f"--fleet {args.fleet}: not the fleet of --store {args.store} (another plan)")
-    road = FleetRoad.load(args.fleet, plan)
+    road = load_road(args.fleet, plan)
     if road is None:
         raise ParameterError(f"--fleet {args.fleet}: fleet {plan.fleet_id!r} is not enrolled on a road (enroll "
                              "--network FILE --road-id ID); its results have no geometry")
@@ -98,7 +98,8 @@ def run(args: argparse.Namespace, command_line: str) -> int:
     for note in summary["notes"]:
         print(f"note: {note}")
     if road is not None:
-        print(f"road {road.road_id!r}: {geo['n_segments']} segments and {geo['n_anomalies']} anomalies with their "
+        where = "every road" if road.road_id == "*" else f"road {road.road_id!r}"
+        print(f"{where}: {geo['n_segments']} segments and {geo['n_anomalies']} anomalies with their "
               f"geometry in {', '.join(geo['files'])}")
     print(f"exported {summary['n_vehicles']} vehicles over {summary['length_m']:.1f} m; wrote {args.out}/report.md")
     return 0

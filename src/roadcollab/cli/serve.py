@@ -85,14 +85,14 @@ def _road_outputs(args, store, command_line: str, log, map_at):
     """
     if args.roads is None:
         return None, None, None
-    from ..network.fleetroad import FleetRoad
+    from ..network.fleetlanes import load_road
     from ..network.livemap import LiveMap
     from ..network.roadsync import RoadSync
     from ..store import RoadStore
 
     sync = live = None
     try:
-        road = FleetRoad.load(args.fleet, store.plan)        # a fleet on a road: segments with their geometry
+        road = load_road(args.fleet, store.plan)        # a fleet on a road or a network: segments with their geometry
         sync = RoadSync(RoadStore.open(args.roads), store, source=command_line, min_interval_s=1.0, road=road)
         if map_at is not None:
             live = LiveMap(args.roads, *map_at).start()

@@ -6,7 +6,6 @@ import argparse
 import os
 import signal
 import threading
-from functools import partial
 from pathlib import Path
 
 from ._arguments import help_range, ranged
@@ -105,7 +104,6 @@ def run(args: argparse.Namespace, command_line: str) -> int:
     from ..io.drive_clean import clean_drive
     from ..io.drives import load_drive
     from ..network.agent import VehicleAgent
-    from ..network.engine import VehicleEngine
     from ..network.fleetdir import load_aggregation, load_login, load_plan
     from ..network.mqtt_client import MqttClient, parse_broker_url
     from ..network.mqtt_run import run_vehicle
@@ -127,15 +125,13 @@ def run(args: argparse.Namespace, command_line: str) -> int:
     index = int(args.id[1:]) - 1 if args.id[1:].isdigit() else 0
     if args.unguarded_receive:
         print(f"{args.id}: --unguarded-receive: waiting messages are applied without the receiver guard", flush=True)
-    road_fields, realign = _place_on_road(args.fleet, plan, drive), None
-    if road_fields is not None:
-        from ..network.fleetroad import align_to_waiting
+    from ..network.fleetlanes import load_road, placed_engine
 
-        drive, road_fields = road_fields
-        realign = partial(align_to_waiting, index=index)
-    agent = VehicleAgent(VehicleEngine(drive, plan, index=index, guard=receiver_guard(args)), identity, trust,
-                         hello_extra=road_fields,
-                         realign=realign, rounds=rounds, relay_key=relay)
+    # on the fleet's road, on every road of its network, or on the drive's own axis (network/fleetlanes.py)
+    engine, road_fields, realign = placed_engine(drive, plan, load_road(args.fleet, plan), index,
+                                                 guard=receiver_guard(args))
+    agent = VehicleAgent(engine, identity, trust, hello_extra=road_fields, realign=realign, rounds=rounds,
+                         relay_key=relay)
 
     def contributed() -> None:
         if policy.secure:     # 'roadcollab fleet' starts the next vehicle on this line
@@ -160,11 +156,3 @@ def run(args: argparse.Namespace, command_line: str) -> int:
     print(f"{args.id}: {len(agent.segments)} segments done ({client.bytes_out} bytes sent"
           f"{', conflicts on ' + str(refused) if refused else ''}){note}", flush=True)
     return 0
-
-
-def _place_on_road(fleet, plan, drive):
-    """``(drive on the fleet's road, hello fields)`` for a fleet on a road, else None (network/fleetroad.py)."""
-    from ..network.fleetroad import FleetRoad
-
-    road = FleetRoad.load(fleet, plan)
-    return None if road is None else road.place(drive)

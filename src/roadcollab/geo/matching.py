@@ -88,7 +88,8 @@ class RoadPass:
     offset_std : float
         Standard error of the offset, m (residual std / sqrt(n_fixes)).
     u_range : (float, float)
-        Lane coordinates of the first and last sample on this road, m.
+        Lane coordinates of the first and last sample on this road, m; where the drive turns onto or off
+        the road through a junction, that end is the junction's lane coordinate.
     """
 
     road_id: str
@@ -231,16 +232,40 @@ def road_passes(drive: Drive, network: RoadNetwork, *, sigma_z: float = 5.0, min
         # the drive is on other roads): the inversion runs on the whole record, free of cut edges
         u = meas if s > 0 else length - meas
         # on the road between the fixes of the runs before and after this one (another pass of the same
-        # road has its own samples)
-        between = (odo_all > (odo[lo] if lo is not None else -np.inf)) & \
-            (odo_all < (odo[hi] if hi is not None else np.inf))
+        # road has its own samples); a turn onto or off this road through a junction happens at the junction: there the cut is the
+        # junction's lane coordinate (exact to the offset's error), not the neighbouring run's nearest fix
+        between = np.ones(odo_all.shape, dtype=bool)
+        ends: list[float | None] = [None, None]           # the junctions' lane coordinates where cut there
+        for k, after in ((lo, False), (hi, True)):
+            if k is None:
+                continue
+            uj = _junction_u(network, rid, str(matched.road_id[k]), s, m0 + s * odo[k])
+            if uj is not None:
+                between &= (u <= uj) if after else (u >= uj)
+                ends[int(after)] = uj
+            else:
+                between &= (odo_all < odo[k]) if after else (odo_all > odo[k])
         on = np.flatnonzero((meas >= 0) & (meas <= length) & between)
         if on.size < 64 or np.ptp(u[on]) < min_length:
             continue
         whole = dataclasses.replace(drive, positions=u, start_m=float(u[0]), gps=None)
         out.append(RoadPass(road_id=rid, direction=s, drive=whole, n_fixes=int(np.count_nonzero(sel)), offset_std=err,
-                            u_range=(float(max(u[on[0]], 0.0)), float(min(u[on[-1]], length)))))
+                            u_range=(float(max(u[on[0]], 0.0)) if ends[0] is None else float(ends[0]),
+                                     float(min(u[on[-1]], length)) if ends[1] is None else float(ends[1]))))
     return out
+
+
+def _junction_u(network: RoadNetwork, rid: str, other: str, s: int, m_near: float) -> float | None:
+    """Lane coordinate on ``rid`` (direction ``s``) of its junction with road ``other`` nearest measure
+    ``m_near``; None when the two roads share no junction (or ``other`` is ``rid``)."""
+    if other == rid or other not in network.nodes_on:
+        return None
+    theirs = {n for _, n in network.nodes_on[other]}
+    common = [m for m, n in network.nodes_on[rid] if n in theirs]
+    if not common:
+        return None
+    m = min(common, key=lambda c: abs(c - m_near))
+    return m if s > 0 else network.roads[rid].length - m
 
 
 def _road_runs(road_id: np.ndarray, min_fixes: int) -> list[tuple[str, int, int, int | None, int | None]]:

@@ -6,7 +6,9 @@ An RFC 7946 GeoJSON ``FeatureCollection`` whose features are ``LineString`` geom
 ``road_id`` property (a non-empty string or an integer, unique), positions ``[lon, lat]`` in WGS 84
 degrees (a third coordinate is ignored). The road's measure (linear referencing, m) runs from its
 first position to its last: that is the road's *forward* direction. Roads meet at junctions where
-their end points coincide (within :data:`JUNCTION_TOLERANCE`); the map matcher routes through them.
+their end points coincide (within :data:`JUNCTION_TOLERANCE`), and at T-junctions where a road's end
+point lies on another road's interior (within the same tolerance): the through road is not split, its
+measure runs on, and the junction is a node at its measure there. The map matcher routes through them.
 At most 10 MB, 10,000 roads.
 
 Without a network, a drive's own GPS track is its road (:func:`track_road`).
@@ -69,15 +71,16 @@ class RoadNetwork:
         ``{road_id: Road}``, in file order.
     projection : LocalProjection
         Centred on the mean of every position.
-    node_of : dict
-        ``{(road_id, end): node}`` with ``end`` 0 (start) or 1 (end).
+    nodes_on : dict
+        ``{road_id: ((measure_m, node), ...)}``: the junction nodes on each road in measure order, its two
+        ends first and last, T-junctions onto its interior between.
     node_distance : (J, J) ndarray
         Shortest distance along the roads between junction nodes, m (inf if not connected).
     """
 
     roads: dict
     projection: LocalProjection
-    node_of: dict
+    nodes_on: dict
     node_distance: np.ndarray
 
     def road(self, road_id: str) -> Road:
@@ -105,36 +108,53 @@ class RoadNetwork:
         Returns
         -------
         float
-            ``|m_b - m_a|`` on one road; otherwise through the junctions (inf if not connected).
+            ``|m_b - m_a|`` on one road; otherwise through the junctions on both roads (their ends and
+            T-junctions; inf if not connected).
         """
         if road_a == road_b:
             return abs(m_b - m_a)
-        la, lb = self.roads[road_a].length, self.roads[road_b].length
         best = np.inf
-        for ea, da in ((0, m_a), (1, la - m_a)):
-            for eb, db in ((0, m_b), (1, lb - m_b)):
-                best = min(best, da + self.node_distance[self.node_of[(road_a, ea)], self.node_of[(road_b, eb)]] + db)
+        for ma, na in self.nodes_on[road_a]:
+            for mb, nb in self.nodes_on[road_b]:
+                best = min(best, abs(m_a - ma) + self.node_distance[na, nb] + abs(m_b - mb))
         return float(best)
 
 
-def _junctions(ends: list[np.ndarray], lengths: list[float]) -> tuple[list[int], np.ndarray]:
-    """Node index of every road end (merged within JUNCTION_TOLERANCE) and all-pairs distances."""
+def _junctions(lines: list[LineString]) -> tuple[list[list[tuple[float, int]]], np.ndarray]:
+    """Junction nodes on every road (ends merged within JUNCTION_TOLERANCE, T-junctions onto interiors) and
+    the all-pairs distances between nodes along the roads."""
     nodes: list[np.ndarray] = []
-    index = []
-    for p in ends:
+
+    def node(p: np.ndarray) -> int:
         hit = next((i for i, q in enumerate(nodes) if np.hypot(*(p - q)) <= JUNCTION_TOLERANCE), None)
         if hit is None:
             nodes.append(p)
             hit = len(nodes) - 1
-        index.append(hit)
+        return hit
+
+    on: list[list[tuple[float, int]]] = []
+    for line in lines:
+        c = np.asarray(line.coords)
+        on.append([(0.0, node(c[0][:2])), (float(line.length), node(c[-1][:2]))])
+    # T-junctions: an end point on another road's interior (farther than the tolerance from its ends)
+    for line, ends in zip(lines, list(on)):
+        for _m, n in ends:
+            pt = shapely.Point(nodes[n])
+            for other, lst in zip(lines, on):
+                if other is line or other.distance(pt) > JUNCTION_TOLERANCE:
+                    continue
+                m = float(other.project(pt))
+                if JUNCTION_TOLERANCE < m < other.length - JUNCTION_TOLERANCE and all(k != n for _, k in lst):
+                    lst.append((m, n))
+    on = [sorted(lst) for lst in on]
     J = len(nodes)
     weight = np.full((J, J), np.inf)
-    for r, length in enumerate(lengths):
-        a, b = index[2 * r], index[2 * r + 1]
-        if a != b:
-            weight[a, b] = weight[b, a] = min(weight[a, b], length)
+    for lst in on:
+        for (ma, a), (mb, b) in zip(lst, lst[1:]):
+            if a != b:
+                weight[a, b] = weight[b, a] = min(weight[a, b], mb - ma)
     graph = csr_matrix(np.where(np.isfinite(weight), weight, 0.0))
-    return index, shortest_path(graph, directed=False)
+    return on, shortest_path(graph, directed=False)
 
 
 def network_from_lonlat(roads: dict) -> RoadNetwork:
@@ -158,7 +178,7 @@ def network_from_lonlat(roads: dict) -> RoadNetwork:
         raise ParameterError("a road network needs at least one road, got none")
     allpts = np.concatenate([np.asarray(v, float) for v in roads.values()])
     proj = LocalProjection(float(np.mean(allpts[:, 1])), float(np.mean(allpts[:, 0])))
-    out, ends, lengths = {}, [], []
+    out = {}
     for rid, pts in roads.items():
         pts = np.asarray(pts, float)
         x, y = proj.to_xy(pts[:, 0], pts[:, 1])
@@ -166,11 +186,9 @@ def network_from_lonlat(roads: dict) -> RoadNetwork:
         if line.length <= 0:
             raise ParameterError(f"road {rid!r}: expected at least two distinct positions, got a zero-length line")
         out[rid] = Road(road_id=rid, lonlat=pts, line=line)
-        ends += [np.array([x[0], y[0]]), np.array([x[-1], y[-1]])]
-        lengths.append(line.length)
-    index, dist = _junctions(ends, lengths)
-    node_of = {(rid, e): index[2 * r + e] for r, rid in enumerate(out) for e in (0, 1)}
-    return RoadNetwork(roads=out, projection=proj, node_of=node_of, node_distance=dist)
+    on, dist = _junctions([r.line for r in out.values()])
+    nodes_on = {rid: tuple(lst) for rid, lst in zip(out, on)}
+    return RoadNetwork(roads=out, projection=proj, nodes_on=nodes_on, node_distance=dist)
 
 
 def _feature_road(path: Path, i: int, feat) -> tuple[str, np.ndarray]:

@@ -28,8 +28,8 @@ m), in its forward direction:
 Drives without GPS in a fleet without a road are unchanged (the plan has no road keys, the hello no
 road fields): the distance-axis equality with ``roadcollab estimate`` holds as before.
 
-Not done: the fleet's road is one road in its forward direction (a route over several roads, or the
-other lane, is another fleet); the network fleet does not align drives by cross-correlation, nor drop
+The fleet's road is one road in its forward direction; a fleet on every road and both directions is
+:mod:`roadcollab.network.fleetlanes` (``enroll --network FILE`` without ``--road-id``). Not done here: the network fleet does not align drives by cross-correlation, nor drop
 each record's first and last 30 m as ``map`` does (the positions come from the GPS offset alone).
 """
 
@@ -105,7 +105,8 @@ class FleetRoad:
 
     @classmethod
     def load(cls, folder, plan: RoadPlan) -> "FleetRoad | None":
-        """The road of a fleet folder's plan; None for a fleet without a road.
+        """The road of a fleet folder's plan; None for a fleet without a road (a fleet on every road:
+        :func:`roadcollab.network.fleetlanes.load_road`).
 
         Parameters
         ----------
@@ -129,6 +130,9 @@ class FleetRoad:
             raise FileFormatError(f"{path}: not the network fleet {plan.fleet_id!r} was enrolled with (SHA-256 "
                                   f"differs from road_sha256 {plan.road_sha256[:12]}... of fleet.toml)")
         network = read_network(path)
+        if plan.road_id == "*":
+            raise ParameterError(f"{path}: fleet {plan.fleet_id!r} surveys every road of its network (load it with "
+                                 "roadcollab.network.fleetlanes.load_road)")
         try:
             check_road(network, plan.road_id, str(path))
         except ParameterError as err:
@@ -248,6 +252,11 @@ def check_hello(plan: RoadPlan, hello: dict) -> None:
     ------
     MessageError
     """
+    if plan.road_id == "*":                              # every road of the network (network/fleetlanes.py)
+        if hello.get("road_id") != "*":
+            raise MessageError(f"hello: fleet {plan.fleet_id!r} surveys every road of its network; expected "
+                               f"road_id '*' (a drive placed on its roads by its GPS), got {hello.get('road_id')!r}")
+        return
     if plan.road_id and (hello.get("road_id") != plan.road_id or hello.get("road_direction") != 1):
         raise MessageError(f"hello: fleet {plan.fleet_id!r} surveys road {plan.road_id!r} forward; expected "
                            f"road_id {plan.road_id!r} and road_direction 1 (a drive placed on it by its GPS), got "

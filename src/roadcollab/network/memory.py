@@ -10,7 +10,6 @@ a phase times out only when no message moves (``offline`` vehicles receive nothi
 
 from __future__ import annotations
 
-import functools
 
 import numpy as np
 
@@ -22,8 +21,7 @@ from ..wire.identity import FleetAuthority, VehicleIdentity
 from ..privacy.secagg_store import SessionLedger
 from .agent import VehicleAgent
 from .aggregation import AggregationPolicy
-from .engine import VehicleEngine
-from .fleetroad import align_to_waiting
+from .fleetlanes import placed_engine
 from .plan import RoadPlan
 from .relaykey import RelayKey
 from .results import results_from_store
@@ -72,10 +70,12 @@ def run_in_memory(drives, plan: RoadPlan, *, store: ServiceStore | None = None, 
         Default: a throwaway authority (the identities never leave the process).
     on_fused : callable, optional
         The service's hook (:class:`~roadcollab.network.service.Service`), e.g. a ``RoadSync``.
-    road : FleetRoad, optional
+    road : FleetRoad or NetworkLanes, optional
         The fleet's road (``plan.road_id``): each vehicle places its GPS drive on it first
         (:meth:`~roadcollab.network.fleetroad.FleetRoad.place`) and aligns it to the waiting messages
-        (:func:`~roadcollab.network.fleetroad.align_to_waiting`), as ``roadcollab vehicle`` does.
+        (:func:`~roadcollab.network.fleetroad.align_to_waiting`), as ``roadcollab vehicle`` does; or
+        every road of the fleet's network (plan ``road_id`` ``*``): each vehicle on every lane it passed
+        (:mod:`roadcollab.network.fleetlanes`).
     aggregation : AggregationPolicy, optional
         Default: in the clear.
     offline : iterable of str
@@ -109,13 +109,9 @@ def run_in_memory(drives, plan: RoadPlan, *, store: ServiceStore | None = None, 
         return _run_secure(drives, plan, store, authority, service, broker, svc, aggregation, set(offline), timeouts,
                            road, guard)
     for j, d in enumerate(drives):
-        extra = realign = None
-        if road is not None:
-            d, extra = road.place(d)
-            realign = functools.partial(align_to_waiting, index=j)
-        agent = VehicleAgent(VehicleEngine(d, plan, index=j, guard=guard),
-                             VehicleIdentity.enroll(authority, f"v{j + 1}"), authority.trust(), hello_extra=extra,
-                             realign=realign)
+        engine, extra, realign = placed_engine(d, plan, road, j, guard=guard)
+        agent = VehicleAgent(engine, VehicleIdentity.enroll(authority, f"v{j + 1}"),
+                             authority.trust(), hello_extra=extra, realign=realign)
         car = broker.client()
         for f in agent.subscriptions:
             car.subscribe(f)
@@ -135,12 +131,9 @@ def _run_secure(drives, plan, store, authority, service, broker, svc, policy, of
     for j, d in enumerate(drives):
         ident = VehicleIdentity.enroll(authority, f"v{j + 1}")
         rounds = RoundAgent(ident, trust, policy.spec, SessionLedger(), f"rc/{plan.fleet_id}", {})
-        extra = realign = None
-        if road is not None:
-            d, extra = road.place(d)
-            realign = functools.partial(align_to_waiting, index=j)
-        agent = VehicleAgent(VehicleEngine(d, plan, index=j, guard=guard), ident, trust, rounds=rounds, relay_key=relay,
-                             hello_extra=extra, realign=realign)
+        engine, extra, realign = placed_engine(d, plan, road, j, guard=guard)
+        agent = VehicleAgent(engine, ident, trust, rounds=rounds, relay_key=relay, hello_extra=extra,
+                             realign=realign)
         car = broker.client()
         for f in agent.subscriptions:
             car.subscribe(f)

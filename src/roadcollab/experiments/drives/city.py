@@ -4,15 +4,21 @@ The network (:func:`city_network`, local metres east/north of ``CITY_ORIGIN``):
 
 * ``main`` from (0, 0) to (600, 0) and ``cross`` from (600, 0) to (600, -500): one route that turns
   at the junction (600, 0);
+* ``side`` from (300, 0) to (300, -400): a T-junction onto the middle of ``main`` (its measure 300);
 * ``service``, parallel to ``main`` 10 m north of it, from (0, 10) to (600, 10), not connected to it
   (its end is 10 m from the junction, beyond the 1 m junction tolerance).
 
-The route ``main`` + ``cross`` is one continuous two-track profile (ISO 8608 class B random walk,
-:func:`~roadcollab.models.road.generate_road`) with :data:`CITY_POTHOLES` added; ``service`` has its
-own. Drives (:func:`simulate_city`) run the route at 12, 15, 18, 13-17 (varying) and 14 m/s and
-``service`` at 15 and 16 m/s, from 5 m before the start to 5 m before the end, 100 Hz accelerometers
-with noise 0.05 m/s^2, a ``speed_mps`` column, and 5 Hz GPS fixes with independent N(0, 3 m) errors
-east and north. Vehicles: :func:`~roadcollab.models.vehicle.sample_fleet` with the default spread.
+Every lane (a road and a direction of travel: the two directions are different wheel tracks) has its
+own two-track profile (ISO 8608 class B random walk, :func:`~roadcollab.models.road.generate_road`)
+with its potholes (:data:`CITY_POTHOLES`); a route's profile is its lanes' pieces joined end to end
+(each piece shifted to continue the elevation), so two routes over the same lane see the same road.
+Drives (:func:`simulate_city`, :data:`CITY_ROUTES`): ``main`` then ``cross`` at 12, 15, 18, 13-17
+(varying) and 14 m/s; ``service`` at 15 and 16 m/s; ``main`` to the T-junction then ``side``
+(turning right) at 13, 16 and 14.5 m/s; and back: ``side`` against its measure then ``main`` against
+its measure from the T-junction to its start (turning left) at 14 and 16.5 m/s. Each runs from 5 m
+after its route's start to 5 m before its end, 100 Hz accelerometers with noise 0.05 m/s^2, a
+``speed_mps`` column, and 5 Hz GPS fixes with independent N(0, 3 m) errors east and north.
+Vehicles: :func:`~roadcollab.models.vehicle.sample_fleet` with the default spread.
 """
 
 from __future__ import annotations
@@ -34,23 +40,34 @@ from ...models.road import RoadSpec, generate_road, moving_average
 from ...models.vehicle import FleetSpec, sample_fleet
 from .mixed_fleet import simulate_drive
 
-__all__ = ["CITY_ORIGIN", "CITY_ROADS", "CITY_POTHOLES", "ROUTE_SPEEDS", "SERVICE_SPEEDS", "CityTruth",
+__all__ = ["CITY_ORIGIN", "CITY_ROADS", "CITY_POTHOLES", "CITY_ROUTES", "ROUTE_SPEEDS", "SERVICE_SPEEDS", "CityTruth",
            "city_network", "city_profiles", "default_potholes", "simulate_city", "network_geojson", "write_city"]
 
 CITY_ORIGIN = (48.137, 11.575)   # lat, lon (degrees)
 #: Road positions in metres east/north of the origin.
 CITY_ROADS = {"main": [(0.0, 0.0), (300.0, 0.0), (600.0, 0.0)], "cross": [(600.0, 0.0), (600.0, -500.0)],
-              "service": [(0.0, 10.0), (600.0, 10.0)]}
-#: (road, measure of the centre m, track, depth m, length m) of every pothole.
+              "service": [(0.0, 10.0), (600.0, 10.0)], "side": [(300.0, 0.0), (300.0, -400.0)]}
+#: (road, measure of the centre m, track, depth m, length m[, direction]) of every pothole; the track is
+#: the vehicle's left or right in its direction of travel; direction +1 (the default) or -1 (the lane
+#: against the road's measure).
 CITY_POTHOLES = (("main", 150.0, "both", 0.05, 0.6), ("main", 420.0, "left", 0.04, 0.5),
                  ("cross", 230.0, "right", 0.06, 0.8), ("cross", 380.0, "both", 0.035, 0.5),
-                 ("service", 330.0, "both", 0.05, 0.6))
+                 ("service", 330.0, "both", 0.05, 0.6), ("side", 200.0, "left", 0.045, 0.6),
+                 ("side", 120.0, "right", 0.05, 0.6, -1), ("main", 90.0, "both", 0.04, 0.6, -1))
 ROUTE_SPEEDS = (12.0, 15.0, 18.0, (13.0, 17.0), 14.0)
 SERVICE_SPEEDS = (15.0, 16.0)
+TURN_SPEEDS = (13.0, 16.0, 14.5)
+BACK_SPEEDS = (14.0, 16.5)
+#: Routes of the city's drives: pieces ``(road, from_m, to_m)`` travelled from ``from_m`` to ``to_m``
+#: (against the road's measure when ``from_m > to_m``), and the speeds they are driven at.
+CITY_ROUTES = (((("main", 0.0, 600.0), ("cross", 0.0, 500.0)), ROUTE_SPEEDS),
+               (((("service", 0.0, 600.0),)), SERVICE_SPEEDS),
+               ((("main", 0.0, 300.0), ("side", 0.0, 400.0)), TURN_SPEEDS),
+               ((("side", 400.0, 0.0), ("main", 300.0, 0.0)), BACK_SPEEDS))
 SAMPLE_RATE = 100.0
 GPS_RATE = 5.0
 GPS_SIGMA = 3.0
-_ROUTE = ("main", "cross")
+_MARGIN = 20.0     # m of profile past a route's end
 
 
 @dataclass(frozen=True, eq=False)
@@ -60,56 +77,62 @@ class CityTruth:
     Attributes
     ----------
     network : RoadNetwork
+    lanes : dict
+        ``{(road_id, direction): RoadProfile}``: each lane's true profile in its lane coordinate ``u``
+        (the road's measure for direction +1, ``length - measure`` for -1), 0 to the road's length plus
+        20 m, with its potholes.
     profiles : dict
-        ``{route: RoadProfile}`` with ``route`` the roads' ids joined by ``+``: ``"main+cross"`` runs
-        ``main`` (measure = route distance) then ``cross`` (measure = route distance - 600 m).
-    road_start : dict
-        ``{road_id: (route, start_m)}``: where each road lies on its route's profile.
+        ``{route: RoadProfile}`` of every route (the road ids joined by ``+``), distance = route distance.
     potholes : tuple
-        ``(road_id, measure_m, side, depth_m, length_m)`` of every pothole.
+        ``(road_id, measure_m, side, depth_m, length_m[, direction])`` of every pothole.
     drives : list of Drive
-        As simulated (positions = true route or road distance), with GPS fixes.
+        As simulated (positions = true route distance), with GPS fixes.
     roads_driven : list of tuple
         The roads each drive travels.
+    routes : list of tuple
+        Each drive's route: pieces ``(road_id, from_m, to_m)`` (:data:`CITY_ROUTES`).
     """
 
     network: RoadNetwork
+    lanes: dict
     profiles: dict
-    road_start: dict
     potholes: tuple
     drives: list
     roads_driven: list
+    routes: list
 
-    def road_profile(self, road_id: str) -> tuple[np.ndarray, np.ndarray]:
-        """Measure (m) and (n, 2) elevation (m) of one road's true profile.
+    def road_profile(self, road_id: str, direction: int = 1) -> tuple[np.ndarray, np.ndarray]:
+        """Lane coordinate (m) and (n, 2) elevation (m) of one lane's true profile, on the road only.
 
         Parameters
         ----------
         road_id : str
+        direction : int
+            +1 (along the road's measure, the default) or -1; for -1 the coordinate is
+            ``length - measure`` and the tracks are the left/right of a vehicle driving that way.
 
         Returns
         -------
-        measure, elevation : ndarray
+        u, elevation : ndarray
         """
-        route, start = self.road_start[road_id]
-        p = self.profiles[route]
-        keep = (p.distance >= start - 1e-9) & (p.distance <= start + self.network.roads[road_id].length + 1e-9)
-        return np.asarray(p.distance[keep]) - start, np.asarray(p.elevation[keep])
+        p = self.lanes[(road_id, direction)]
+        keep = p.distance <= self.network.roads[road_id].length + 1e-9
+        return np.asarray(p.distance[keep]), np.asarray(p.elevation[keep])
 
     def potholes_lonlat(self) -> list[dict]:
-        """Every pothole: road, measure, lon, lat, depth (m).
+        """Every pothole: road, direction, measure, lon, lat, depth (m).
 
         Returns
         -------
         list of dict
         """
         out = []
-        for road, m, side, depth, _length in self.potholes:
+        for road, m, side, depth, _length, *rest in self.potholes:
             line = self.network.roads[road].line
             pt = line.interpolate(m)
             lon, lat = self.network.projection.to_lonlat(pt.x, pt.y)
-            out.append({"road_id": road, "measure_m": m, "lon": float(lon), "lat": float(lat), "depth_m": depth,
-                        "side": side})
+            out.append({"road_id": road, "direction": int(rest[0]) if rest else 1, "measure_m": m, "lon": float(lon),
+                        "lat": float(lat), "depth_m": depth, "side": side})
         return out
 
 
@@ -142,37 +165,65 @@ def _with_potholes(profile: RoadProfile, potholes: list[tuple[float, str, float,
     return RoadProfile(d, profile.elevation + moving_average(bumps, spacing, 0.25), tuple(truth), profile.source)
 
 
+def _pieces(route) -> list[tuple[str, int, float, float]]:
+    """``(road, direction, u_from, u_to)`` of every piece of a route (lane coordinates, increasing)."""
+    return [(r, 1 if b >= a else -1, a, b) for r, a, b in route]
+
+
 def city_profiles(network: RoadNetwork, routes, potholes, *, rng=None) -> tuple[dict, dict]:
-    """The true profiles of every route (module docstring).
+    """The true profiles of every lane and route (module docstring).
 
     Parameters
     ----------
     network : RoadNetwork
     routes : sequence of tuple
-        Each a sequence of road ids driven one after the other.
+        Each a sequence of pieces ``(road_id, from_m, to_m)`` driven one after the other.
     potholes : sequence of tuple
-        ``(road_id, measure_m, side, depth_m, length_m)``.
+        ``(road_id, measure_m, side, depth_m, length_m[, direction])``.
     rng : numpy.random.Generator | int | None
 
     Returns
     -------
+    lanes : dict
+        ``{(road_id, direction): RoadProfile}`` in the lane coordinate, ISO class B, 20 m longer than the
+        road, with its potholes (generated in the order the routes first drive them).
     profiles : dict
-        ``{route name: RoadProfile}`` (ISO class B, 20 m longer than the route, with the potholes).
-    road_start : dict
-        ``{road_id: (route name, start_m)}``.
+        ``{route name: RoadProfile}``: the lanes' pieces joined, each shifted to continue the elevation,
+        20 m past the route's end.
     """
     rng = np.random.default_rng(rng)
-    profiles, road_start = {}, {}
+    lanes: dict = {}
     for route in routes:
-        name = "+".join(route)
-        start = 0.0
-        for r in route:
-            road_start[r] = (name, start)
-            start += network.roads[r].length
-        base = generate_road(RoadSpec(length=start + 20.0, iso_class="B", anomaly_density=0.0), rng=rng)
-        on = [(m + road_start[r][1], side, depth, length) for r, m, side, depth, length in potholes if r in route]
-        profiles[name] = _with_potholes(base, on)
-    return profiles, road_start
+        for r, s, _a, _b in _pieces(route):
+            if (r, s) in lanes:
+                continue
+            length = network.roads[r].length
+            base = generate_road(RoadSpec(length=length + _MARGIN, iso_class="B", anomaly_density=0.0), rng=rng)
+            on = [(m if s > 0 else length - m, side, depth, plen) for r2, m, side, depth, plen, *d in potholes
+                  if r2 == r and (d[0] if d else 1) == s]
+            lanes[(r, s)] = _with_potholes(base, on)
+    profiles = {}
+    for route in routes:
+        xs, hs, start = [], [], 0.0
+        pieces = _pieces(route)
+        for k, (r, s, a, b) in enumerate(pieces):
+            length = network.roads[r].length
+            u0, u1 = (a, b) if s > 0 else (length - a, length - b)
+            lane = lanes[(r, s)]
+            d = np.asarray(lane.distance)
+            last = k == len(pieces) - 1
+            sel = (d >= u0 - 1e-9) & ((d <= u1 + _MARGIN + 1e-9) if last else (d < u1 - 1e-9))
+            h = np.asarray(lane.elevation)[sel]
+            if hs:
+                h = h - h[0] + hs[-1][-1]
+            xs.append(start + d[sel] - d[sel][0])
+            hs.append(h)
+            start += u1 - u0
+        x = np.concatenate(xs)
+        spacing = float(np.asarray(lanes[pieces[0][:2]].distance)[1])
+        x = spacing * np.arange(x.size)          # one grid: the pieces are whole numbers of steps
+        profiles["+".join(r for r, *_ in route)] = RoadProfile(x, np.concatenate(hs), (), "city route")
+    return lanes, profiles
 
 
 def default_potholes(network: RoadNetwork) -> tuple:
@@ -191,16 +242,17 @@ def default_potholes(network: RoadNetwork) -> tuple:
                  for p in ((rid, 0.3 * r.length, "both", 0.05, 0.6), (rid, 0.7 * r.length, "left", 0.04, 0.5)))
 
 
-def _gps(drive: Drive, network: RoadNetwork, roads: tuple, rng: np.random.Generator) -> tuple[np.ndarray, ...]:
+def _gps(drive: Drive, network: RoadNetwork, route: tuple, rng: np.random.Generator) -> tuple[np.ndarray, ...]:
     """lat, lon (NaN between fixes) at GPS_RATE with N(0, GPS_SIGMA) errors east and north."""
     step = int(round(SAMPLE_RATE / GPS_RATE))
     k = np.arange(0, drive.n_samples, step)
-    lines = [network.roads[r].line for r in roads]
-    ends = np.cumsum([0.0] + [ln.length for ln in lines])
+    ends = np.cumsum([0.0] + [abs(b - a) for _r, a, b in route])
     xy = np.empty((k.size, 2))
     for i, p in enumerate(drive.positions[k]):
-        j = min(int(np.searchsorted(ends, p, side="right")) - 1, len(lines) - 1)
-        pt = lines[j].interpolate(float(p - ends[j]))
+        j = min(int(np.searchsorted(ends, p, side="right")) - 1, len(route) - 1)
+        r, a, b = route[j]
+        m = a + np.sign(b - a) * float(p - ends[j])
+        pt = network.roads[r].line.interpolate(m)
         xy[i] = (pt.x, pt.y)
     xy += rng.normal(0.0, GPS_SIGMA, xy.shape)
     lon, lat = network.projection.to_lonlat(xy[:, 0], xy[:, 1])
@@ -233,27 +285,29 @@ def simulate_city(*, seed: int = 0, network: RoadNetwork | None = None, speeds=N
     """
     if network is None:
         network, potholes = city_network(), CITY_POTHOLES
-        plan = [(_ROUTE, v) for v in ROUTE_SPEEDS] + [(("service",), v) for v in SERVICE_SPEEDS]
+        plan = [(route, v) for route, vs in CITY_ROUTES for v in vs]
     else:
         speeds = (12.0, 15.0, 18.0) if speeds is None else tuple(speeds)
         potholes = default_potholes(network)
-        plan = [((rid,), speeds[j % len(speeds)]) for rid in network.roads for j in range(vehicles)]
+        plan = [(((rid, 0.0, r.length),), speeds[j % len(speeds)]) for rid, r in network.roads.items()
+                for j in range(vehicles)]
     ss = np.random.SeedSequence(seed)
     road_rng, fleet_rng, *drive_seeds = ss.spawn(2 + len(plan))
     routes = list(dict.fromkeys(route for route, _ in plan))
-    profiles, road_start = city_profiles(network, routes, potholes, rng=np.random.default_rng(road_rng))
+    lanes, profiles = city_profiles(network, routes, potholes, rng=np.random.default_rng(road_rng))
     fleet = sample_fleet(len(plan), FleetSpec(), rng=np.random.default_rng(fleet_rng))
     drives, gps = [], []
     for j, ((route, speed), child) in enumerate(zip(plan, drive_seeds)):
         rng = np.random.default_rng(child)
-        road = profiles["+".join(route)]
-        end = sum(network.roads[r].length for r in route)
+        road = profiles["+".join(r for r, *_ in route)]
+        end = sum(abs(b - a) for _r, a, b in route)
         d = simulate_drive(road, fleet[j], speed, start=0.0, end_margin=float(road.distance[-1]) - end + 5.0,
                            sample_rate=SAMPLE_RATE, rng=rng)
         drives.append(d)
         gps.append(_gps(d, network, route, rng))
-    truth = CityTruth(network=network, profiles=profiles, road_start=road_start, potholes=tuple(potholes),
-                      drives=drives, roads_driven=[route for route, _ in plan])
+    truth = CityTruth(network=network, lanes=lanes, profiles=profiles, potholes=tuple(potholes), drives=drives,
+                      roads_driven=[tuple(r for r, *_ in route) for route, _ in plan],
+                      routes=[route for route, _ in plan])
     return truth, gps
 
 
@@ -301,6 +355,7 @@ def write_city(out, *, seed: int = 0, network: RoadNetwork | None = None, speeds
         write_drive_params(out / f"drive{j}.toml", speed=d.speed if constant else None, params=d.params)
         paths.append(p)
     doc = {"seed": seed, "gps_sigma_m": GPS_SIGMA, "gps_rate_hz": GPS_RATE, "sample_rate_hz": SAMPLE_RATE,
-           "roads_driven": [list(r) for r in truth.roads_driven], "potholes": truth.potholes_lonlat()}
+           "roads_driven": [list(r) for r in truth.roads_driven],
+           "routes": [[list(p) for p in r] for r in truth.routes], "potholes": truth.potholes_lonlat()}
     (out / "truth.json").write_text(json.dumps(doc, indent=1))
     return {"network": net, "drives": paths, "truth": out / "truth.json"}
