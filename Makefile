@@ -25,7 +25,7 @@ study: $(STAMP)
 # the target is under 3 minutes on an idle 2-core one);
 # test-slow runs only those, test-all everything (what .ci/run does).
 test: $(STAMP)
-	$(BIN)/python -m pytest -m "not slow"
+	$(BIN)/python -m pytest -m "not slow" --durations=25
 
 test-slow: $(STAMP)
 	$(BIN)/python -m pytest -m slow
