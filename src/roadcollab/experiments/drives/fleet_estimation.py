@@ -1,7 +1,7 @@
 """Road estimates from drives at different speeds, rates and starts, on one uniform distance grid.
 
 Approach (kernels in :mod:`roadcollab.experiments.drives.distance_maps`)
-------------------------------------------------------------------
+------------------------------------------------------------------------
 A vehicle's suspension is time-invariant in its own time, not in distance, so **every inversion
 runs in the vehicle's own time base**: vehicle ``j`` is designed (Lemma 1) at a constant speed,
 its mean speed, on ``SegmentGrid(N_j, rate_j)``; its observer ``D_j y_j``, its offline inversion
