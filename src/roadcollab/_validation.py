@@ -8,11 +8,16 @@ happens at construction, never with ``assert``.
 from __future__ import annotations
 
 import math
+import os
 from numbers import Integral, Real
+from typing import Union
 
 import numpy as np
 
 from .errors import ParameterError
+
+#: A file path as the functions that open files accept it (``str`` or ``os.PathLike``), for annotations.
+StrPath = Union[str, "os.PathLike[str]"]
 
 __all__ = [
     "check_real",

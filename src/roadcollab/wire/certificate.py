@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import struct
 from dataclasses import dataclass
+from types import ModuleType
 
 from ..errors import MessageError, ParameterError
 
@@ -47,7 +48,7 @@ def check_id(name: str, value: str) -> str:
     return value
 
 
-def _ed25519():
+def _ed25519() -> ModuleType:
     from cryptography.hazmat.primitives.asymmetric import ed25519
     return ed25519
 
@@ -91,7 +92,8 @@ class _Reader:
         return out
 
     def u(self, fmt: str) -> int:
-        return struct.unpack(fmt, self.take(struct.calcsize(fmt)))[0]
+        value: int = struct.unpack(fmt, self.take(struct.calcsize(fmt)))[0]
+        return value
 
     def string(self, name: str) -> str:
         raw = self.take(self.u(">H"))

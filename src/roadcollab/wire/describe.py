@@ -10,6 +10,7 @@ message classes (they import it); it recognises them by their ``WIRE_TYPE``.
 from __future__ import annotations
 
 from numbers import Integral, Real
+from typing import Any
 
 import numpy as np
 
@@ -23,21 +24,21 @@ from .limits import check_header, check_mechanism, check_payload
 __all__ = ["message_fields", "validate_message"]
 
 
-def _as_int(name: str, value) -> int:
+def _as_int(name: str, value: object) -> int:
     """``value`` as an int; bools and non-integers are refused."""
     if isinstance(value, (bool, np.bool_)) or not isinstance(value, (Integral, np.integer)):
         raise MessageError(f"{name} must be an integer, got {value!r} ({type(value).__name__})")
     return int(value)
 
 
-def _as_float(name: str, value) -> float:
+def _as_float(name: str, value: object) -> float:
     """``value`` as a float; bools and non-real numbers are refused."""
     if isinstance(value, (bool, np.bool_)) or not isinstance(value, (Real, np.floating, np.integer)):
         raise MessageError(f"{name} must be a real number, got {value!r} ({type(value).__name__})")
     return float(value)
 
 
-def _as_f8(name: str, value, shape: tuple[int | None, int | None]) -> np.ndarray:
+def _as_f8(name: str, value: Any, shape: tuple[int | None, int | None]) -> np.ndarray:
     """``value`` as a float64 array of the given shape (None = any), never losing precision."""
     arr = np.asarray(value)
     if arr.dtype.kind not in "fiu":
@@ -51,10 +52,11 @@ def _as_f8(name: str, value, shape: tuple[int | None, int | None]) -> np.ndarray
     return arr.astype(np.float64, copy=False)
 
 
-def _exchange_fields(message, base: Header) -> tuple[Header, dict[str, np.ndarray]]:
+def _exchange_fields(message: Any, base: Header) -> tuple[Header, dict[str, np.ndarray]]:
     """Dimensions, sample times and arrays of T, S, e and wf added to the common fields ``base``."""
     arrays: dict[str, np.ndarray] = {}
-    orders, dts = {}, {}
+    orders: dict[str, int] = {}
+    dts: dict[str, float] = {}
     for name in ("T", "S"):
         sys = getattr(message, name)
         if not isinstance(sys, StateSpaceData):
@@ -73,13 +75,13 @@ def _exchange_fields(message, base: Header) -> tuple[Header, dict[str, np.ndarra
     return h, arrays
 
 
-def _inversion_fields(message, base: Header) -> tuple[Header, dict[str, np.ndarray]]:
+def _inversion_fields(message: Any, base: Header) -> tuple[Header, dict[str, np.ndarray]]:
     """Length, count and the array ``z`` added to the common fields ``base``."""
     z = _as_f8("z", message.z, (None, CHANNELS))
     return base._replace(length=z.shape[0], count=_as_int("count", message.count)), {"z": z}
 
 
-def _as_bytes(name: str, value, nbytes: int) -> bytes:
+def _as_bytes(name: str, value: object, nbytes: int) -> bytes:
     """``value`` if it is ``bytes`` of exactly ``nbytes``."""
     if not isinstance(value, bytes) or len(value) != nbytes:
         got = f"{len(value)} bytes" if isinstance(value, bytes) else type(value).__name__
@@ -87,7 +89,7 @@ def _as_bytes(name: str, value, nbytes: int) -> bytes:
     return value
 
 
-def _as_shares(name: str, value) -> list[tuple[int, int]]:
+def _as_shares(name: str, value: object) -> list[tuple[int, int]]:
     """A dict ``{owner: share}`` of ints as ``(owner, share)`` pairs sorted by owner (the wire order)."""
     if not isinstance(value, dict):
         raise MessageError(f"{name} must be a dict of owner id to share, got {type(value).__name__}")
@@ -95,13 +97,13 @@ def _as_shares(name: str, value) -> list[tuple[int, int]]:
     return sorted(pairs)
 
 
-def _secagg_fields(message, msg_type: int) -> tuple[SecAggHeader, dict]:
+def _secagg_fields(message: Any, msg_type: int) -> tuple[SecAggHeader, dict[str, Any]]:
     """Header and payload fields of a secure-aggregation message, with types and lengths checked."""
     kind = TYPE_NAMES[msg_type]
     session = _as_bytes(f"{kind}: session", message.session, 16)
     if msg_type == MESSAGE_TYPE_KEY_ADVERT:
         h = SecAggHeader(msg_type, session, 0, _as_int("vehicle", message.vehicle))
-        fields = {"c_pk": _as_bytes("c_pk", message.c_pk, KEY_NBYTES),
+        fields: dict[str, Any] = {"c_pk": _as_bytes("c_pk", message.c_pk, KEY_NBYTES),
                   "s_pk": _as_bytes("s_pk", message.s_pk, KEY_NBYTES)}
     elif msg_type == MESSAGE_TYPE_SEALED_SHARES:
         h = SecAggHeader(msg_type, session, 0, _as_int("sender", message.sender),
@@ -121,7 +123,7 @@ def _secagg_fields(message, msg_type: int) -> tuple[SecAggHeader, dict]:
     return h._replace(payload_nbytes=h.expected_payload_nbytes()), fields
 
 
-def message_fields(message) -> tuple[Header | SecAggHeader, dict]:
+def message_fields(message: Any) -> tuple[Header | SecAggHeader, dict[str, Any]]:
     """Header and arrays of an in-memory message, with types and shapes checked.
 
     Parameters
@@ -162,9 +164,9 @@ def message_fields(message) -> tuple[Header | SecAggHeader, dict]:
     return h._replace(payload_nbytes=h.expected_payload_nbytes()), arrays
 
 
-def _message_arrays(message) -> list:
+def _message_arrays(message: Any) -> list[np.ndarray]:
     """The array attributes of an exchange or inversion message (its systems' matrices included)."""
-    out = []
+    out: list[np.ndarray] = []
     for name in ("e", "wf", "z"):
         arr = getattr(message, name, None)
         if arr is not None:
@@ -176,7 +178,7 @@ def _message_arrays(message) -> list:
     return out
 
 
-def _frozen(arr) -> bool:
+def _frozen(arr: object) -> bool:
     """True if ``arr`` is an ndarray whose content cannot change through it or any array it views."""
     while isinstance(arr, np.ndarray):
         if arr.flags.writeable:
@@ -185,7 +187,7 @@ def _frozen(arr) -> bool:
     return arr is None or isinstance(arr, bytes)
 
 
-def validate_message(message) -> tuple[Header | SecAggHeader, dict]:
+def validate_message(message: Any) -> tuple[Header | SecAggHeader, dict[str, Any]]:
     """Every check :func:`~roadcollab.wire.protocol.decode` applies, on an in-memory message.
 
     Parameters
@@ -208,9 +210,10 @@ def validate_message(message) -> tuple[Header | SecAggHeader, dict]:
         # Validated before and nothing can have changed since: the same array objects, all frozen
         # (encoding a message built a moment ago re-checked 80 us of content per segment, measured).
         ids, result = memo
+        result_typed: tuple[Header | SecAggHeader, dict[str, Any]] = result
         held = _message_arrays(message)
         if ids == tuple(map(id, held)) and all(map(_frozen, held)):
-            return result
+            return result_typed
     h, arrays = message_fields(message)
     check_header(h)
     # The systems' own memo of their certificate (keyed by A's content): building a message and

@@ -6,7 +6,7 @@ its arrays. The encoding side, :func:`~.describe.message_fields`, lives in :mod:
 
 from __future__ import annotations
 
-from typing import Union
+from typing import Any, Union
 
 from ..lti.realisation import StateSpaceData, SystemCache
 from .layout import (MESSAGE_TYPE_INVERSION, MESSAGE_TYPE_KEY_ADVERT, MESSAGE_TYPE_MASKED_INPUT,
@@ -19,7 +19,7 @@ __all__ = ["Message", "build_message"]
 Message = Union[ExchangeMessage, InversionMessage, KeyAdvert, SealedShares, MaskedInput, Reveal]
 
 
-def _build_secagg(h: SecAggHeader, fields: dict) -> Message:
+def _build_secagg(h: SecAggHeader, fields: dict[str, Any]) -> Message:
     """The secure-aggregation message of a checked header and its payload fields."""
     if h.msg_type == MESSAGE_TYPE_KEY_ADVERT:
         return KeyAdvert(h.vehicle, fields["c_pk"], fields["s_pk"], session=h.session)
@@ -30,7 +30,7 @@ def _build_secagg(h: SecAggHeader, fields: dict) -> Message:
     return Reveal(h.vehicle, dict(fields["self_mask_shares"]), dict(fields["key_shares"]), session=h.session)
 
 
-def build_message(h: Header | SecAggHeader, arrays: dict, *, systems: SystemCache | None = None) -> Message:
+def build_message(h: Header | SecAggHeader, arrays: dict[str, Any], *, systems: SystemCache | None = None) -> Message:
     """The message described by a checked header and its payload arrays.
 
     Parameters
@@ -53,7 +53,7 @@ def build_message(h: Header | SecAggHeader, arrays: dict, *, systems: SystemCach
         return InversionMessage(mechanism=h.mechanism, sample_rate=h.sample_rate, n_samples=h.n_samples,
                                 z=arrays["z"], count=h.count)
     make = StateSpaceData if systems is None else systems.get
-    T, S = (make(*(arrays[f"{name}.{p}"] for p in "ABCD"), dt)
+    T, S = (make(arrays[f"{name}.A"], arrays[f"{name}.B"], arrays[f"{name}.C"], arrays[f"{name}.D"], dt)
             for name, dt in (("T", h.dt_T), ("S", h.dt_S)))
     return ExchangeMessage(mechanism=h.mechanism, sample_rate=h.sample_rate, n_samples=h.n_samples,
                            T=T, S=S, e=arrays["e"], wf=arrays["wf"])

@@ -7,6 +7,8 @@ allocated from a declared size before the header has passed every check.
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 
 from ..errors import MessageError
@@ -19,7 +21,7 @@ from .secagg_framing import pack_secagg, read_secagg_header
 __all__ = ["as_buffer", "read_header", "check_frame_size", "read_array", "pack_message"]
 
 
-def as_buffer(data) -> memoryview:
+def as_buffer(data: object) -> memoryview:
     """A flat, C-contiguous byte view of ``data`` (bytes, bytearray or memoryview).
 
     Parameters
@@ -165,7 +167,7 @@ def read_array(buf: memoryview, offset: int, shape: tuple[int, int]) -> np.ndarr
     return arr
 
 
-def pack_message(h: Header | SecAggHeader, arrays: dict) -> bytes:
+def pack_message(h: Header | SecAggHeader, arrays: dict[str, Any]) -> bytes:
     """The bytes of a checked message: header, extension, then the arrays in wire order.
 
     Parameters

@@ -25,14 +25,20 @@ from __future__ import annotations
 
 import os
 import time
+from collections.abc import Iterable
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
+from .._validation import StrPath
 from ..errors import FileFormatError, MessageError, ParameterError
 from .certificate import _KEY, CERT_CONTEXT, Certificate, _ed25519, check_id, verify_signature
 
 __all__ = ["CERT_CONTEXT", "Certificate", "FleetAuthority", "VehicleIdentity", "FleetTrust", "verify_signature",
            "check_id"]
+
+if TYPE_CHECKING:
+    from cryptography.hazmat.primitives.asymmetric.ed25519 import Ed25519PrivateKey
 
 @dataclass(frozen=True)
 class FleetTrust:
@@ -49,7 +55,7 @@ class FleetTrust:
 
     fleet_id: str
     authority_key: bytes
-    revoked: frozenset = frozenset()
+    revoked: frozenset[str] = frozenset()
 
     def check(self, cert: Certificate) -> Certificate:
         """Accept ``cert`` if it is this fleet's, signed by its authority and not revoked.
@@ -76,7 +82,7 @@ class FleetTrust:
             raise MessageError(f"certificate of {cert.vehicle_id!r}: revoked")
         return cert
 
-    def save(self, path) -> Path:
+    def save(self, path: StrPath) -> Path:
         """Write the trust anchor (fleet id, authority public key in hex, revoked ids) as a small TOML file.
 
         Parameters
@@ -94,7 +100,7 @@ class FleetTrust:
         return path
 
     @classmethod
-    def load(cls, path) -> "FleetTrust":
+    def load(cls, path: StrPath) -> "FleetTrust":
         """Read a file written by :meth:`save`; :class:`~roadcollab.errors.FileFormatError` if malformed.
 
         Parameters
@@ -118,7 +124,7 @@ class FleetTrust:
         return cls(fleet, key, revoked)
 
 
-def _read_toml(path) -> dict:
+def _read_toml(path: StrPath) -> dict[str, Any]:
     try:
         import tomllib
     except ModuleNotFoundError:  # Python 3.10
@@ -127,7 +133,8 @@ def _read_toml(path) -> dict:
     if not path.is_file():
         raise FileFormatError(f"{path}: not found (expected a regular file)")
     try:
-        return tomllib.loads(path.read_text())
+        data: dict[str, Any] = tomllib.loads(path.read_text())
+        return data
     except (tomllib.TOMLDecodeError, UnicodeDecodeError) as err:
         raise FileFormatError(f"{path}: not valid TOML ({err})") from None
 
@@ -139,7 +146,7 @@ def _write_private(path: Path, data: bytes) -> None:
         fh.write(data)
 
 
-def _load_private(path) -> object:
+def _load_private(path: StrPath) -> Ed25519PrivateKey:
     from cryptography.hazmat.primitives import serialization
 
     path = Path(path)
@@ -149,19 +156,20 @@ def _load_private(path) -> object:
         key = serialization.load_pem_private_key(path.read_bytes(), password=None)
     except (ValueError, TypeError) as err:
         raise FileFormatError(f"{path}: not a PEM private key ({err})") from None
-    if not isinstance(key, _ed25519().Ed25519PrivateKey):
+    ed25519_key: type[Ed25519PrivateKey] = _ed25519().Ed25519PrivateKey
+    if not isinstance(key, ed25519_key):
         raise FileFormatError(f"{path}: expected an Ed25519 private key")
     return key
 
 
-def _pem(key) -> bytes:
+def _pem(key: Ed25519PrivateKey) -> bytes:
     from cryptography.hazmat.primitives import serialization
 
     return key.private_bytes(serialization.Encoding.PEM, serialization.PrivateFormat.PKCS8,
                              serialization.NoEncryption())
 
 
-def _raw_public(key) -> bytes:
+def _raw_public(key: Ed25519PrivateKey) -> bytes:
     from cryptography.hazmat.primitives import serialization
 
     return key.public_key().public_bytes(serialization.Encoding.Raw, serialization.PublicFormat.Raw)
@@ -177,7 +185,7 @@ class FleetAuthority:
         Use :meth:`generate` or :meth:`load`.
     """
 
-    def __init__(self, fleet_id: str, private_key) -> None:
+    def __init__(self, fleet_id: str, private_key: Ed25519PrivateKey) -> None:
         self.fleet_id = check_id("fleet_id", fleet_id)
         self._key = private_key
         self.public_key = _raw_public(private_key)
@@ -196,7 +204,7 @@ class FleetAuthority:
         """
         return cls(fleet_id, _ed25519().Ed25519PrivateKey.generate())
 
-    def trust(self, revoked=()) -> FleetTrust:
+    def trust(self, revoked: Iterable[str] = ()) -> FleetTrust:
         """The public trust anchor of this authority.
 
         Parameters
@@ -233,7 +241,7 @@ class FleetAuthority:
         return Certificate(self.fleet_id, vehicle_id, bytes(public_key), unsigned.issued_s,
                            self._key.sign(unsigned.signed_bytes()))
 
-    def save(self, folder) -> Path:
+    def save(self, folder: StrPath) -> Path:
         """Write ``authority.key`` (PEM, mode 0600; an existing key is never replaced) and ``trust.toml``.
 
         Parameters
@@ -252,7 +260,7 @@ class FleetAuthority:
         return folder
 
     @classmethod
-    def load(cls, folder) -> "FleetAuthority":
+    def load(cls, folder: StrPath) -> "FleetAuthority":
         """Read a folder written by :meth:`save`.
 
         Parameters
@@ -281,7 +289,7 @@ class VehicleIdentity:
         Must match ``certificate.public_key``.
     """
 
-    def __init__(self, certificate: Certificate, private_key) -> None:
+    def __init__(self, certificate: Certificate, private_key: Ed25519PrivateKey) -> None:
         if _raw_public(private_key) != certificate.public_key:
             raise ParameterError(f"the private key of {certificate.vehicle_id!r} does not match its certificate")
         self.certificate = certificate
@@ -320,7 +328,7 @@ class VehicleIdentity:
         """
         return self._key.sign(bytes(data))
 
-    def save(self, folder) -> Path:
+    def save(self, folder: StrPath) -> Path:
         """Write ``identity.key`` (PEM, 0600; never replaced) and ``certificate.bin``.
 
         Parameters
@@ -339,7 +347,7 @@ class VehicleIdentity:
         return folder
 
     @classmethod
-    def load(cls, folder) -> "VehicleIdentity":
+    def load(cls, folder: StrPath) -> "VehicleIdentity":
         """Read a folder written by :meth:`save`.
 
         Parameters

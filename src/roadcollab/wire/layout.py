@@ -165,7 +165,8 @@ class Header(NamedTuple):
     order_S: int = 0
     dt_T: float = 0.0
     dt_S: float = 0.0
-    count: int = 0
+    # the wire field ``count`` shadows tuple.count (a method) on purpose: it is the message's field name
+    count: int = 0  # type: ignore[assignment]
 
     @property
     def header_nbytes(self) -> int:

@@ -9,7 +9,7 @@ refusal is a :class:`~roadcollab.errors.MessageError`.
 from __future__ import annotations
 
 import math
-from typing import Callable
+from typing import Any, Callable
 
 import numpy as np
 
@@ -63,7 +63,7 @@ MAX_MESSAGE_BYTES = max(exchange_nbytes(MAX_ORDER, MAX_ORDER, MAX_SIGNAL_LENGTH)
                         *(h.header_nbytes + h.expected_payload_nbytes() for h in _SECAGG_MAX))
 
 
-def check_mechanism(mechanism) -> str:
+def check_mechanism(mechanism: object) -> str:
     """``mechanism`` if it is one of the names of ``MECHANISM_CODES``.
 
     Parameters
@@ -109,7 +109,7 @@ def _check_inversion_header(h: Header) -> None:
         raise MessageError(f"count must be 1 for mechanism 'hardened', got {h.count}")
 
 
-def check_header(h: Header) -> None:
+def check_header(h: Header | SecAggHeader) -> None:
     """Check every header field against the limits; uses no payload, allocates nothing.
 
     Parameters
@@ -183,7 +183,7 @@ def _check_system(name: str, A: np.ndarray, B: np.ndarray, C: np.ndarray, D: np.
                            f"a non-normal A whose computed eigenvalues mislead")
 
 
-def check_payload(h: Header, arrays: dict[str, np.ndarray], *,
+def check_payload(h: Header | SecAggHeader, arrays: dict[str, Any], *,
                   certificates: dict[str, Callable[[], tuple[float, float]]] | None = None) -> None:
     """Check the arrays of a message whose header passed :func:`check_header`.
 
@@ -210,8 +210,8 @@ def check_payload(h: Header, arrays: dict[str, np.ndarray], *,
         return
     if h.msg_type == MESSAGE_TYPE_EXCHANGE:
         for name in ("T", "S"):
-            _check_system(name, *(arrays[f"{name}.{p}"] for p in "ABCD"),
-                          certify=None if certificates is None else certificates.get(name))
+            A, B, C, D = (arrays[f"{name}.{p}"] for p in "ABCD")
+            _check_system(name, A, B, C, D, certify=None if certificates is None else certificates.get(name))
         _check_finite("e", arrays["e"])
         _check_finite("wf", arrays["wf"])
     else:
@@ -258,7 +258,7 @@ def _check_secagg_header(h: SecAggHeader) -> None:
         raise MessageError(f"header declares {h.payload_nbytes} payload bytes but its dimensions imply {expected}")
 
 
-def _check_shares(name: str, entries: list) -> None:
+def _check_shares(name: str, entries: list[tuple[int, int]]) -> None:
     """Owner ids strictly increasing (the canonical order) and shares in ``[0, SHARE_MODULUS)``."""
     previous = 0
     for owner, share in entries:
@@ -270,7 +270,7 @@ def _check_shares(name: str, entries: list) -> None:
         previous = owner
 
 
-def _check_secagg_payload(h: SecAggHeader, fields: dict) -> None:
+def _check_secagg_payload(h: SecAggHeader, fields: dict[str, Any]) -> None:
     """:func:`check_payload` of a secure-aggregation message.
 
     ``fields`` as from :func:`~.describe.message_fields`, a reveal's ``self_mask_shares`` and

@@ -229,7 +229,7 @@ def encode(message: Message) -> bytes:
     return pack_message(h, arrays)
 
 
-def _decode(data, systems: SystemCache | None = None) -> Message:
+def _decode(data: object, systems: SystemCache | None = None) -> Message:
     """:func:`decode` without the final conversion of unexpected exceptions."""
     buf = as_buffer(data)
     h = read_header(buf)
@@ -285,7 +285,7 @@ def decode(data: bytes | bytearray | memoryview, *, systems: SystemCache | None 
         raise MessageError(f"malformed message: {type(err).__name__}: {err}") from err
 
 
-def write_example(path: str | PathLike, mechanism: str = "paper", seed: int = 0) -> int:
+def write_example(path: str | PathLike[str], mechanism: str = "paper", seed: int = 0) -> int:
     """Encode ``example_message(mechanism, rng=seed)`` to ``path``.
 
     Parameters

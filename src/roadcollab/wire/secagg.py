@@ -162,8 +162,8 @@ class Reveal(_SecAggMessage):
     WIRE_TYPE = MESSAGE_TYPE_REVEAL
 
     vehicle: int
-    self_mask_shares: dict = field(default_factory=dict)
-    key_shares: dict = field(default_factory=dict)
+    self_mask_shares: dict[int, int] = field(default_factory=dict)
+    key_shares: dict[int, int] = field(default_factory=dict)
     session: bytes = DEFAULT_SESSION
 
     @property

@@ -9,6 +9,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from typing import Any
+
 from ..errors import MessageError
 from .layout import (CHANNELS, FORMAT_VERSION, KEY_NBYTES, MAGIC, MECHANISM_CODES, MESSAGE_TYPE_KEY_ADVERT,
                      MESSAGE_TYPE_MASKED_INPUT, MESSAGE_TYPE_SEALED_SHARES, SEALED_NBYTES, SECAGG_HEADER_NBYTES,
@@ -57,7 +59,7 @@ def _read_shares(buf: memoryview, offset: int, count: int) -> list[tuple[int, in
     return out
 
 
-def read_secagg_fields(buf: memoryview, h: SecAggHeader) -> dict:
+def read_secagg_fields(buf: memoryview, h: SecAggHeader) -> dict[str, Any]:
     """The payload fields of a message whose header passed the checks and whose size matches it.
 
     Parameters
@@ -93,7 +95,7 @@ def _pack_shares(entries: list[tuple[int, int]]) -> bytes:
     return b"".join(o.to_bytes(_ID_NBYTES, "little") + y.to_bytes(SHARE_NBYTES, "little") for o, y in entries)
 
 
-def pack_secagg(h: SecAggHeader, fields: dict) -> bytes:
+def pack_secagg(h: SecAggHeader, fields: dict[str, Any]) -> bytes:
     """The bytes of a checked secure-aggregation message: header, then the payload fields.
 
     Parameters
@@ -111,9 +113,9 @@ def pack_secagg(h: SecAggHeader, fields: dict) -> bytes:
     head = SECAGG_STRUCT.pack(MAGIC, FORMAT_VERSION, h.msg_type, MECHANISM_CODES[h.mechanism], 0, h.session,
                               h.payload_nbytes, h.vehicle, h.n1, h.n2, 0)
     if h.msg_type == MESSAGE_TYPE_KEY_ADVERT:
-        return head + fields["c_pk"] + fields["s_pk"]
+        return head + bytes(fields["c_pk"]) + bytes(fields["s_pk"])
     if h.msg_type == MESSAGE_TYPE_SEALED_SHARES:
-        return head + fields["ciphertext"]
+        return head + bytes(fields["ciphertext"])
     if h.msg_type == MESSAGE_TYPE_MASKED_INPUT:
         return head + np.ascontiguousarray(fields["y"], dtype=U8).tobytes()
     return head + _pack_shares(fields["self_mask_shares"]) + _pack_shares(fields["key_shares"])

@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import hashlib
 import struct
+from collections.abc import Iterable
 from dataclasses import dataclass
 
 from ..errors import MessageError
@@ -106,7 +107,7 @@ class ShareCommitments:
 
     dealer: int
     b_hash: bytes
-    shares: dict
+    shares: dict[int, tuple[bytes, bytes]]
 
     def to_bytes(self) -> bytes:
         """The payload (module docstring)."""
@@ -132,7 +133,7 @@ class ShareCommitments:
         dealer, m = _U32.unpack_from(data, 0)[0], _U32.unpack_from(data, 4 + HASH_NBYTES)[0]
         if m > _MAX_IDS or len(data) != head + m * row:
             raise MessageError(f"share commitments: {len(data)} bytes do not hold {m} entries")
-        shares = {}
+        shares: dict[int, tuple[bytes, bytes]] = {}
         for k in range(m):
             at = head + k * row
             j = _U32.unpack_from(data, at)[0]
@@ -223,12 +224,12 @@ def open_commitments(data: bytes, trust: FleetTrust, session: bytes) -> tuple[Ce
     return cert, ShareCommitments.from_bytes(payload)
 
 
-def _view_payload(signer: int, view) -> bytes:
+def _view_payload(signer: int, view: Iterable[int]) -> bytes:
     ids = sorted(view)
     return _U32.pack(signer) + _U32.pack(len(ids)) + b"".join(_U32.pack(i) for i in ids)
 
 
-def sign_view(identity: VehicleIdentity, session: bytes, signer: int, view) -> bytes:
+def sign_view(identity: VehicleIdentity, session: bytes, signer: int, view: Iterable[int]) -> bytes:
     """The consistency signature of vehicle ``signer`` on the survivor set ``view`` (``U_3``) of ``session``.
 
     Parameters
@@ -245,7 +246,7 @@ def sign_view(identity: VehicleIdentity, session: bytes, signer: int, view) -> b
     return seal_envelope(identity, _view_payload(signer, view), VIEW_CONTEXT + session)
 
 
-def open_view(data: bytes, trust: FleetTrust, session: bytes) -> tuple[Certificate, int, tuple]:
+def open_view(data: bytes, trust: FleetTrust, session: bytes) -> tuple[Certificate, int, tuple[int, ...]]:
     """Check a consistency signature of ``session``: ``(certificate, signer id, sorted view)``.
 
     Parameters
