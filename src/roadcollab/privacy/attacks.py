@@ -36,6 +36,7 @@ from dataclasses import dataclass
 
 import numpy as np
 import scipy.linalg
+from numpy.typing import ArrayLike
 import scipy.optimize
 
 from ..errors import ParameterError
@@ -87,7 +88,7 @@ class PhysicalPrior:
         return float(np.hypot(np.log(f / self.center_frequency), (zeta - self.center_damping) / 0.3))
 
 
-def pole_errors(estimated, true) -> np.ndarray:
+def pole_errors(estimated: ArrayLike, true: ArrayLike) -> np.ndarray:
     """Relative error of each true pole after optimal matching (Hungarian).
 
     Parameters
@@ -113,7 +114,7 @@ def pole_errors(estimated, true) -> np.ndarray:
     return err
 
 
-def select_by_prior(candidates, prior: PhysicalPrior = PhysicalPrior(), n_pairs: int = 2) -> np.ndarray:
+def select_by_prior(candidates: ArrayLike, prior: PhysicalPrior = PhysicalPrior(), n_pairs: int = 2) -> np.ndarray:
     """The ``n_pairs`` complex pairs among ``candidates`` that the prior finds most plausible.
 
     Parameters
@@ -189,7 +190,8 @@ def _match_sets(a: np.ndarray, b: np.ndarray, rtol: float) -> np.ndarray:
     if a.size == 0 or b.size == 0:
         return np.zeros(0, complex)
     d = np.abs(a[:, None] - b[None, :]) / np.maximum(np.abs(a)[:, None], 1e-300)
-    return a[d.min(axis=1) < rtol]
+    out: np.ndarray = a[d.min(axis=1) < rtol]
+    return out
 
 
 def attack_pole_intersection(message: ExchangeMessage, prior: PhysicalPrior = PhysicalPrior(),
@@ -248,7 +250,7 @@ def attack_multiplicity(message: ExchangeMessage, prior: PhysicalPrior = Physica
 
 
 # -- attacks on signals (hardened exchange) ----------------------------------------------------
-def _signals(z: np.ndarray, w_band: np.ndarray):
+def _signals(z: np.ndarray, w_band: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Input (z) and output (w - z) of the map the attacker identifies."""
     return z, w_band - z
 
@@ -379,6 +381,7 @@ def attack_signals_intersection(segments: list[tuple[np.ndarray, np.ndarray]], d
     """
     if len(segments) < 2:
         raise ParameterError(f"segments must hold at least 2 (z, w) pairs, got {len(segments)}")
-    p1 = arx_poles(*_signals(*segments[0]), dt, order, decimate)
-    p2 = arx_poles(*_signals(*segments[1]), dt, order, decimate)
+    (u1, y1), (u2, y2) = _signals(*segments[0]), _signals(*segments[1])
+    p1 = arx_poles(u1, y1, dt, order, decimate)
+    p2 = arx_poles(u2, y2, dt, order, decimate)
     return intersect_pole_sets(p1, p2, prior, rtol)

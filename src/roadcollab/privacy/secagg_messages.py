@@ -149,8 +149,8 @@ class AggregateResult:
     """
 
     total: np.ndarray
-    survivors: tuple
-    dropped: tuple
+    survivors: tuple[int, ...]
+    dropped: tuple[int, ...]
 
     @property
     def average(self) -> np.ndarray:

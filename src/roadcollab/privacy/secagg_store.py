@@ -16,8 +16,11 @@ from __future__ import annotations
 
 import hashlib
 import sqlite3
+from collections.abc import Iterable
 from pathlib import Path
+from typing import Any
 
+from .._validation import StrPath
 from ..errors import FileFormatError
 from .secagg_messages import AggregationRefused
 
@@ -28,7 +31,7 @@ _SCHEMA = ("CREATE TABLE IF NOT EXISTS secagg_sessions (session BLOB PRIMARY KEY
 _MAGIC_TABLE = "secagg_sessions"
 
 
-def view_digest(ids) -> bytes:
+def view_digest(ids: Iterable[int]) -> bytes:
     """SHA-256 of a sorted set of vehicle ids (a roster or a survivor set), 32 bytes.
 
     Parameters
@@ -57,7 +60,7 @@ class SessionLedger:
         ``path`` exists and is not a ledger written by this class.
     """
 
-    def __init__(self, path=None) -> None:
+    def __init__(self, path: StrPath | None = None) -> None:
         self.path = None if path is None else Path(path)
         if self.path is not None and self.path.exists():
             self._check_existing(self.path)
@@ -91,7 +94,7 @@ class SessionLedger:
         """Close the database (further calls fail)."""
         self._db.close()
 
-    def _row(self, session: bytes):
+    def _row(self, session: bytes) -> Any:
         return self._db.execute("SELECT roster, view FROM secagg_sessions WHERE session = ?",
                                 (bytes(session),)).fetchone()
 
@@ -108,7 +111,7 @@ class SessionLedger:
         """
         return self._row(session) is not None
 
-    def record_contribution(self, session: bytes, roster) -> None:
+    def record_contribution(self, session: bytes, roster: Iterable[int]) -> None:
         """Record, before it is sent, that the masked input of ``session`` goes to ``roster``.
 
         Parameters
@@ -131,7 +134,7 @@ class SessionLedger:
             raise AggregationRefused("this vehicle already contributed its input for this segment and epoch; "
                                      "a second session gets nothing") from None
 
-    def record_view(self, session: bytes, view) -> None:
+    def record_view(self, session: bytes, view: Iterable[int]) -> None:
         """Record the survivor set this vehicle signs in ``session`` (the same set again is accepted).
 
         Parameters
