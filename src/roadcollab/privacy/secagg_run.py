@@ -15,7 +15,9 @@ from __future__ import annotations
 
 import os
 import time
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass
+from typing import Any, TypeVar
 
 import numpy as np
 
@@ -27,6 +29,7 @@ from ._secagg_kernels import KEY_NBYTES, decode_sum, derive, encode_fixed, prg_r
 from .secure_aggregation import (_SEALED_NBYTES, AggregateResult, KeyAdvert, MaskedInput, Reveal, SealedShares,
                                  SecAggSpec, _collect, _open_share, _pair_mask, advertise_keys, mask_input,
                                  reveal_shares, session_id, share_keys, unmask)
+from .secagg_messages import VehicleSecrets
 
 __all__ = ["ROUNDS", "AggregatorView", "SecAggRun", "CollusionView", "run_secure_aggregation", "aggregator_view",
            "collusion_view", "secure_aggregation_cost"]
@@ -55,10 +58,10 @@ class AggregatorView:
         Fixed-point fraction bits of the session.
     """
 
-    roster: dict
-    sealed: dict
-    masked: dict
-    reveals: tuple
+    roster: dict[int, KeyAdvert]
+    sealed: dict[tuple[int, int], bytes]
+    masked: dict[int, np.ndarray]
+    reveals: tuple[Reveal, ...]
     result: AggregateResult
     frac_bits: int
 
@@ -105,8 +108,8 @@ class SecAggRun:
     view: AggregatorView
     spec: SecAggSpec
     session: bytes
-    inputs: tuple
-    secrets: tuple
+    inputs: tuple[np.ndarray, ...]
+    secrets: tuple[VehicleSecrets, ...]
     vehicle_ms: np.ndarray
     bytes_sent: np.ndarray
     bytes_received: np.ndarray
@@ -123,14 +126,20 @@ class SecAggRun:
         return self.view.result.average
 
 
-def _timed(fn, *args):
+_T = TypeVar("_T")
+
+#: What :func:`run_secure_aggregation` passes every message through (``None``: delivered as is).
+Transport = Callable[[Any], Any]
+
+
+def _timed(fn: Callable[..., _T], *args: Any) -> tuple[_T, float]:
     """``(fn(*args), ms)``."""
     t0 = time.perf_counter()
     out = fn(*args)
     return out, (time.perf_counter() - t0) * 1e3
 
 
-def _deliver(transport, message, kind: type):
+def _deliver(transport: Transport | None, message: _T, kind: type[_T]) -> _T:
     """``message`` as its recipient gets it: through ``transport`` (if any), still of type ``kind``."""
     if transport is None:
         return message
@@ -140,7 +149,7 @@ def _deliver(transport, message, kind: type):
     return out
 
 
-def _forward_sealed(transport, sender: int, recipient: int, ciphertext: bytes, session: bytes) -> bytes:
+def _forward_sealed(transport: Transport | None, sender: int, recipient: int, ciphertext: bytes, session: bytes) -> bytes:
     """Sealed shares ``sender -> recipient`` as forwarded by the aggregator (through ``transport``)."""
     out = _deliver(transport, SealedShares(sender, recipient, ciphertext, session=session), SealedShares)
     if (out.sender, out.recipient, out.session) != (sender, recipient, session):
@@ -148,13 +157,13 @@ def _forward_sealed(transport, sender: int, recipient: int, ciphertext: bytes, s
     return out.ciphertext
 
 
-def _check_ids(name: str, ids, n: int) -> frozenset:
+def _check_ids(name: str, ids: Iterable[int], n: int) -> frozenset[int]:
     """A set of vehicle ids in ``1..n``."""
     out = frozenset(check_int(name, i, low=1, high=n) for i in ids)
     return out
 
 
-def _check_inputs(inputs) -> tuple:
+def _check_inputs(inputs: Iterable[Any]) -> tuple[np.ndarray, ...]:
     """The vehicles' inputs as finite float arrays of one common shape (L, 2)."""
     arrs = tuple(np.asarray(z.z if isinstance(z, InversionMessage) else z, dtype=float) for z in inputs)
     if not arrs or any(a.shape != arrs[0].shape or a.ndim != 2 or a.shape[1] != 2 for a in arrs):
@@ -164,9 +173,10 @@ def _check_inputs(inputs) -> tuple:
     return arrs
 
 
-def run_secure_aggregation(inputs, spec: SecAggSpec = SecAggSpec(), *, session: bytes | None = None,
-                           dropped_before_masking=(), silent_in_unmasking=(), rng=None,
-                           transport=None) -> SecAggRun:
+def run_secure_aggregation(inputs: Sequence[Any], spec: SecAggSpec = SecAggSpec(), *, session: bytes | None = None,
+                           dropped_before_masking: Iterable[int] = (), silent_in_unmasking: Iterable[int] = (),
+                           rng: int | np.random.Generator | None = None,
+                           transport: Transport | None = None) -> SecAggRun:
     """Run one session with every vehicle and the aggregator in-process.
 
     Parameters
@@ -230,8 +240,8 @@ def run_secure_aggregation(inputs, spec: SecAggSpec = SecAggSpec(), *, session: 
     reveals = []
     for j in survivors:
         if j not in silent:
-            mine = {i: sealed[(i, j)] for i in ids if i != j}
-            rev, ms[j - 1, 3] = _timed(reveal_shares, secrets[j], mine, roster, survivors, spec)
+            for_j = {i: sealed[(i, j)] for i in ids if i != j}
+            rev, ms[j - 1, 3] = _timed(reveal_shares, secrets[j], for_j, roster, survivors, spec)
             reveals.append(_deliver(transport, rev, Reveal))
             sent[j - 1, 3] = rev.nbytes
     # Each vehicle receives the roster, the n - 1 shares sealed for it and the survivor list.
@@ -275,10 +285,10 @@ class CollusionView:
         the coalition rebuilds an honest ``s_sk`` and strips every mask (``b_i`` is revealed in round 3).
     """
 
-    colluders: tuple
-    honest: tuple
+    colluders: tuple[int, ...]
+    honest: tuple[int, ...]
     honest_sum: np.ndarray
-    recovered: dict
+    recovered: dict[int, np.ndarray]
 
 
 def _strip_masks(run: SecAggRun, h: int, s_sk: bytes) -> np.ndarray:
@@ -293,7 +303,7 @@ def _strip_masks(run: SecAggRun, h: int, s_sk: bytes) -> np.ndarray:
     return decode_sum(x, spec.frac_bits)
 
 
-def collusion_view(run: SecAggRun, colluders) -> CollusionView:
+def collusion_view(run: SecAggRun, colluders: Iterable[int]) -> CollusionView:
     """The aggregator colluding with ``c`` vehicles: the honest sum, and individual inputs if it can.
 
     The coalition subtracts its own (clipped, quantised) inputs from the aggregate. For each honest survivor
@@ -330,7 +340,7 @@ def collusion_view(run: SecAggRun, colluders) -> CollusionView:
     return CollusionView(tuple(coal), honest, view.result.total - own, recovered)
 
 
-def _cost_inputs(values, n: int, gen: np.random.Generator) -> list[np.ndarray]:
+def _cost_inputs(values: Any, n: int, gen: np.random.Generator) -> list[np.ndarray]:
     """``n`` distinct inputs of the shape of ``values``: scaled copies plus a little noise."""
     z = np.asarray(values.z if isinstance(values, InversionMessage) else values, dtype=float)
     z = z.reshape(-1, 2) if z.ndim == 1 and z.size % 2 == 0 else z
@@ -340,8 +350,8 @@ def _cost_inputs(values, n: int, gen: np.random.Generator) -> list[np.ndarray]:
     return [z * (1.0 + 0.1 * gen.standard_normal()) + 0.01 * scale * gen.standard_normal(z.shape) for _ in range(n)]
 
 
-def secure_aggregation_cost(values, *, n_vehicles: int = 10, spec: SecAggSpec = SecAggSpec(), dropped: int = 0,
-                            repeats: int = 3, rng=None) -> dict:
+def secure_aggregation_cost(values: Any, *, n_vehicles: int = 10, spec: SecAggSpec = SecAggSpec(), dropped: int = 0,
+                            repeats: int = 3, rng: int | np.random.Generator | None = None) -> dict[str, Any]:
     """Cost per vehicle of one secure aggregation of messages like ``values`` (for ``baselines.csv``).
 
     Parameters

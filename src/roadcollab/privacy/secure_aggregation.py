@@ -43,8 +43,11 @@ from __future__ import annotations
 
 import os
 import struct
+from collections.abc import Iterable
+from typing import Any
 
 import numpy as np
+from numpy.typing import ArrayLike
 from cryptography.exceptions import InvalidTag
 from cryptography.hazmat.primitives.ciphers.aead import ChaCha20Poly1305
 
@@ -95,7 +98,7 @@ def advertise_keys(vehicle: int, session: bytes, *, root: bytes | None = None) -
     return secrets, KeyAdvert(vehicle, c_pk, s_pk, session=session)
 
 
-def _check_roster(roster: dict, spec: SecAggSpec, secrets: VehicleSecrets) -> list[int]:
+def _check_roster(roster: dict[int, KeyAdvert], spec: SecAggSpec, secrets: VehicleSecrets) -> list[int]:
     """Sorted ids of the roster ``U_1`` (untrusted broadcast); refused if it is smaller than ``k``."""
     if not isinstance(roster, dict) or not all(isinstance(a, KeyAdvert) and a.vehicle == i for i, a in roster.items()):
         raise MessageError("roster must map each vehicle id to its KeyAdvert")
@@ -109,7 +112,7 @@ def _check_roster(roster: dict, spec: SecAggSpec, secrets: VehicleSecrets) -> li
     return sorted(roster)
 
 
-def _check_session(messages, session: bytes) -> None:
+def _check_session(messages: Iterable[Any], session: bytes) -> None:
     """MessageError if one of ``messages`` (untrusted) belongs to another session (segment, round)."""
     for m in messages:
         if m.session != session:
@@ -123,7 +126,7 @@ def _seal_key(secrets: VehicleSecrets, peer_pk: bytes, sender: int, recipient: i
     return derive(shared, b"seal", secrets.session, sender, recipient)
 
 
-def share_keys(secrets: VehicleSecrets, roster: dict, spec: SecAggSpec) -> dict[int, bytes]:
+def share_keys(secrets: VehicleSecrets, roster: dict[int, KeyAdvert], spec: SecAggSpec) -> dict[int, bytes]:
     """Round 1: Shamir shares of ``s_sk`` and ``b_seed``, sealed for each other vehicle of ``roster``.
 
     Parameters
@@ -153,7 +156,7 @@ def share_keys(secrets: VehicleSecrets, roster: dict, spec: SecAggSpec) -> dict[
     return out
 
 
-def _open_share(secrets: VehicleSecrets, sender: int, blob, roster: dict) -> tuple[int, int]:
+def _open_share(secrets: VehicleSecrets, sender: int, blob: object, roster: dict[int, KeyAdvert]) -> tuple[int, int]:
     """The (s, b) shares that ``sender`` sealed for this vehicle; :class:`MessageError` if not authentic."""
     if not isinstance(blob, bytes) or len(blob) != _SEALED_NBYTES:
         raise MessageError(f"sealed shares from vehicle {sender}: expected {_SEALED_NBYTES} bytes")
@@ -168,7 +171,8 @@ def _open_share(secrets: VehicleSecrets, sender: int, blob, roster: dict) -> tup
     return s, int.from_bytes(plain[_PAIR.size + SHARE_NBYTES:], "little")
 
 
-def _pair_mask(secrets_sk: bytes, me: int, other: int, other_pk: bytes, session: bytes, shape) -> np.ndarray:
+def _pair_mask(secrets_sk: bytes, me: int, other: int, other_pk: bytes, session: bytes,
+               shape: tuple[int, ...]) -> np.ndarray:
     """``PRG(s_{me,other})`` signed for ``me``: ``+`` if ``me < other``, ``-`` (mod 2^64) otherwise."""
     seed = derive(x25519_agree(secrets_sk, other_pk, f"s_pk of vehicle {other}"), b"pair", session,
                   min(me, other), max(me, other))
@@ -176,7 +180,7 @@ def _pair_mask(secrets_sk: bytes, me: int, other: int, other_pk: bytes, session:
     return mask if me < other else np.negative(mask)
 
 
-def mask_input(secrets: VehicleSecrets, z, roster: dict, spec: SecAggSpec) -> MaskedInput:
+def mask_input(secrets: VehicleSecrets, z: ArrayLike, roster: dict[int, KeyAdvert], spec: SecAggSpec) -> MaskedInput:
     """Round 2: the masked contribution ``y_i`` of this vehicle (equation in the module docstring).
 
     Parameters
@@ -204,7 +208,8 @@ def mask_input(secrets: VehicleSecrets, z, roster: dict, spec: SecAggSpec) -> Ma
     return MaskedInput(secrets.vehicle, y, session=secrets.session)
 
 
-def reveal_shares(secrets: VehicleSecrets, sealed: dict, roster: dict, survivors, spec: SecAggSpec) -> Reveal:
+def reveal_shares(secrets: VehicleSecrets, sealed: dict[int, bytes], roster: dict[int, KeyAdvert],
+                  survivors: Iterable[int], spec: SecAggSpec) -> Reveal:
     """Round 3: this vehicle's shares of ``b_i`` for ``i`` in ``survivors`` and of ``s_i`` for the rest.
 
     Parameters
@@ -249,12 +254,13 @@ def reveal_shares(secrets: VehicleSecrets, sealed: dict, roster: dict, survivors
     return Reveal(me, b, s, session=secrets.session)
 
 
-def _collect(reveals, field_name: str, owner: int) -> dict[int, int]:
+def _collect(reveals: Iterable[Reveal], field_name: str, owner: int) -> dict[int, int]:
     """``{holder: share}`` of ``owner``'s secret from every reveal that carries one."""
     return {r.vehicle: getattr(r, field_name)[owner] for r in reveals if owner in getattr(r, field_name)}
 
 
-def unmask(roster: dict, masked, reveals, spec: SecAggSpec, session: bytes) -> AggregateResult:
+def unmask(roster: dict[int, KeyAdvert], masked: Iterable[MaskedInput], reveals: Iterable[Reveal], spec: SecAggSpec,
+           session: bytes) -> AggregateResult:
     """The aggregator's last step: ``sum_{U_2} x_i`` from the masked inputs and the revealed shares.
 
     Parameters
@@ -281,27 +287,27 @@ def unmask(roster: dict, masked, reveals, spec: SecAggSpec, session: bytes) -> A
         Inputs of different shapes, from another session or from outside the roster, inconsistent
         shares, or a reconstructed key that does not match its advertised public key.
     """
-    masked = {m.vehicle: m for m in masked}
-    reveals = list(reveals)
-    _check_session([*masked.values(), *reveals], session)
-    u2 = sorted(masked)
+    by_vehicle = {m.vehicle: m for m in masked}
+    answers = list(reveals)
+    _check_session([*by_vehicle.values(), *answers], session)
+    u2 = sorted(by_vehicle)
     if len(u2) < spec.min_inputs:
         raise AggregationRefused(f"{len(u2)} masked inputs, at least k = {spec.min_inputs} required")
-    if len(reveals) < spec.threshold:
-        raise AggregationRefused(f"{len(reveals)} vehicles answered, threshold t = {spec.threshold} required")
+    if len(answers) < spec.threshold:
+        raise AggregationRefused(f"{len(answers)} vehicles answered, threshold t = {spec.threshold} required")
     if not set(u2) <= set(roster):
         raise MessageError(f"masked inputs from vehicles outside the roster: {sorted(set(u2) - set(roster))}")
-    shape = masked[u2[0]].y.shape
-    if any(m.y.shape != shape for m in masked.values()):
+    shape = by_vehicle[u2[0]].y.shape
+    if any(m.y.shape != shape for m in by_vehicle.values()):
         raise MessageError("masked inputs have different shapes")
     total = np.zeros(shape, dtype=np.uint64)
     for i in u2:
-        total += masked[i].y
-        b_i = shamir_combine(_collect(reveals, "self_mask_shares", i), spec.threshold, f"b of vehicle {i}")
+        total += by_vehicle[i].y
+        b_i = shamir_combine(_collect(answers, "self_mask_shares", i), spec.threshold, f"b of vehicle {i}")
         total -= prg_ring(derive(b_i, b"self", session, i), shape)
     dropped = tuple(sorted(set(roster) - set(u2)))
     for d in dropped:
-        s_sk = shamir_combine(_collect(reveals, "key_shares", d), spec.threshold, f"s_sk of vehicle {d}")
+        s_sk = shamir_combine(_collect(answers, "key_shares", d), spec.threshold, f"s_sk of vehicle {d}")
         if x25519_keypair(s_sk)[1] != roster[d].s_pk:
             raise MessageError(f"reconstructed s_sk of vehicle {d} does not match its advertised key")
         for j in u2:   # y_j carries +-PRG(s_jd); remove it
