@@ -415,8 +415,9 @@ class RoundCoordinator:
             signed = self.got["adverts"]
             roster = verify_roster(dict(signed), self.trust, self.session, self.spec)
             coms = {i: _unb64(_json(b, "shares")["commitments"], "commitments") for i, b in self.got["shares"].items()}
-            masked = [decode(b) for b in self.got["masked"].values()]
-            reveals = [decode(b) for b in self.got["reveal"].values()]
+            # _check admitted only messages of the phase's type; decoded again, they are narrowed here
+            masked = [m for m in map(decode, self.got["masked"].values()) if isinstance(m, MaskedInput)]
+            reveals = [r for r in map(decode, self.got["reveal"].values()) if isinstance(r, Reveal)]
             agg = unmask_verified(roster, coms, masked, reveals, self.spec, self.trust)
         except MessageError as err:
             return self._abort(f"unmasking: {err}")

@@ -34,9 +34,11 @@ Fig. 4 (ConsistencyCheck round, signatures) and Thm. 6.5 (active adversary).
 from __future__ import annotations
 
 import os
+from collections.abc import Iterable
 from dataclasses import dataclass
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from .._validation import check_int
 from ..errors import MessageError, ParameterError
@@ -44,7 +46,8 @@ from ..wire.identity import FleetTrust, VehicleIdentity
 from ..wire.secagg_signed import (ShareCommitments, open_advert, open_commitments, open_view, secret_hash,
                                   share_hash, sign_advert, sign_commitments, sign_view)
 from ._secagg_kernels import KEY_NBYTES, decode_sum, derive, prg_ring, shamir_combine, shamir_split, x25519_keypair
-from .secagg_messages import AggregateResult, AggregationRefused, MaskedInput, Reveal, SecAggSpec
+from .secagg_messages import (AggregateResult, AggregationRefused, KeyAdvert, MaskedInput, Reveal, SecAggSpec,
+                              VehicleSecrets)
 from .secagg_store import SessionLedger, view_digest
 from .secure_aggregation import _collect, _open_share, _pair_mask, advertise_keys, mask_input, share_keys
 
@@ -65,8 +68,8 @@ class VerifiedRoster:
     """
 
     session: bytes
-    adverts: dict
-    certificates: dict
+    adverts: dict[int, KeyAdvert]
+    certificates: dict[int, str]
 
     @property
     def ids(self) -> list[int]:
@@ -74,7 +77,7 @@ class VerifiedRoster:
         return sorted(self.adverts)
 
 
-def verify_roster(signed: dict, trust: FleetTrust, session: bytes, spec: SecAggSpec) -> VerifiedRoster:
+def verify_roster(signed: dict[int, bytes], trust: FleetTrust, session: bytes, spec: SecAggSpec) -> VerifiedRoster:
     """Check a roster of signed adverts (as relayed, untrusted) for ``session``.
 
     Parameters
@@ -99,7 +102,8 @@ def verify_roster(signed: dict, trust: FleetTrust, session: bytes, spec: SecAggS
     """
     if not isinstance(signed, dict) or not signed:
         raise MessageError("roster must map vehicle ids to signed adverts")
-    adverts, certs = {}, {}
+    adverts: dict[int, KeyAdvert] = {}
+    certs: dict[int, str] = {}
     for i, data in signed.items():
         cert, advert = open_advert(data, trust, session)
         if advert.vehicle != i:
@@ -117,7 +121,8 @@ def verify_roster(signed: dict, trust: FleetTrust, session: bytes, spec: SecAggS
     return VerifiedRoster(session, adverts, certs)
 
 
-def _commitments(session: bytes, vehicle: int, ids, s_sh: dict, b_sh: dict, b_seed: bytes) -> ShareCommitments:
+def _commitments(session: bytes, vehicle: int, ids: Iterable[int], s_sh: dict[int, int], b_sh: dict[int, int],
+                 b_seed: bytes) -> ShareCommitments:
     return ShareCommitments(vehicle, secret_hash(session, vehicle, b_seed),
                             {j: (share_hash(session, vehicle, j, b"s", s_sh[j]),
                                  share_hash(session, vehicle, j, b"b", b_sh[j])) for j in ids})
@@ -153,15 +158,28 @@ class SecAggVehicle:
         if not isinstance(ledger, SessionLedger):
             raise ParameterError(f"ledger must be a SessionLedger, got {type(ledger).__name__}")
         self.identity, self.trust, self.spec, self.ledger = identity, trust, spec, ledger
-        self._secrets = self._advert = self._roster = self._view = None
+        self._secrets: VehicleSecrets | None = None
+        self._advert: KeyAdvert | None = None
+        self._roster: VerifiedRoster | None = None
+        self._view: tuple[int, ...] | None = None
         self.complaints: list[tuple[int, str]] = []
 
     @property
     def session(self) -> bytes:
         """The session of the current attempt (after :meth:`advertise`)."""
+        return self._sec.session
+
+    @property
+    def _sec(self) -> VehicleSecrets:
         if self._secrets is None:
             raise ParameterError("advertise() first")
-        return self._secrets.session
+        return self._secrets
+
+    @property
+    def _ros(self) -> VerifiedRoster:
+        if self._roster is None:
+            raise ParameterError("share_keys() first")
+        return self._roster
 
     def advertise(self, session: bytes, *, root: bytes | None = None) -> bytes:
         """Round 0: fresh keys for ``session``, as a signed advert.
@@ -182,7 +200,7 @@ class SecAggVehicle:
         self._roster = self._view = None
         return sign_advert(self.identity, self._advert)
 
-    def share_keys(self, signed_roster: dict) -> tuple[dict, bytes]:
+    def share_keys(self, signed_roster: dict[int, bytes]) -> tuple[dict[int, bytes], bytes]:
         """Round 1: check the roster; sealed shares per recipient and the signed share commitments.
 
         Parameters
@@ -203,18 +221,18 @@ class SecAggVehicle:
         if roster.certificates[self.vehicle] != self.identity.vehicle_id:
             raise MessageError(f"roster binds id {self.vehicle} to another certificate")
         self._roster = roster
-        sec, ids = self._secrets, roster.ids
+        sec, ids = self._sec, roster.ids
         sealed = share_keys(sec, roster.adverts, self.spec)
         s_sh, b_sh = self._own_polys(ids)
         com = _commitments(sec.session, self.vehicle, ids, s_sh, b_sh, sec.b_seed)
         return sealed, sign_commitments(self.identity, sec.session, com)
 
-    def _own_polys(self, ids) -> tuple[dict, dict]:
-        sec, t = self._secrets, self.spec.threshold
+    def _own_polys(self, ids: list[int]) -> tuple[dict[int, int], dict[int, int]]:
+        sec, t = self._sec, self.spec.threshold
         return (shamir_split(sec.s_sk, ids, t, derive(sec.share_seed, b"s", sec.session)),
                 shamir_split(sec.b_seed, ids, t, derive(sec.share_seed, b"b", sec.session)))
 
-    def mask_input(self, z, measured: tuple[int, int]) -> MaskedInput:
+    def mask_input(self, z: ArrayLike, measured: tuple[int, int]) -> MaskedInput:
         """Round 2: ``y`` of the measurement ``measured = (segment, epoch)``, which must be this session's.
 
         Parameters
@@ -239,9 +257,9 @@ class SecAggVehicle:
         if tuple(measured) != from_session:
             raise AggregationRefused(f"session is for (segment, epoch) {from_session}, the input is of {measured}")
         self.ledger.record_contribution(self.session, self._roster.ids)  # written before y leaves
-        return mask_input(self._secrets, z, self._roster.adverts, self.spec)
+        return mask_input(self._sec, z, self._roster.adverts, self.spec)
 
-    def sign_survivors(self, survivors) -> bytes:
+    def sign_survivors(self, survivors: Iterable[int]) -> bytes:
         """Round 2.5: the consistency signature on the announced ``U_3`` (one set per session, persisted).
 
         Parameters
@@ -267,36 +285,36 @@ class SecAggVehicle:
         self._view = tuple(view)
         return sign_view(self.identity, self.session, self.vehicle, view)
 
-    def _check_signatures(self, signatures: dict) -> None:
-        good = set()
+    def _check_signatures(self, signatures: dict[int, bytes], view: tuple[int, ...]) -> None:
+        good: set[int] = set()
         for i, data in signatures.items():
             try:
                 cert, signer, ids = open_view(data, self.trust, self.session)
             except MessageError:
                 continue
-            if signer == i and i in self._view and ids == self._view and self._roster.certificates[i] == cert.vehicle_id:
+            if signer == i and i in view and ids == view and self._ros.certificates[i] == cert.vehicle_id:
                 good.add(i)
         if len(good) < self.spec.threshold:
             raise AggregationRefused(f"{len(good)} valid consistency signatures on this survivor set, "
                                      f"t = {self.spec.threshold} required")
 
-    def _dealt(self, dealer: int, blob, commitments: dict) -> tuple[int, int] | None:
+    def _dealt(self, dealer: int, blob: object, commitments: dict[int, bytes]) -> tuple[int, int] | None:
         """The (s, b) shares ``dealer`` sealed here if they match its signed commitments, else None (noted)."""
         try:
-            s, b = _open_share(self._secrets, dealer, blob, self._roster.adverts)
+            s, b = _open_share(self._sec, dealer, blob, self._ros.adverts)
             cert, com = open_commitments(commitments[dealer], self.trust, self.session)
         except (MessageError, KeyError) as err:
             self.complaints.append((dealer, f"no valid sealed share or commitments ({err})"))
             return None
         hs, hb = com.shares.get(self.vehicle, (b"", b""))
-        if cert.vehicle_id != self._roster.certificates[dealer] or com.dealer != dealer or \
+        if cert.vehicle_id != self._ros.certificates[dealer] or com.dealer != dealer or \
                 hs != share_hash(self.session, dealer, self.vehicle, b"s", s) or \
                 hb != share_hash(self.session, dealer, self.vehicle, b"b", b):
             self.complaints.append((dealer, "sealed share does not match the dealer's signed commitment"))
             return None
         return s, b
 
-    def reveal(self, sealed: dict, commitments: dict, signatures: dict) -> Reveal:
+    def reveal(self, sealed: dict[int, bytes], commitments: dict[int, bytes], signatures: dict[int, bytes]) -> Reveal:
         """Round 3: shares of ``b`` for the signed ``U_3`` and of ``s_sk`` for the rest of the roster.
 
         Parameters
@@ -313,17 +331,20 @@ class SecAggVehicle:
         Reveal
             Dealers whose sealed share fails its commitment are left out (see :attr:`complaints`).
         """
-        if self._view is None:
+        view = self._view
+        if view is None:
             raise AggregationRefused("no survivor set signed in this session: nothing is revealed")
-        if self.ledger.signed_view(self.session) != view_digest(self._view):
+        if self.ledger.signed_view(self.session) != view_digest(view):
             raise AggregationRefused("the ledger holds another survivor set for this session")
-        self._check_signatures(signatures)
-        s_own, b_own = (p[self.vehicle] for p in self._own_polys(self._roster.ids))
-        b, s = {}, {}
-        for i in self._roster.ids:
+        self._check_signatures(signatures, view)
+        ids = self._ros.ids
+        s_own, b_own = (p[self.vehicle] for p in self._own_polys(ids))
+        b: dict[int, int] = {}
+        s: dict[int, int] = {}
+        for i in ids:
             sh = (s_own, b_own) if i == self.vehicle else self._dealt(i, sealed.get(i), commitments)
             if sh is not None:
-                (b if i in self._view else s)[i] = sh[1] if i in self._view else sh[0]
+                (b if i in view else s)[i] = sh[1] if i in view else sh[0]
         return Reveal(self.vehicle, b, s, session=self.session)
 
 
@@ -339,13 +360,13 @@ class VerifiedAggregate:
     """
 
     result: AggregateResult
-    bad_shares: tuple
+    bad_shares: tuple[tuple[int, int], ...]
 
 
-def _good_shares(reveals, field: str, kind: bytes, owner: int, com: ShareCommitments, session: bytes,
-                 bad: list) -> dict:
+def _good_shares(reveals: Iterable[Reveal], field: str, kind: bytes, owner: int, com: ShareCommitments,
+                 session: bytes, bad: list[tuple[int, int]]) -> dict[int, int]:
     got = _collect(reveals, field, owner)
-    good = {}
+    good: dict[int, int] = {}
     for h, y in got.items():
         if share_hash(session, owner, h, kind, y) == com.shares.get(h, (b"", b""))[kind == b"b"]:
             good[h] = y
@@ -354,8 +375,8 @@ def _good_shares(reveals, field: str, kind: bytes, owner: int, com: ShareCommitm
     return good
 
 
-def unmask_verified(roster: VerifiedRoster, commitments: dict, masked, reveals, spec: SecAggSpec,
-                    trust: FleetTrust) -> VerifiedAggregate:
+def unmask_verified(roster: VerifiedRoster, commitments: dict[int, bytes], masked: Iterable[MaskedInput],
+                    reveals: Iterable[Reveal], spec: SecAggSpec, trust: FleetTrust) -> VerifiedAggregate:
     """The aggregator's last step with verifiable shares: bad shares excluded, a bad dealer named.
 
     Parameters
@@ -382,26 +403,26 @@ def unmask_verified(roster: VerifiedRoster, commitments: dict, masked, reveals, 
         dealer is named), or inputs outside the roster / of another shape.
     """
     session = roster.session
-    masked = {m.vehicle: m for m in masked}
-    reveals = [r for r in reveals if r.session == session]
-    u2 = sorted(masked)
+    by_vehicle = {m.vehicle: m for m in masked}
+    answers = [r for r in reveals if r.session == session]
+    u2 = sorted(by_vehicle)
     if len(u2) < spec.min_inputs:
         raise AggregationRefused(f"{len(u2)} masked inputs, at least k = {spec.min_inputs} required")
-    if not set(u2) <= set(roster.ids) or any(m.session != session for m in masked.values()):
+    if not set(u2) <= set(roster.ids) or any(m.session != session for m in by_vehicle.values()):
         raise MessageError("masked inputs from outside the roster or another session")
-    shape = masked[u2[0]].y.shape
-    if any(m.y.shape != shape for m in masked.values()):
+    shape = by_vehicle[u2[0]].y.shape
+    if any(m.y.shape != shape for m in by_vehicle.values()):
         raise MessageError("masked inputs have different shapes")
-    coms = {}
+    coms: dict[int, ShareCommitments] = {}
     for i in roster.ids:
         cert, com = open_commitments(commitments[i], trust, session)
         if cert.vehicle_id != roster.certificates[i] or com.dealer != i:
             raise MessageError(f"commitments of vehicle {i} are signed by another vehicle")
         coms[i] = com
-    bad: list = []
+    bad: list[tuple[int, int]] = []
 
     def secret(owner: int, field: str, kind: bytes) -> bytes:
-        good = _good_shares(reveals, field, kind, owner, coms[owner], session, bad)
+        good = _good_shares(answers, field, kind, owner, coms[owner], session, bad)
         if len(good) < spec.threshold:
             culprits = sorted({h for h, o in bad if o == owner})
             raise AggregationRefused(f"{len(good)} valid shares of vehicle {owner}'s secret, t = {spec.threshold} "
@@ -416,9 +437,9 @@ def unmask_verified(roster: VerifiedRoster, commitments: dict, masked, reveals, 
         b_i = secret(i, "self_mask_shares", b"b")
         if secret_hash(session, i, b_i) != coms[i].b_hash:
             raise MessageError(f"vehicle {i} dealt shares that do not reconstruct its committed b")
-        total += masked[i].y
+        total += by_vehicle[i].y
         total -= prg_ring(derive(b_i, b"self", session, i), shape)
-    dropped = tuple(i for i in roster.ids if i not in masked)
+    dropped = tuple(i for i in roster.ids if i not in by_vehicle)
     for d in dropped:
         s_sk = secret(d, "key_shares", b"s")
         if x25519_keypair(s_sk)[1] != roster.adverts[d].s_pk:
