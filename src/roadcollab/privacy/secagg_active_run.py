@@ -10,13 +10,16 @@ networked fleet calls the same :class:`~.secagg_active.SecAggVehicle` methods.
 from __future__ import annotations
 
 import time
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
+from typing import Any, TypeVar
 
 import numpy as np
 
 from .._validation import check_int
 from ..errors import MessageError
-from ..wire.identity import FleetAuthority, VehicleIdentity
+from ..wire.identity import FleetAuthority, FleetTrust, VehicleIdentity
+from ..wire.secagg import MaskedInput, Reveal
 from ._secagg_kernels import KEY_NBYTES
 from .secagg_active import SecAggVehicle, VerifiedAggregate, unmask_verified, verify_roster
 from .secagg_messages import SecAggSpec
@@ -42,20 +45,20 @@ class SecAggFleet:
 
     n: int
     spec: SecAggSpec
-    ledger_paths: tuple = ()
+    ledger_paths: tuple[str, ...] = ()
     authority: FleetAuthority = field(init=False)
-    vehicles: dict = field(init=False)
+    vehicles: dict[int, SecAggVehicle] = field(init=False)
 
     def __post_init__(self) -> None:
         check_int("n", self.n, low=1)
         self.authority = FleetAuthority.generate("fleet")
-        paths = tuple(self.ledger_paths) or (None,) * self.n
+        paths: tuple[str | None, ...] = tuple(self.ledger_paths) or (None,) * self.n
         self.vehicles = {i: SecAggVehicle(i, VehicleIdentity.enroll(self.authority, f"veh-{i}"),
                                           self.authority.trust(), self.spec, SessionLedger(paths[i - 1]))
                          for i in range(1, self.n + 1)}
 
     @property
-    def trust(self):
+    def trust(self) -> FleetTrust:
         """The fleet's trust anchor."""
         return self.authority.trust()
 
@@ -66,13 +69,13 @@ class Relay:
     Every hook receives what an honest aggregator would send to ``recipient`` and returns what it sends.
     """
 
-    def roster(self, recipient: int, signed: dict) -> dict:
+    def roster(self, recipient: int, signed: dict[int, bytes]) -> dict[int, bytes]:
         return signed
 
-    def survivors(self, recipient: int, survivors: list) -> list:
+    def survivors(self, recipient: int, survivors: list[int]) -> list[int]:
         return survivors
 
-    def signatures(self, recipient: int, signatures: dict) -> dict:
+    def signatures(self, recipient: int, signatures: dict[int, bytes]) -> dict[int, bytes]:
         return signatures
 
 
@@ -96,15 +99,18 @@ class ActiveRun:
     """
 
     aggregate: VerifiedAggregate | None
-    refusals: dict
-    reveals: tuple
-    masked: dict
+    refusals: dict[int, str]
+    reveals: tuple[Reveal, ...]
+    masked: dict[int, MaskedInput]
     vehicle_ms: np.ndarray
     bytes_sent: np.ndarray
     aggregator_ms: float = 0.0
 
 
-def _try(refusals: dict, i: int, fn, *args):
+_T = TypeVar("_T")
+
+
+def _try(refusals: dict[int, str], i: int, fn: Callable[..., _T], *args: Any) -> _T | None:
     try:
         return fn(*args)
     except MessageError as err:     # AggregationRefused included: the vehicle stops, nothing is sent
@@ -112,8 +118,11 @@ def _try(refusals: dict, i: int, fn, *args):
         return None
 
 
-def run_active_session(fleet: SecAggFleet, inputs: dict, session: bytes, *, measured=None, relay: Relay | None = None,
-                       dropped_before_masking=(), silent_in_unmasking=(), corrupt=None, rng=None) -> ActiveRun:
+def run_active_session(fleet: SecAggFleet, inputs: dict[int, Any], session: bytes, *,
+                       measured: tuple[int, int] | None = None, relay: Relay | None = None,
+                       dropped_before_masking: Iterable[int] = (), silent_in_unmasking: Iterable[int] = (),
+                       corrupt: Callable[[Reveal], Reveal] | None = None,
+                       rng: int | np.random.Generator | None = None) -> ActiveRun:
     """Run one session of the vehicles ``inputs`` names (id -> (L, 2) z, m/s) through ``relay``.
 
     Parameters
@@ -140,23 +149,28 @@ def run_active_session(fleet: SecAggFleet, inputs: dict, session: bytes, *, meas
     """
     relay = relay or Relay()
     gen = None if rng is None else np.random.default_rng(rng)
-    measured = measured or tuple(int.from_bytes(session[k:k + 8], "little") for k in (0, 8))
+    if measured is None:
+        measured = (int.from_bytes(session[0:8], "little"), int.from_bytes(session[8:16], "little"))
     ids = sorted(inputs)
     veh = {i: fleet.vehicles[i] for i in ids}
-    refusals, ms = {}, np.zeros((fleet.n, len(ROUNDS)))
+    refusals: dict[int, str] = {}
+    ms = np.zeros((fleet.n, len(ROUNDS)))
     sent = np.zeros((fleet.n, len(ROUNDS)), dtype=np.int64)
 
-    def step(i, r, fn, *args):
+    def step(i: int, r: int, fn: Callable[..., _T], *args: Any) -> _T | None:
         t0 = time.perf_counter()
         out = _try(refusals, i, fn, *args)
         ms[i - 1, r] += (time.perf_counter() - t0) * 1e3
         return out
 
-    signed = {i: step(i, 0, lambda v: v.advertise(session, root=None if gen is None else gen.bytes(KEY_NBYTES)),
-                      veh[i]) for i in ids}
+    signed: dict[int, bytes] = {}
     for i in ids:
-        sent[i - 1, 0] = len(signed[i])
-    sealed, coms = {}, {}
+        adv = step(i, 0, lambda v: v.advertise(session, root=None if gen is None else gen.bytes(KEY_NBYTES)), veh[i])
+        if adv is not None:
+            signed[i] = adv
+            sent[i - 1, 0] = len(adv)
+    sealed: dict[tuple[int, int], bytes] = {}
+    coms: dict[int, bytes] = {}
     for i in ids:
         out = step(i, 1, veh[i].share_keys, relay.roster(i, signed))
         if out is not None:
@@ -164,7 +178,7 @@ def run_active_session(fleet: SecAggFleet, inputs: dict, session: bytes, *, meas
             coms[i] = out[1]
             sent[i - 1, 1] = sum(len(c) + 4 for c in out[0].values()) + len(out[1])
     gone, silent = set(dropped_before_masking), set(silent_in_unmasking)
-    masked = {}
+    masked: dict[int, MaskedInput] = {}
     for i in ids:
         if i in coms and i not in gone:
             m = step(i, 2, veh[i].mask_input, inputs[i], measured)
@@ -172,13 +186,13 @@ def run_active_session(fleet: SecAggFleet, inputs: dict, session: bytes, *, meas
                 masked[i] = m
                 sent[i - 1, 2] = m.nbytes
     u3 = sorted(masked)
-    views = {}
+    views: dict[int, bytes] = {}
     for i in u3:
         v = step(i, 3, veh[i].sign_survivors, relay.survivors(i, u3))
         if v is not None:
             views[i] = v
             sent[i - 1, 3] = len(v)
-    reveals = []
+    reveals: list[Reveal] = []
     for i in u3:
         if i in views and i not in silent:
             mine = {d: sealed[(d, i)] for d in coms if (d, i) in sealed}
@@ -186,14 +200,17 @@ def run_active_session(fleet: SecAggFleet, inputs: dict, session: bytes, *, meas
             if r is not None:
                 reveals.append(r if corrupt is None else corrupt(r))
                 sent[i - 1, 4] = r.nbytes
-    agg, t0 = None, time.perf_counter()
+    agg: VerifiedAggregate | None = None
+    t0 = time.perf_counter()
     if reveals and len(coms) == len(ids):
         roster = verify_roster(signed, fleet.trust, session, fleet.spec)
         agg = _try(refusals, 0, unmask_verified, roster, coms, masked.values(), reveals, fleet.spec, fleet.trust)
     return ActiveRun(agg, refusals, tuple(reveals), masked, ms, sent, (time.perf_counter() - t0) * 1e3)
 
 
-def active_secure_aggregation_cost(inputs, spec: SecAggSpec, *, repeats: int = 3, dropped=(), rng=None) -> dict:
+def active_secure_aggregation_cost(inputs: Sequence[Any], spec: SecAggSpec, *, repeats: int = 3,
+                                   dropped: Iterable[int] = (),
+                                   rng: int | np.random.Generator | None = None) -> dict[str, Any]:
     """Cost per vehicle and exactness of the active protocol on ``inputs`` (fresh fleet and ledgers per run).
 
     Parameters
@@ -221,14 +238,15 @@ def active_secure_aggregation_cost(inputs, spec: SecAggSpec, *, repeats: int = 3
     zs = {i + 1: np.asarray(z, float) for i, z in enumerate(inputs)}
     gone = set(dropped)
     plain = np.mean([np.clip(z, -spec.clip, spec.clip) for i, z in zs.items() if i not in gone], axis=0)
-    runs = []
+    runs, aggs = [], []
     for r in range(repeats):
         run = run_active_session(SecAggFleet(len(zs), spec), zs, bytes(8) + r.to_bytes(8, "little"),
                                  dropped_before_masking=gone, rng=gen)
         if run.aggregate is None:
             raise MessageError(f"an honest session was refused: {run.refusals}")
         runs.append(run)
-    err = max(float(np.max(np.abs(r.aggregate.result.average - plain))) for r in runs) / float(np.max(np.abs(plain)))
+        aggs.append(run.aggregate)
+    err = max(float(np.max(np.abs(a.result.average - plain))) for a in aggs) / float(np.max(np.abs(plain)))
     full = [i - 1 for i in zs if i not in gone]     # vehicles that take part in every round
     return {"ms_per_message": float(np.median([r.vehicle_ms[full].sum(axis=1).mean() for r in runs])),
             "ms_by_round": dict(zip(ROUNDS, np.median([r.vehicle_ms.mean(axis=0) for r in runs], axis=0).tolist())),

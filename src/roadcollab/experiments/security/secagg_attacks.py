@@ -211,12 +211,12 @@ def active_attack(attack: str, inputs, victim: int, spec: SecAggSpec | None = No
         second = {i: zs[i] for i in others}
         rest = run_active_session(fleet, second, session, rng=gen)              # the same (segment, epoch)
         relabelled = run_active_session(fleet, second, session_id(segment, 1), measured=(segment, 0), rng=gen)
-        refusals = {(label, i): why for label, r in (("first", full), ("second", rest), ("relabelled", relabelled))
-                    for i, why in r.refusals.items()}
+        runs = (("first", full), ("second", rest), ("relabelled", relabelled))
+        by_run: dict[tuple[str, int], str] = {(label, i): why for label, r in runs for i, why in r.refusals.items()}
         got = [r.aggregate for r in (rest, relabelled) if r.aggregate is not None]
         if full.aggregate is None or not got:
-            return None, refusals
-        return full.aggregate.result.total - got[0].result.total, refusals
+            return None, by_run
+        return full.aggregate.result.total - got[0].result.total, by_run
     if attack in ("equivocation", "double_reveal"):
         alive = [victim, *others[:n // 2 - 1]]
         run = run_active_session(fleet, zs, session, relay=_Equivocate(victim, alive), rng=gen)
@@ -227,7 +227,8 @@ def active_attack(attack: str, inputs, victim: int, spec: SecAggSpec | None = No
                     v.sign_survivors(others if i in alive else sorted(zs))
                 except MessageError as err:
                     refusals[i] = f"{type(err).__name__}: {err}"
-        adverts = fleet.vehicles[victim]._roster.adverts if fleet.vehicles[victim]._roster else {}
+        roster = fleet.vehicles[victim]._roster
+        adverts = roster.adverts if roster is not None else {}
         return _recover(run, victim, spec, session, {i: a.s_pk for i, a in adverts.items()}), refusals
     # Sybil and key substitution: a victim that accepted the forged roster would be exposed exactly (the
     # aggregator holds every other key; legacy_attack shows the recovery), so acceptance counts as recovery.
