@@ -15,6 +15,7 @@ system's secure randomness (intended, cannot be seeded).
 from __future__ import annotations
 
 import time
+from typing import Any
 
 import numpy as np
 
@@ -33,7 +34,7 @@ PAILLIER_REL_PRECISION = 1e-13
 _EXPONENT_NBYTES = 4
 
 
-def _message_values(values) -> np.ndarray:
+def _message_values(values: Any) -> np.ndarray:
     """The numbers of one message, flattened to shape (n,) with n >= 1 (``z`` of an InversionMessage)."""
     if isinstance(values, InversionMessage):
         values = values.z
@@ -66,7 +67,7 @@ def _scale_and_precision(x: np.ndarray, precision: float | None) -> tuple[float,
     return scale, check_positive("precision", precision)
 
 
-def _choose_sample(x: np.ndarray, sample: int, rng) -> tuple[list[float], bool]:
+def _choose_sample(x: np.ndarray, sample: int, rng: np.random.Generator) -> tuple[list[float], bool]:
     """The values to encrypt: all of ``x`` (n,), or ``sample`` of them drawn without replacement.
 
     Returns
@@ -83,7 +84,7 @@ def _choose_sample(x: np.ndarray, sample: int, rng) -> tuple[list[float], bool]:
     return [float(v) for v in chosen], extrapolated
 
 
-def _check_keypair(keypair, key_bits: int):
+def _check_keypair(keypair: object, key_bits: int) -> tuple[Any, Any]:
     """``(public, private)`` of a caller's keypair whose modulus has ``key_bits`` bits."""
     from phe import paillier
 
@@ -100,7 +101,7 @@ def _check_keypair(keypair, key_bits: int):
     return pub, priv
 
 
-def _keypair(keypair, key_bits: int):
+def _keypair(keypair: object, key_bits: int) -> tuple[Any, Any, float]:
     """``(public, private, keygen_ms)``: a fresh timed key pair, or the caller's (keygen_ms NaN)."""
     from phe import paillier
 
@@ -112,17 +113,17 @@ def _keypair(keypair, key_bits: int):
     return pub, priv, (time.perf_counter() - t0) * 1e3
 
 
-def _time_encryption(pub, chosen: list[float], precision: float) -> tuple[list, float]:
+def _time_encryption(pub: Any, chosen: list[float], precision: float) -> tuple[list[Any], float]:
     """Encrypt every chosen value once; returns the ciphertexts and the median ms per value."""
-    encrypted: list = []
+    encrypted: list[Any] = []
     it = iter(chosen)
     enc_ms = median_ms(lambda: encrypted.append(pub.encrypt(next(it), precision=precision)), len(chosen))
     return encrypted, enc_ms
 
 
-def _time_decryption(priv, encrypted: list) -> tuple[list[float], float]:
+def _time_decryption(priv: Any, encrypted: list[Any]) -> tuple[list[float], float]:
     """Decrypt every ciphertext once; returns the plaintexts and the median ms per value."""
-    decrypted: list = []
+    decrypted: list[float] = []
     it_c = iter(encrypted)
     dec_ms = median_ms(lambda: decrypted.append(priv.decrypt(next(it_c))), len(encrypted))
     return decrypted, dec_ms
@@ -135,7 +136,7 @@ def _check_round_trip(decrypted: list[float], chosen: list[float], tol: float) -
         raise RuntimeError(f"Paillier round trip lost precision: error {float(err.max()):.3g} > tolerance {tol:.3g}")
 
 
-def _ciphertext_nbytes(encrypted: list) -> np.ndarray:
+def _ciphertext_nbytes(encrypted: list[Any]) -> np.ndarray:
     """Wire size of each ciphertext, bytes, shape (len(encrypted),): ``c mod n^2`` plus its exponent."""
     return np.array([(c.ciphertext(be_secure=False).bit_length() + 7) // 8 + _EXPONENT_NBYTES for c in encrypted])
 
@@ -145,7 +146,8 @@ def _message_nbytes(sizes: np.ndarray, n: int, extrapolated: bool) -> int:
     return int(sizes.sum()) if not extrapolated else int(round(sizes.mean() * n))
 
 
-def _per_value_cost(x: np.ndarray, pub, priv, precision: float, scale: float, sample: int, gen) -> dict:
+def _per_value_cost(x: np.ndarray, pub: Any, priv: Any, precision: float, scale: float, sample: int,
+                    gen: np.random.Generator) -> dict[str, Any]:
     """The earlier baseline: ``phe``'s ``encrypt`` per value on ``sample`` values, extrapolated to ``x``."""
     chosen, extrapolated = _choose_sample(x, sample, gen)
     encrypted, enc_ms = _time_encryption(pub, chosen, precision)
@@ -158,8 +160,9 @@ def _per_value_cost(x: np.ndarray, pub, priv, precision: float, scale: float, sa
             "extrapolated_from": len(chosen) if extrapolated else None}
 
 
-def paillier_cost(values, *, key_bits: int = 2048, sample: int = 32, rng=None, keypair=None,
-                  precision: float | None = None, packing: bool = True, n_summands: int = 16) -> dict:
+def paillier_cost(values: Any, *, key_bits: int = 2048, sample: int = 32,
+                  rng: int | np.random.Generator | None = None, keypair: object = None,
+                  precision: float | None = None, packing: bool = True, n_summands: int = 16) -> dict[str, Any]:
     """Cost of sending a message as Paillier ciphertexts: packed as deployed, or one per number.
 
     ``packing=True``: see :mod:`.paillier_packed` (slot layout, offline ``r^n``); the online time is

@@ -18,6 +18,7 @@ from __future__ import annotations
 import math
 import secrets
 import time
+from typing import Any
 
 import numpy as np
 
@@ -102,7 +103,7 @@ def unpack(plain: list[int], count: int, precision: float, value_bits: int, slot
     return ints.astype(float) * precision
 
 
-def precompute_rn(pub, count: int) -> list:
+def precompute_rn(pub: Any, count: int) -> list[Any]:
     """Offline phase: ``count`` values ``r^n mod n^2`` (``r`` uniform in ``[1, n)`` from :mod:`secrets`).
 
     Parameters
@@ -122,7 +123,7 @@ def precompute_rn(pub, count: int) -> list:
     return [gmpy2.powmod(gmpy2.mpz(secrets.randbelow(pub.n - 1) + 1), n, n2) for _ in range(count)]
 
 
-def encrypt_packed(pub, plain: list[int], rn: list) -> list:
+def encrypt_packed(pub: Any, plain: list[int], rn: list[Any]) -> list[Any]:
     """Online phase: ``c = (1 + m n) r^n mod n^2`` for each plaintext, with a precomputed ``r^n`` each.
 
     Parameters
@@ -143,8 +144,8 @@ def encrypt_packed(pub, plain: list[int], rn: list) -> list:
     return [(1 + gmpy2.mpz(m) * n) * r % n2 for m, r in zip(plain, rn)]
 
 
-def packed_cost(x: np.ndarray, pub, priv, precision: float, scale: float, *, n_summands: int, sample: int,
-                rng) -> dict:
+def packed_cost(x: np.ndarray, pub: Any, priv: Any, precision: float, scale: float, *, n_summands: int, sample: int,
+                rng: np.random.Generator) -> dict[str, Any]:
     """Time one message the deployed way (see the module docstring); the round trip is checked.
 
     Online encryption is timed on every ciphertext; the offline ``r^n`` and decryption (modular
