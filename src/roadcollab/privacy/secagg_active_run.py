@@ -108,6 +108,7 @@ class ActiveRun:
 
 
 _T = TypeVar("_T")
+_Rng = int | np.random.Generator | None
 
 
 def _try(refusals: dict[int, str], i: int, fn: Callable[..., _T], *args: Any) -> _T | None:
@@ -121,8 +122,7 @@ def _try(refusals: dict[int, str], i: int, fn: Callable[..., _T], *args: Any) ->
 def run_active_session(fleet: SecAggFleet, inputs: dict[int, Any], session: bytes, *,
                        measured: tuple[int, int] | None = None, relay: Relay | None = None,
                        dropped_before_masking: Iterable[int] = (), silent_in_unmasking: Iterable[int] = (),
-                       corrupt: Callable[[Reveal], Reveal] | None = None,
-                       rng: int | np.random.Generator | None = None) -> ActiveRun:
+                       corrupt: Callable[[Reveal], Reveal] | None = None, rng: _Rng = None) -> ActiveRun:
     """Run one session of the vehicles ``inputs`` names (id -> (L, 2) z, m/s) through ``relay``.
 
     Parameters
@@ -149,26 +149,20 @@ def run_active_session(fleet: SecAggFleet, inputs: dict[int, Any], session: byte
     """
     relay = relay or Relay()
     gen = None if rng is None else np.random.default_rng(rng)
-    if measured is None:
-        measured = (int.from_bytes(session[0:8], "little"), int.from_bytes(session[8:16], "little"))
+    measured = measured or (int.from_bytes(session[0:8], "little"), int.from_bytes(session[8:16], "little"))
     ids = sorted(inputs)
     veh = {i: fleet.vehicles[i] for i in ids}
     refusals: dict[int, str] = {}
-    ms = np.zeros((fleet.n, len(ROUNDS)))
-    sent = np.zeros((fleet.n, len(ROUNDS)), dtype=np.int64)
-
+    ms, sent = np.zeros((fleet.n, len(ROUNDS))), np.zeros((fleet.n, len(ROUNDS)), dtype=np.int64)
     def step(i: int, r: int, fn: Callable[..., _T], *args: Any) -> _T | None:
         t0 = time.perf_counter()
         out = _try(refusals, i, fn, *args)
         ms[i - 1, r] += (time.perf_counter() - t0) * 1e3
         return out
-
-    signed: dict[int, bytes] = {}
-    for i in ids:
-        adv = step(i, 0, lambda v: v.advertise(session, root=None if gen is None else gen.bytes(KEY_NBYTES)), veh[i])
-        if adv is not None:
-            signed[i] = adv
-            sent[i - 1, 0] = len(adv)
+    adverts = {i: step(i, 0, lambda v: v.advertise(session, root=None if gen is None else gen.bytes(KEY_NBYTES)),
+                       veh[i]) for i in ids}
+    signed = {i: a for i, a in adverts.items() if a is not None}
+    sent[[i - 1 for i in signed], 0] = [len(a) for a in signed.values()]
     sealed: dict[tuple[int, int], bytes] = {}
     coms: dict[int, bytes] = {}
     for i in ids:
@@ -200,8 +194,7 @@ def run_active_session(fleet: SecAggFleet, inputs: dict[int, Any], session: byte
             if r is not None:
                 reveals.append(r if corrupt is None else corrupt(r))
                 sent[i - 1, 4] = r.nbytes
-    agg: VerifiedAggregate | None = None
-    t0 = time.perf_counter()
+    agg, t0 = None, time.perf_counter()
     if reveals and len(coms) == len(ids):
         roster = verify_roster(signed, fleet.trust, session, fleet.spec)
         agg = _try(refusals, 0, unmask_verified, roster, coms, masked.values(), reveals, fleet.spec, fleet.trust)
