@@ -195,3 +195,21 @@ def test_close_eigenvalues_near_the_circle_stay_in_one_block(path):
     ref = direct_response(sys, om)
     per_bin = np.linalg.norm(got - ref, axis=(1, 2)) / np.linalg.norm(ref, axis=(1, 2))
     assert per_bin.max() < 4e-10
+
+
+@pytest.mark.skipif(not compiled_available(), reason="numba not importable")
+def test_compiled_clusters_equal_the_label_propagation():
+    """The compiled clustering gives the numpy label propagation's clusters: chains of close eigenvalues
+    (single linkage), eigenvalues close only relative to their distance to the circle, isolated ones."""
+    from roadcollab.lti._blockdiag_kernel import clusters
+    from roadcollab.lti.blockdiag import CLUSTER_REL, CLUSTER_TOL, _clusters
+
+    rng = np.random.default_rng(11)
+    cases = [np.array([0.5, 0.5005, 0.501, 0.9, -0.3 + 0.1j, 0.9008, 0.2]),
+             np.array([0.9776, 0.9812, 0.9828, 0.9776, 0.9812, 0.9828, 0.5 + 0.5j]),
+             np.array([0.3])]
+    cases += [rng.uniform(0.9, 0.999, 12) * np.exp(1j * rng.choice([0.0, 0.01, 0.5], 12)) for _ in range(20)]
+    for lam in cases:
+        lam = lam.astype(complex)
+        assert clusters(lam, CLUSTER_TOL, CLUSTER_REL) == _clusters(lam, CLUSTER_TOL, CLUSTER_REL)
+    assert len(clusters(cases[0], CLUSTER_TOL, CLUSTER_REL)) == 4

@@ -21,12 +21,12 @@ import numpy as np
 
 from .kernels import compiled_available, jit_options
 
-__all__ = ["decouple"]
+__all__ = ["decouple", "clusters"]
 
 _KERNEL: dict[str, Any] = {}
 
 #: The functions compiled by :func:`_build` (rebound in place, so compiled callers find compiled callees).
-_COMPILED_NAMES = ("_swap", "_sylvester", "_decouple_pass")
+_COMPILED_NAMES = ("_swap", "_sylvester", "_decouple_pass", "_cluster_labels")
 
 
 def _build() -> dict[str, Any]:
@@ -34,15 +34,35 @@ def _build() -> dict[str, Any]:
     if _KERNEL:
         return _KERNEL
     if not compiled_available():
-        _KERNEL.update(decouple=None)
+        _KERNEL.update(decouple=None, labels=None)
         return _KERNEL
     import numba
 
     jit = numba.njit(**jit_options())
     for name in _COMPILED_NAMES:
         globals()[name] = jit(globals()[name])
-    _KERNEL.update(decouple=globals()["_decouple_pass"])
+    _KERNEL.update(decouple=globals()["_decouple_pass"], labels=globals()["_cluster_labels"])
     return _KERNEL
+
+
+def _cluster_labels(lam: np.ndarray, tol: float, rel: float) -> np.ndarray:   # pragma: no cover - compiled
+    """Per eigenvalue the smallest index of its connected component in the graph
+    ``|lam_i - lam_k| <= max(tol, rel min(d_i, d_k))``, ``d_i = |1 - |lam_i||`` (the fixed point of
+    :func:`~roadcollab.lti.blockdiag._clusters`' label propagation)."""
+    n = lam.size
+    d = np.empty(n)
+    for i in range(n):
+        d[i] = abs(1.0 - abs(lam[i]))
+    label = np.arange(n)
+    changed = True
+    while changed:
+        changed = False
+        for i in range(n):
+            for k in range(n):
+                if label[k] < label[i] and abs(lam[i] - lam[k]) <= max(tol, rel * min(d[i], d[k])):
+                    label[i] = label[k]
+                    changed = True
+    return label
 
 
 def _swap(T: np.ndarray, U: np.ndarray, k: int) -> None:   # pragma: no cover - compiled
@@ -210,3 +230,25 @@ def decouple(T0: np.ndarray, U0: np.ndarray, B: np.ndarray, C: np.ndarray, clust
     Cw = np.empty((C.shape[0], T.shape[0]), dtype=np.complex128)
     status = int(_build()["decouple"](T, U, B, C, order, sizes, float(max_coupling), Bw, Cw))
     return status, T, U, Bw, Cw
+
+
+def clusters(lam: np.ndarray, tol: float, rel: float) -> list[list[int]]:
+    """:func:`~roadcollab.lti.blockdiag._clusters` with the label propagation compiled.
+
+    Parameters
+    ----------
+    lam : (n,) complex ndarray
+        Eigenvalues.
+    tol, rel : float
+        As :func:`~roadcollab.lti.blockdiag.block_schur`'s ``cluster_tol``, ``cluster_rel``.
+
+    Returns
+    -------
+    list of list of int
+        Each cluster's indices in ascending order, the clusters ordered by their first index.
+    """
+    label = _build()["labels"](np.ascontiguousarray(lam, dtype=np.complex128), float(tol), float(rel))
+    groups: dict[int, list[int]] = {}
+    for i, g in enumerate(label.tolist()):
+        groups.setdefault(g, []).append(i)
+    return sorted(groups.values(), key=lambda g: g[0])

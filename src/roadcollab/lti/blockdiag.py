@@ -23,7 +23,7 @@ import scipy.linalg
 from scipy.linalg import lapack
 
 from .kernels import block_eval, kernel_path
-from ._blockdiag_kernel import decouple as _compiled_decouple
+from ._blockdiag_kernel import clusters as _compiled_clusters, decouple as _compiled_decouple
 
 __all__ = ["MAX_COUPLING", "CLUSTER_TOL", "CLUSTER_REL", "SMALL_BLOCK", "BlockSchur", "block_schur", "block_response"]
 
@@ -131,7 +131,10 @@ def block_schur(A, B, C, *, schur: tuple[np.ndarray, np.ndarray] | None = None,
     A = np.asarray(A, dtype=float)
     T0, U0 = scipy.linalg.schur(A, output="complex") if schur is None else schur
     lam = np.diag(T0)
-    clusters = _clusters(lam, cluster_tol, cluster_rel)
+    if kernel_path() == "compiled":
+        clusters = _compiled_clusters(lam, cluster_tol, cluster_rel)
+    else:
+        clusters = _clusters(lam, cluster_tol, cluster_rel)
     while True:
         out = _decouple(T0, U0, B, C, clusters, max_coupling)
         if isinstance(out, BlockSchur):
