@@ -135,6 +135,12 @@ def test_caches_hit_only_on_identical_bytes():
     H = H2
     assert not np.array_equal(cache.response(StateSpaceData(A2, B, C, D, 0.01), om), H)
     assert np.allclose(cache.response(first, om, inverse=True) @ H, np.eye(2))
+    # A decoded (received) system keeps no response memo of its own (its receiver's cache does);
+    # one built in memory does, and both give the same response.
+    local = StateSpaceData(A.copy(), B, C, D, 0.01)
+    assert np.array_equal(first.frequency_response(om), local.frequency_response(om))
+    assert "_response" not in first.__dict__ and "_response" in local.__dict__
+    assert np.array_equal(local.frequency_response(om), first.frequency_response(om))
 
 
 def test_decode_reuses_a_certified_system_only_for_the_same_bytes():
