@@ -19,7 +19,7 @@ The block diagonalisation of a received system (reordering, Sylvester splits, ei
 :mod:`roadcollab.lti._blockdiag_kernel`) and ``Psi``'s pole residues are compiled too.
 
 The default is ``"reference"`` (numpy). The compiled path passes the 300-segment exactness test and
-makes ``paper`` about 2.1-2.2x faster per segment than the reference path (the bench's alternating
+makes ``paper`` about 2.1-2.5x faster per segment than the reference path (the bench's alternating
 line), but every process that uses it pays 1.2-1.5 s of numba start-up (import, cache load, code
 generation) and about 145 MiB, and a fresh installation compiles for about 21-24 s (docs/speed.md,
 "Fourth pass"). So it is opt-in, for long runs. The
