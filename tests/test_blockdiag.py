@@ -8,6 +8,7 @@ import scipy.linalg
 
 from roadcollab.experiments.bench.naive import direct_response
 from roadcollab.lti.blockdiag import block_response, block_schur
+from roadcollab.lti.kernels import compiled_available, use_kernels
 from roadcollab.lti.realisation import StateSpaceData, SystemCache, random_orthogonal, series, similarity
 from roadcollab.lti.response import FrequencyResponseCache
 from roadcollab.lti.stability import spectral_radius_and_gain
@@ -22,8 +23,9 @@ def _hidden(A, B, C, D, rng):
     return StateSpaceData(Q.T @ A @ Q, Q.T @ B, C @ Q, D, 0.005)
 
 
+@pytest.mark.parametrize("path", ["compiled", "reference"])
 @pytest.mark.parametrize("case", ["distinct", "doubled", "jordan", "series"])
-def test_block_response_agrees_with_dense_solves(case):
+def test_block_response_agrees_with_dense_solves(case, path):
     rng = np.random.default_rng(7)
     om = np.linspace(1e-3, np.pi - 1e-3, 400)
     if case == "distinct":
@@ -40,15 +42,17 @@ def test_block_response_agrees_with_dense_solves(case):
         A = s.A
     n = A.shape[0]
     sys = _hidden(A, rng.standard_normal((n, 2)), rng.standard_normal((2, n)), rng.standard_normal((2, 2)), rng)
-    bs = block_schur(sys.A, sys.B, sys.C)
-    got = block_response(bs, sys.D, np.exp(1j * om))
+    with use_kernels(path):
+        bs = block_schur(sys.A, sys.B, sys.C)
+        got = block_response(bs, sys.D, np.exp(1j * om))
     assert _rel(got, direct_response(sys, om)) < 1e-11
     assert sum(b - a for a, b in bs.blocks) == n
     if case == "jordan":
         assert max(b - a for a, b in bs.blocks) >= 3
 
 
-def test_merged_clusters_still_exact():
+@pytest.mark.parametrize("path", ["compiled", "reference"])
+def test_merged_clusters_still_exact(path):
     """A tight coupling bound forces merges (down to one block): the result is the Schur back
     substitution, equally exact."""
     rng = np.random.default_rng(3)
@@ -56,9 +60,46 @@ def test_merged_clusters_still_exact():
                              rng.standard_normal((4, 2)), rng.standard_normal((2, 4)), np.eye(2), rng),
                      np.eye(4), balance=True)
     om = np.linspace(1e-3, 3.0, 300)
-    bs = block_schur(sys.A, sys.B, sys.C, max_coupling=1e-6)
+    with use_kernels(path):
+        bs = block_schur(sys.A, sys.B, sys.C, max_coupling=1e-6)
     assert bs.blocks == [(0, 4)]
     assert _rel(block_response(bs, sys.D, np.exp(1j * om)), direct_response(sys, om)) < 1e-11
+
+
+@pytest.mark.skipif(not compiled_available(), reason="numba not importable")
+def test_compiled_block_diagonalisation_equals_the_lapack_pass():
+    """The compiled pass (reordering, Sylvester splits, Bw, Cw) gives the LAPACK path's blocks and, per
+    block, the same eigenvalues; the responses agree to round-off (obfuscated T~, S~ of the bench's
+    vehicles and bench segment 133's S~, which needs the merges)."""
+    from roadcollab.experiments.bench.study import _config_for
+    from roadcollab.experiments.pipeline import FleetPipeline
+    from roadcollab.models.vehicle import sample_fleet
+    from roadcollab.privacy.obfuscation import ObfuscationChannel
+
+    cfg = _config_for(4000)
+    rng = np.random.default_rng(5)
+    pipe = FleetPipeline(cfg, sample_fleet(2, cfg.fleet, rng=rng))
+    est = pipe.estimators[1]
+    d = np.load(Path(__file__).parent / "data" / "bench_segment133_S.npz")
+    systems = [StateSpaceData(d["A"], d["B"], d["C"], d["D"], 0.005)]
+    for _ in range(4):
+        ch = ObfuscationChannel.draw(est.T_ss, est.S_ss, pipe.grid, cfg.obfuscation, rng=rng)
+        systems += [ch.T, ch.S]
+    z = np.exp(1j * np.linspace(1e-3, 3.0, 500))
+    for sys in systems:
+        schur = scipy.linalg.schur(sys.A, output="complex")
+        with use_kernels("reference"):
+            ref = block_schur(sys.A, sys.B, sys.C, schur=schur)
+            H_ref = block_response(ref, sys.D, z)
+        with use_kernels("compiled"):
+            got = block_schur(sys.A, sys.B, sys.C, schur=schur)
+            H_got = block_response(got, sys.D, z)
+        assert got.blocks == ref.blocks
+        assert np.allclose(np.diag(got.R), np.diag(ref.R), rtol=0, atol=1e-12)
+        assert np.all(np.tril(got.R, -1) == 0)
+        for a, b in got.blocks:                 # nothing couples one block to the next
+            assert np.all(got.R[a:b, b:] == 0)
+        assert _rel(H_got, H_ref) < 1e-12
 
 
 def test_schur_certificate_agrees_with_the_eigen_one():
@@ -94,6 +135,12 @@ def test_caches_hit_only_on_identical_bytes():
     H = H2
     assert not np.array_equal(cache.response(StateSpaceData(A2, B, C, D, 0.01), om), H)
     assert np.allclose(cache.response(first, om, inverse=True) @ H, np.eye(2))
+    # A decoded (received) system keeps no response memo of its own (its receiver's cache does);
+    # one built in memory does, and both give the same response.
+    local = StateSpaceData(A.copy(), B, C, D, 0.01)
+    assert np.array_equal(first.frequency_response(om), local.frequency_response(om))
+    assert "_response" not in first.__dict__ and "_response" in local.__dict__
+    assert np.array_equal(local.frequency_response(om), first.frequency_response(om))
 
 
 def test_decode_reuses_a_certified_system_only_for_the_same_bytes():
@@ -154,3 +201,21 @@ def test_close_eigenvalues_near_the_circle_stay_in_one_block(path):
     ref = direct_response(sys, om)
     per_bin = np.linalg.norm(got - ref, axis=(1, 2)) / np.linalg.norm(ref, axis=(1, 2))
     assert per_bin.max() < 4e-10
+
+
+@pytest.mark.skipif(not compiled_available(), reason="numba not importable")
+def test_compiled_clusters_equal_the_label_propagation():
+    """The compiled clustering gives the numpy label propagation's clusters: chains of close eigenvalues
+    (single linkage), eigenvalues close only relative to their distance to the circle, isolated ones."""
+    from roadcollab.lti._blockdiag_kernel import clusters
+    from roadcollab.lti.blockdiag import CLUSTER_REL, CLUSTER_TOL, _clusters
+
+    rng = np.random.default_rng(11)
+    cases = [np.array([0.5, 0.5005, 0.501, 0.9, -0.3 + 0.1j, 0.9008, 0.2]),
+             np.array([0.9776, 0.9812, 0.9828, 0.9776, 0.9812, 0.9828, 0.5 + 0.5j]),
+             np.array([0.3])]
+    cases += [rng.uniform(0.9, 0.999, 12) * np.exp(1j * rng.choice([0.0, 0.01, 0.5], 12)) for _ in range(20)]
+    for lam in cases:
+        lam = lam.astype(complex)
+        assert clusters(lam, CLUSTER_TOL, CLUSTER_REL) == _clusters(lam, CLUSTER_TOL, CLUSTER_REL)
+    assert len(clusters(cases[0], CLUSTER_TOL, CLUSTER_REL)) == 4

@@ -135,6 +135,13 @@ def test_balanced_similarity_keeps_a_high_gain_series_transfer_matrix():
     expect = H2 @ H1
     got = hidden.frequency_response(np.angle(z))
     assert _rel(got, expect) < 1e-10
+    # The balancing is scipy's matrix_balance bit for bit (similarity calls its LAPACK routine directly).
+    import scipy.linalg
+
+    Q = random_orthogonal(sys.order, rng)
+    Ab, (scale, _) = scipy.linalg.matrix_balance(sys.A, permute=False, separate=True)
+    ref = (Q.T @ Ab @ Q, Q.T @ (sys.B / scale[:, None]), (sys.C * scale[None, :]) @ Q)
+    assert all(np.array_equal(a, b) for a, b in zip((lambda h: (h.A, h.B, h.C))(similarity(sys, Q, balance=True)), ref))
 
 
 @settings(max_examples=25)

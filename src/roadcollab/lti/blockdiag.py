@@ -23,6 +23,7 @@ import scipy.linalg
 from scipy.linalg import lapack
 
 from .kernels import block_eval, kernel_path
+from ._blockdiag_kernel import clusters as _compiled_clusters, decouple as _compiled_decouple
 
 __all__ = ["MAX_COUPLING", "CLUSTER_TOL", "CLUSTER_REL", "SMALL_BLOCK", "BlockSchur", "block_schur", "block_response"]
 
@@ -130,7 +131,10 @@ def block_schur(A, B, C, *, schur: tuple[np.ndarray, np.ndarray] | None = None,
     A = np.asarray(A, dtype=float)
     T0, U0 = scipy.linalg.schur(A, output="complex") if schur is None else schur
     lam = np.diag(T0)
-    clusters = _clusters(lam, cluster_tol, cluster_rel)
+    if kernel_path() == "compiled":
+        clusters = _compiled_clusters(lam, cluster_tol, cluster_rel)
+    else:
+        clusters = _clusters(lam, cluster_tol, cluster_rel)
     while True:
         out = _decouple(T0, U0, B, C, clusters, max_coupling)
         if isinstance(out, BlockSchur):
@@ -146,7 +150,14 @@ def block_schur(A, B, C, *, schur: tuple[np.ndarray, np.ndarray] | None = None,
 
 def _decouple(T0, U0, B, C, clusters, max_coupling) -> BlockSchur | int:
     """One pass of :func:`block_schur`: the form, or the index of the first cluster whose split
-    from the rest failed (``||X||_F > max_coupling`` or the Sylvester solve failed)."""
+    from the rest failed (``||X||_F > max_coupling`` or the Sylvester solve failed). On the compiled
+    path the same pass is one call (:mod:`~roadcollab.lti._blockdiag_kernel`)."""
+    if kernel_path() == "compiled":
+        status, T, _, Bw, Cw = _compiled_decouple(T0, U0, B, C, clusters, max_coupling)
+        if status >= 0:
+            return status
+        bounds = np.cumsum([0] + [len(g) for g in clusters])
+        return BlockSchur(T, Bw, Cw, [(int(a), int(b)) for a, b in zip(bounds[:-1], bounds[1:])], (T0, U0))
     T, U, sizes = _reorder(T0.copy(), U0.copy(), clusters)
     n = T.shape[0]
     Bw = U.conj().T @ np.asarray(B, dtype=complex)

@@ -15,10 +15,14 @@ Two paths compute the same quantities:
   (:mod:`roadcollab.lti._bin_kernel`). They differ from the reference by round-off only (the Schur form
   is another valid one; the certificate's residual is checked either way).
 
+The block diagonalisation of a received system (reordering, Sylvester splits, eigenvalue clustering:
+:mod:`roadcollab.lti._blockdiag_kernel`) and ``Psi``'s pole residues are compiled too.
+
 The default is ``"reference"`` (numpy). The compiled path passes the 300-segment exactness test and
-makes ``paper`` about 1.4-1.9x faster per segment, but every process that uses it pays 1.2-1.5 s of
-numba start-up (import, cache load, code generation) and about 145 MiB, and a fresh installation
-compiles for about 15 s (docs/speed.md, "Second pass"). So it is opt-in, for long runs. The
+makes ``paper`` about 2.1-2.5x faster per segment than the reference path (the bench's alternating
+line), but every process that uses it pays 1.2-1.5 s of numba start-up (import, cache load, code
+generation) and about 145 MiB, and a fresh installation compiles for about 21-24 s (docs/speed.md,
+"Fourth pass"). So it is opt-in, for long runs. The
 environment variable ``ROADCOLLAB_KERNELS=compiled`` (or ``reference``) sets the default, and
 :func:`use_kernels` selects a path for a block of code (``roadcollab bench --kernels``).
 

@@ -24,7 +24,7 @@ from ..lti.kernels import kernel_path, pole_residue_eval
 from ..lti.response import unit_circle
 from ..lti.realisation import StateSpaceData
 from ..estimation.grid import SegmentGrid
-from ._draw_kernel import draw_loop
+from ._draw_kernel import draw_loop, pole_residues as _compiled_residues
 
 __all__ = ["ObfuscationSpec", "Obfuscator", "draw_obfuscator"]
 
@@ -189,6 +189,8 @@ class Obfuscator:
         direct : (2, 2) complex ndarray
             ``Psi(z = inf)`` (real up to round-off; equals the realisation's ``Dd``).
         """
+        if kernel_path() == "compiled":
+            return _compiled_residues(self.poles, self.numerators, self.system.dt)
         p = np.asarray(self.poles, dtype=complex)
         h = 0.5 * self.system.dt
         dden = np.polyder(_poly(p))

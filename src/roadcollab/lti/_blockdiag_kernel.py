@@ -1,0 +1,254 @@
+"""Compiled (numba) pass of the Bavely-Stewart block diagonalisation (:mod:`~roadcollab.lti.blockdiag`,
+the ``"compiled"`` path of :mod:`~roadcollab.lti.kernels`).
+
+One call does what :func:`~roadcollab.lti.blockdiag._decouple` does with a Python loop over LAPACK
+calls: the reordering of the complex Schur form (adjacent swaps by Givens rotations, the algorithm of
+LAPACK ``ztrexc``), ``Bw = U^H B``, ``Cw = C U``, and per split the triangular Sylvester equation
+``R11 X - X R22 = -R12`` (the column-by-column substitution of LAPACK ``ztrsyl``, with its test of a
+near-singular pivot), the coupling test ``||X||_F <= max_coupling`` and the updates of ``Bw``, ``Cw``.
+The numpy path took 0.27-0.34 ms per obfuscated ``T~`` or ``S~`` in that loop's Python glue and small
+LAPACK calls (docs/speed.md, "Fourth pass"). The result differs from the LAPACK path by round-off only
+(another rounding of the same rotations and substitutions).
+
+Plain loops over complex scalars: numba's array expressions cost seconds of first-run compilation each.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from .kernels import compiled_available, jit_options
+
+__all__ = ["decouple", "clusters"]
+
+_KERNEL: dict[str, Any] = {}
+
+#: The functions compiled by :func:`_build` (rebound in place, so compiled callers find compiled callees).
+_COMPILED_NAMES = ("_swap", "_sylvester", "_decouple_pass", "_cluster_labels")
+
+
+def _build() -> dict[str, Any]:
+    """The compiled pass (``None`` without numba); numba is imported on first use."""
+    if _KERNEL:
+        return _KERNEL
+    if not compiled_available():
+        _KERNEL.update(decouple=None, labels=None)
+        return _KERNEL
+    import numba
+
+    jit = numba.njit(**jit_options())
+    for name in _COMPILED_NAMES:
+        globals()[name] = jit(globals()[name])
+    _KERNEL.update(decouple=globals()["_decouple_pass"], labels=globals()["_cluster_labels"])
+    return _KERNEL
+
+
+def _cluster_labels(lam: np.ndarray, tol: float, rel: float) -> np.ndarray:   # pragma: no cover - compiled
+    """Per eigenvalue the smallest index of its connected component in the graph
+    ``|lam_i - lam_k| <= max(tol, rel min(d_i, d_k))``, ``d_i = |1 - |lam_i||`` (the fixed point of
+    :func:`~roadcollab.lti.blockdiag._clusters`' label propagation)."""
+    n = lam.size
+    d = np.empty(n)
+    for i in range(n):
+        d[i] = abs(1.0 - abs(lam[i]))
+    label = np.arange(n)
+    changed = True
+    while changed:
+        changed = False
+        for i in range(n):
+            for k in range(n):
+                if label[k] < label[i] and abs(lam[i] - lam[k]) <= max(tol, rel * min(d[i], d[k])):
+                    label[i] = label[k]
+                    changed = True
+    return label
+
+
+def _swap(T: np.ndarray, U: np.ndarray, k: int) -> None:   # pragma: no cover - compiled
+    """Swap the diagonal entries ``k``, ``k + 1`` of the upper triangular ``T`` (``ztrexc``'s step):
+    the rotation ``[[c, s], [-conj(s), c]]`` that zeroes ``(T_k,k+1, T_k+1,k+1 - T_kk)`` (``zlartg``),
+    applied to rows ``k, k+1`` right of the pair, to columns ``k, k+1`` above it and to ``U``."""
+    n = T.shape[0]
+    t11 = T[k, k]
+    t22 = T[k + 1, k + 1]
+    f = T[k, k + 1]
+    g = t22 - t11
+    af = abs(f)
+    ag = abs(g)
+    if ag == 0.0:
+        c = 1.0
+        s = 0.0 + 0.0j
+    elif af == 0.0:
+        c = 0.0
+        s = np.conj(g) / ag
+    else:
+        d = np.sqrt(af * af + ag * ag)
+        c = af / d
+        s = (f / af) * np.conj(g) / d
+    for j in range(k + 2, n):                   # rows k, k+1: zrot(cs, sn)
+        x, y = T[k, j], T[k + 1, j]
+        T[k, j] = c * x + s * y
+        T[k + 1, j] = c * y - np.conj(s) * x
+    sc = np.conj(s)
+    for i in range(k):                          # columns k, k+1: zrot(cs, conj(sn))
+        x, y = T[i, k], T[i, k + 1]
+        T[i, k] = c * x + sc * y
+        T[i, k + 1] = c * y - s * x
+    T[k, k] = t22
+    T[k + 1, k + 1] = t11
+    for i in range(n):
+        x, y = U[i, k], U[i, k + 1]
+        U[i, k] = c * x + sc * y
+        U[i, k + 1] = c * y - s * x
+
+
+def _sylvester(T: np.ndarray, start: int, stop: int, X: np.ndarray) -> bool:   # pragma: no cover - compiled
+    """``X`` (``stop - start`` by ``n - stop``) of ``R11 X - X R22 = -R12`` for the blocks of ``T``
+    split at ``[start, stop)``, by ``ztrsyl``'s substitution (columns forward, rows backward). False
+    when a pivot ``R11_kk - R22_ll`` is at most ``ztrsyl``'s ``smin`` (LAPACK then perturbs it and
+    reports ``info = 1``; the caller merges the blocks instead)."""
+    n = T.shape[0]
+    m1 = stop - start
+    m2 = n - stop
+    amax = 0.0
+    for i in range(start, stop):
+        for j in range(i, stop):
+            amax = max(amax, abs(T[i, j]))
+    bmax = 0.0
+    for i in range(stop, n):
+        for j in range(i, n):
+            bmax = max(bmax, abs(T[i, j]))
+    eps = np.finfo(np.float64).eps              # dlamch('P'), as ztrsyl
+    smlnum = np.finfo(np.float64).tiny * (m1 * m2) / eps
+    smin = max(smlnum, eps * amax, eps * bmax)
+    for l in range(m2):
+        for k in range(m1 - 1, -1, -1):
+            acc = -T[start + k, stop + l]
+            for j in range(k + 1, m1):          # suml = R11[k, k+1:] X[k+1:, l]
+                acc -= T[start + k, start + j] * X[j, l]
+            for j in range(l):                  # sgn * sumr = -X[k, :l] R22[:l, l]
+                acc += X[k, j] * T[stop + j, stop + l]
+            a11 = T[start + k, start + k] - T[stop + l, stop + l]
+            if abs(a11.real) + abs(a11.imag) <= smin:
+                return False
+            X[k, l] = acc / a11
+    return True
+
+
+def _decouple_pass(T: np.ndarray, U: np.ndarray, B: np.ndarray, C: np.ndarray, order: np.ndarray,
+                   sizes: np.ndarray, max_coupling: float, Bw: np.ndarray, Cw: np.ndarray) -> int:   # pragma: no cover - compiled
+    """One pass of :func:`~roadcollab.lti.blockdiag._decouple` on ``T``, ``U`` (copies, changed in
+    place): reorder to ``order`` (the clusters' eigenvalue indices, concatenated), form ``Bw``, ``Cw``,
+    split after every cluster of ``sizes`` but the last. -1 on success, else the index of the first
+    cluster whose split failed."""
+    n = T.shape[0]
+    pos = np.arange(n)                          # pos[i]: current place of the eigenvalue first at i
+    for target in range(n):
+        src = pos[order[target]]
+        if src != target:
+            for k in range(src - 1, target - 1, -1):
+                _swap(T, U, k)
+            for i in range(n):
+                if target <= pos[i] < src:
+                    pos[i] += 1
+                elif pos[i] == src:
+                    pos[i] = target
+    for i in range(n):                          # Bw = U^H B, Cw = C U
+        for j in range(B.shape[1]):
+            acc = 0.0 + 0.0j
+            for r in range(n):
+                acc += np.conj(U[r, i]) * B[r, j]
+            Bw[i, j] = acc
+    for i in range(C.shape[0]):
+        for j in range(n):
+            acc = 0.0 + 0.0j
+            for r in range(n):
+                acc += C[i, r] * U[r, j]
+            Cw[i, j] = acc
+    start = 0
+    for c in range(sizes.size - 1):
+        stop = start + sizes[c]
+        X = np.empty((stop - start, n - stop), dtype=np.complex128)
+        if not _sylvester(T, start, stop, X):
+            return c
+        norm2 = 0.0
+        for i in range(stop - start):
+            for j in range(n - stop):
+                norm2 += X[i, j].real ** 2 + X[i, j].imag ** 2
+        if not np.sqrt(norm2) <= max_coupling:
+            return c
+        for i in range(stop - start):           # Bw[start:stop] -= X Bw[stop:]
+            for j in range(Bw.shape[1]):
+                acc = 0.0 + 0.0j
+                for r in range(n - stop):
+                    acc += X[i, r] * Bw[stop + r, j]
+                Bw[start + i, j] -= acc
+        for i in range(Cw.shape[0]):            # Cw[:, stop:] += Cw[:, start:stop] X
+            for j in range(n - stop):
+                acc = 0.0 + 0.0j
+                for r in range(stop - start):
+                    acc += Cw[i, start + r] * X[r, j]
+                Cw[i, stop + j] += acc
+        for i in range(start, stop):
+            for j in range(stop, n):
+                T[i, j] = 0.0
+        start = stop
+    return -1
+
+
+def decouple(T0: np.ndarray, U0: np.ndarray, B: np.ndarray, C: np.ndarray, clusters: list[list[int]],
+             max_coupling: float) -> tuple[int, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """One compiled pass of the block diagonalisation (module docstring).
+
+    Parameters
+    ----------
+    T0, U0 : (n, n) complex ndarray
+        A complex Schur form ``A = U0 T0 U0^H`` (not modified).
+    B : (n, m) real ndarray
+    C : (p, n) real ndarray
+    clusters : list of list of int
+        Eigenvalue indices (positions on ``T0``'s diagonal) of each cluster, in order.
+    max_coupling : float
+        Largest ``||X||_F`` of a split.
+
+    Returns
+    -------
+    status : int
+        -1 on success, else the index of the first cluster that could not be split from the rest.
+    R, U, Bw, Cw : ndarray
+        The reordered, decoupled ``R`` (zero between blocks), its ``U``, ``U^H B`` and ``C U`` after
+        the splits (meaningful on success only).
+    """
+    T = np.array(T0, dtype=np.complex128, order="C")
+    U = np.array(U0, dtype=np.complex128, order="C")
+    B = np.ascontiguousarray(B, dtype=float)
+    C = np.ascontiguousarray(C, dtype=float)
+    order = np.array([i for g in clusters for i in g], dtype=np.int64)
+    sizes = np.array([len(g) for g in clusters], dtype=np.int64)
+    Bw = np.empty((T.shape[0], B.shape[1]), dtype=np.complex128)
+    Cw = np.empty((C.shape[0], T.shape[0]), dtype=np.complex128)
+    status = int(_build()["decouple"](T, U, B, C, order, sizes, float(max_coupling), Bw, Cw))
+    return status, T, U, Bw, Cw
+
+
+def clusters(lam: np.ndarray, tol: float, rel: float) -> list[list[int]]:
+    """:func:`~roadcollab.lti.blockdiag._clusters` with the label propagation compiled.
+
+    Parameters
+    ----------
+    lam : (n,) complex ndarray
+        Eigenvalues.
+    tol, rel : float
+        As :func:`~roadcollab.lti.blockdiag.block_schur`'s ``cluster_tol``, ``cluster_rel``.
+
+    Returns
+    -------
+    list of list of int
+        Each cluster's indices in ascending order, the clusters ordered by their first index.
+    """
+    label = _build()["labels"](np.ascontiguousarray(lam, dtype=np.complex128), float(tol), float(rel))
+    groups: dict[int, list[int]] = {}
+    for i, g in enumerate(label.tolist()):
+        groups.setdefault(g, []).append(i)
+    return sorted(groups.values(), key=lambda g: g[0])
