@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from roadcollab.errors import ParameterError
+from roadcollab.experiments.security.secagg_bounded import centred_clipping
 from roadcollab.privacy.secagg_active_run import SecAggFleet
 from roadcollab.privacy.secagg_flp import Field, Proof, ValidityEncoding, decide, prove, query
 from roadcollab.privacy.secagg_messages import SecAggSpec, session_id
@@ -104,3 +105,14 @@ def test_norm_soundness_on_a_small_field():
     assert rate <= 3 / 97                                      # only rho_0 = 0 (1/p) lets it through
     plain = dataclasses.replace(enc, norm=0.0)
     assert _norm_cheat_rate(plain, [3, 3]) == 1.0              # without the norm check it is valid
+
+
+def test_the_study_node_computes_what_the_phased_protocol_reveals():
+    fleet, wide, tight, inputs = _setup(n=5, R=0.25)
+    lie = dict(inputs)
+    lie[2] = inputs[2] * 3.0
+    out = run_phased_session(fleet, lie, session_id(7, 0), wide, tight, phases=6, verify_key=KEY, rng=0)
+    us = [wide.clip(u)[0] for _, u in sorted(lie.items())]
+    ideal, clipped = centred_clipping(us, us, tight.honest_radius, 6)
+    assert out.clipped == clipped > 0
+    assert np.max(np.abs(out.result - ideal)) < 6 * 2.0 ** -12
