@@ -12,7 +12,7 @@ from roadcollab.experiments.security.secagg_bounded import centred_clipping
 from roadcollab.privacy.secagg_active_run import SecAggFleet
 from roadcollab.privacy.secagg_flp import Field, Proof, ValidityEncoding, decide, prove, query
 from roadcollab.privacy.secagg_messages import SecAggSpec, session_id
-from roadcollab.privacy.secagg_phased import phase_session, run_phased_session
+from roadcollab.privacy.secagg_phased import phase_session, radius_schedule, run_phased_session
 from roadcollab.privacy.secagg_validity import submit
 
 KEY = bytes(range(32))
@@ -116,3 +116,13 @@ def test_the_study_node_computes_what_the_phased_protocol_reveals():
     ideal, clipped = centred_clipping(us, us, tight.honest_radius, 6)
     assert out.clipped == clipped > 0
     assert np.max(np.abs(out.result - ideal)) < 6 * 2.0 ** -12
+
+
+def test_the_radius_schedule_and_one_encoding_per_phase():
+    assert radius_schedule(1.0, 5, grow=4.0) == [4.0, 2.0, 1.0, 1.0] and radius_schedule(1.0, 3) == [1.0, 1.0]
+    fleet, wide, _, inputs = _setup()
+    encs = [ValidityEncoding(np.full(L, r), r * 2.0 ** -12, norm=r) for r in radius_schedule(0.6, 4, grow=4.0)]
+    out = run_phased_session(fleet, inputs, session_id(8, 0), wide, encs, phases=4, verify_key=KEY, rng=0)
+    assert out.phases == 4 and np.max(np.abs(out.result - np.mean(list(inputs.values()), axis=0))) < 2.0 ** -10
+    with pytest.raises(ParameterError, match="one encoding per phase"):
+        run_phased_session(fleet, inputs, session_id(9, 0), wide, encs, phases=3, verify_key=KEY, rng=0)

@@ -27,7 +27,7 @@ Rules (docs/security-secagg.md, "Phased sessions"):
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -40,7 +40,7 @@ from .secagg_flp import ValidityEncoding
 from .secagg_messages import AggregationRefused
 from .secagg_validity import Submission, ValidatedAggregate, run_validated_aggregation, submit
 
-__all__ = ["PhasedResult", "phase_session", "run_phased_session"]
+__all__ = ["PhasedResult", "phase_session", "radius_schedule", "run_phased_session"]
 
 #: ``tamper(phase, vehicle, submission) -> submission``: a malicious vehicle's change to what it sends.
 Tamper = Callable[[int, int, Submission], Submission]
@@ -84,12 +84,38 @@ def phase_session(session: bytes, phase: int) -> bytes:
     return bytes(session) + b"/phase" + int(phase).to_bytes(2, "little")
 
 
-def _check_encodings(wide: ValidityEncoding, tight: ValidityEncoding, phases: int) -> int:
-    if not tight.norm:
-        raise ParameterError("tight: the later phases need an encoding with a norm bound (ValidityEncoding(norm=R))")
-    if wide.length != tight.length:
-        raise ParameterError(f"wide and tight must have the same length, got {wide.length} and {tight.length}")
-    return check_int("phases", phases, low=1)
+def radius_schedule(radius: float, phases: int, grow: float = 1.0) -> list[float]:
+    """The balls of phases ``2..K``: ``R_k = R max(1, grow / 2^(k-2))`` (wider first, then ``R``).
+
+    Parameters
+    ----------
+    radius : float
+        ``R``, the last phases' ball.
+    phases : int
+        ``K``.
+    grow : float
+        ``>= 1``; 1 gives ``R`` in every phase.
+
+    Returns
+    -------
+    list of float
+        ``K - 1`` radii.
+    """
+    return [radius * max(1.0, grow / 2.0 ** j) for j in range(check_int("phases", phases, low=1) - 1)]
+
+
+def _check_encodings(wide: ValidityEncoding, tight: ValidityEncoding | Sequence[ValidityEncoding],
+                     phases: int) -> list[ValidityEncoding]:
+    phases = check_int("phases", phases, low=1)
+    encs = [tight] * (phases - 1) if isinstance(tight, ValidityEncoding) else list(tight)
+    if len(encs) != phases - 1:
+        raise ParameterError(f"tight: one encoding per phase after the first ({phases - 1}), got {len(encs)}")
+    for e in encs:
+        if not e.norm:
+            raise ParameterError("tight: the later phases need encodings with a norm bound (ValidityEncoding(norm=R))")
+        if wide.length != e.length:
+            raise ParameterError(f"wide and tight must have the same length, got {wide.length} and {e.length}")
+    return encs
 
 
 def _aggregate(fleet: Any, enc: ValidityEncoding, subs: dict[int, Submission], session: bytes,
@@ -124,7 +150,7 @@ def _later_phase(fleet: Any, us: dict[int, np.ndarray], m: np.ndarray, k: int, s
 
 
 def run_phased_session(fleet: Any, inputs: dict[int, ArrayLike], session: bytes, wide: ValidityEncoding,
-                       tight: ValidityEncoding, *, phases: int, verify_key: bytes, rng: Any = None,
+                       tight: ValidityEncoding | Sequence[ValidityEncoding], *, phases: int, verify_key: bytes, rng: Any = None,
                        tamper: Tamper | None = None,
                        announce: Callable[[int, tuple[int, ...]], tuple[int, ...]] | None = None) -> PhasedResult:
     """A phased session among the certified vehicles of ``fleet`` (module docstring), both aggregators in-process.
@@ -137,8 +163,10 @@ def run_phased_session(fleet: Any, inputs: dict[int, ArrayLike], session: bytes,
         Vehicle id to its input (``L`` values).
     session : bytes
         ``session_id(segment, epoch)``.
-    wide, tight : ValidityEncoding
-        Phase 1's box, and the later phases' (with ``norm``).
+    wide : ValidityEncoding
+        Phase 1's box.
+    tight : ValidityEncoding or sequence of them
+        The later phases' (with ``norm``), one for all or one per phase (:func:`radius_schedule`).
     phases : int
         ``K >= 1``.
     verify_key : bytes
@@ -153,7 +181,7 @@ def run_phased_session(fleet: Any, inputs: dict[int, ArrayLike], session: bytes,
     -------
     PhasedResult
     """
-    phases = _check_encodings(wide, tight, phases)
+    encs = _check_encodings(wide, tight, phases)
     gen = np.random.default_rng(rng)
     subs: dict[int, Submission] = {}
     refused: dict[int, str] = {}
@@ -175,12 +203,12 @@ def run_phased_session(fleet: Any, inputs: dict[int, ArrayLike], session: bytes,
     accepted, m, clipped = first.accepted, first.average, 0
     for i in accepted:          # the checked set, kept by every vehicle of it for the later phases
         fleet.vehicles[i].ledger.record_view(session, accepted)
-    for k in range(2, phases + 1):
+    for k, enc in enumerate(encs, start=2):
         announced = tuple(accepted) if announce is None else tuple(announce(k, accepted))
-        out, why, c = _later_phase(fleet, us, m, k, session, announced, tight, verify_key, gen, tamper)
+        out, why, c = _later_phase(fleet, us, m, k, session, announced, enc, verify_key, gen, tamper)
         clipped += c
         if out.average is None or out.accepted != accepted:
             missing = {i: why.get(i, f"vehicle {i}: no input in phase {k}") for i in accepted if i not in out.accepted}
             return PhasedResult(None, accepted, {**refused, **why, **missing}, k - 1, clipped)
         m = m + out.average
-    return PhasedResult(m, accepted, refused, phases, clipped)
+    return PhasedResult(m, accepted, refused, len(encs) + 1, clipped)

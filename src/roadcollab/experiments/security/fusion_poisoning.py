@@ -58,7 +58,7 @@ from ...wire.message import InversionMessage
 from ..anomalies.config import AnomalyStudyConfig
 from ..pipeline import FleetPipeline, fleet_and_run_seeds, record_run
 from ..seeds import SeedPlan, run_stream
-from .secagg_bounded import (ADAPTIVE_STRATEGIES, BOUNDED_PHASES, ball_radius, bounded_inputs,
+from .secagg_bounded import (ADAPTIVE_STRATEGIES, BOUNDED_GROW, BOUNDED_PHASES, ball_radius, bounded_inputs,
                              centred_clipping)
 
 __all__ = ["FUSION_STRATEGIES", "FUSION_TARGETS", "PoisoningSummary", "fusion_poisoning_rows"]
@@ -274,7 +274,7 @@ def _secagg_bounded_node(run: _Run, msgs: list[InversionMessage],
     """The phased, centred-clipping secure aggregate (:mod:`.secagg_bounded`), then vehicle 1's guard."""
     box, _ = run.box
     first, raw = bounded_inputs(run, msgs)
-    m, clipped = centred_clipping(first, raw, run.radius, BOUNDED_PHASES, adaptive=adaptive)
+    m, clipped = centred_clipping(first, raw, run.radius, BOUNDED_PHASES, adaptive=adaptive, grow=BOUNDED_GROW)
     agg = run.grid.irfft(box.from_vector(m))
     est = run.pipe.estimators[0]
     Z, _ = run.guard.substitute(run.message(agg, len(first)), run.Ys[0], est.invert(run.Ys[0], posterior=True))

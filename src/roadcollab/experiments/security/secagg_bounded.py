@@ -6,7 +6,8 @@ vehicles runs ``phases`` validated sessions on one segment (:mod:`roadcollab.pri
 
 - phase 1: the wide box of ``secagg_valid``; the public result is ``m_1 = mean u_i``;
 - phase ``k > 1``: vehicle ``i`` submits ``d_i = u_i - m_{k-1}`` proven inside the l2 ball
-  ``||d_i|| <= R`` (honest vehicles scale ``d_i`` down onto the ball instead of being refused), and
+  ``||d_i|| <= R_k`` (``R_k = R max(1, grow / 2^(k-2))``: wider balls first work off the phase-1 offset
+  in fewer phases; honest vehicles scale ``d_i`` down onto the ball instead of being refused), and
   ``m_k = m_{k-1} + mean d_i`` (centred clipping; Karimireddy, He and Jaggi, ICML 2021, eq. 2).
 
 The radius is public: ``R^2 = kappa2 (1 - 1/n) sum_{k,t} C_kt`` with ``C`` the public expected inversion
@@ -30,12 +31,17 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["ADAPTIVE_STRATEGIES", "BOUNDED_KAPPA2", "BOUNDED_PHASES", "ball_radius", "centred_clipping"]
+from ...privacy.secagg_phased import radius_schedule
+
+__all__ = ["ADAPTIVE_STRATEGIES", "BOUNDED_GROW", "BOUNDED_KAPPA2", "BOUNDED_PHASES", "ball_radius",
+           "centred_clipping"]
 
 ADAPTIVE_STRATEGIES = ("adaptive_anti_road", "adaptive_fake", "adaptive_erase")
-#: ``kappa2`` and phases of the study node (docs/security-secagg.md: 0.25 and 10 meet 2x on every row).
+#: ``kappa2``, phases and radius schedule of the study node (docs/security-secagg.md: 0.25, 5 phases with
+#: radii 4R, 2R, R, R meet 2x on every row; a constant R needs 10 phases).
 BOUNDED_KAPPA2 = 0.25
-BOUNDED_PHASES = 10
+BOUNDED_PHASES = 5
+BOUNDED_GROW = 4.0
 
 
 def ball_radius(C: np.ndarray, n: int, kappa2: float = BOUNDED_KAPPA2) -> float:
@@ -64,7 +70,7 @@ def _onto_ball(d: np.ndarray, radius: float) -> tuple[np.ndarray, bool]:
 
 
 def centred_clipping(first: Sequence[np.ndarray], raw: Sequence[np.ndarray], radius: float, phases: int, *,
-                     adaptive: tuple[int, np.ndarray] | None = None) -> tuple[np.ndarray, int]:
+                     adaptive: tuple[int, np.ndarray] | None = None, grow: float = 1.0) -> tuple[np.ndarray, int]:
     """The result of ``phases`` validated sessions over one checked set (module docstring).
 
     Parameters
@@ -79,7 +85,9 @@ def centred_clipping(first: Sequence[np.ndarray], raw: Sequence[np.ndarray], rad
     phases : int
         Sessions, at least 1.
     adaptive : (int, ndarray), optional
-        An attacker's index and direction: it sends ``R dir / ||dir||`` in every phase after the first.
+        An attacker's index and direction: it sends ``R_k dir / ||dir||`` in every phase after the first.
+    grow : float
+        Radius schedule :func:`~roadcollab.privacy.secagg_phased.radius_schedule` (1: ``R`` in every phase).
 
     Returns
     -------
@@ -90,14 +98,14 @@ def centred_clipping(first: Sequence[np.ndarray], raw: Sequence[np.ndarray], rad
     """
     m = np.mean(first, axis=0)
     clipped = 0
-    for _ in range(phases - 1):
+    for radius_k in radius_schedule(radius, phases, grow):
         ds = []
         for i, r in enumerate(raw):
             if adaptive is not None and i == adaptive[0]:
                 direction = adaptive[1]
-                ds.append(direction * (radius / float(np.sqrt(np.sum(direction ** 2)))))
+                ds.append(direction * (radius_k / float(np.sqrt(np.sum(direction ** 2)))))
                 continue
-            d, c = _onto_ball(r - m, radius)
+            d, c = _onto_ball(r - m, radius_k)
             clipped += c
             ds.append(d)
         m = m + np.mean(ds, axis=0)
