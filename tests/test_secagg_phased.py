@@ -12,7 +12,7 @@ from roadcollab.experiments.security.secagg_bounded import centred_clipping
 from roadcollab.privacy.secagg_active_run import SecAggFleet
 from roadcollab.privacy.secagg_flp import Field, Proof, ValidityEncoding, decide, prove, query
 from roadcollab.privacy.secagg_messages import SecAggSpec, session_id
-from roadcollab.privacy.secagg_phased import phase_session, radius_schedule, run_phased_session
+from roadcollab.privacy.secagg_phased import phase_session, public_schedule, radius_schedule, run_phased_session
 from roadcollab.privacy.secagg_validity import submit
 
 KEY = bytes(range(32))
@@ -126,3 +126,9 @@ def test_the_radius_schedule_and_one_encoding_per_phase():
     assert out.phases == 4 and np.max(np.abs(out.result - np.mean(list(inputs.values()), axis=0))) < 2.0 ** -10
     with pytest.raises(ParameterError, match="one encoding per phase"):
         run_phased_session(fleet, inputs, session_id(9, 0), wide, encs, phases=3, verify_key=KEY, rng=0)
+
+
+def test_the_public_schedule_works_off_the_largest_offset():
+    assert public_schedule(7.1, 1.0) == (6, 8.0)          # radii 8, 4, 2, 1, 1
+    assert public_schedule(0.5, 1.0, final=1) == (2, 1.0)
+    assert radius_schedule(1.0, *public_schedule(29.7, 1.0)) == [32.0, 16.0, 8.0, 4.0, 2.0, 1.0, 1.0]

@@ -27,6 +27,7 @@ Rules (docs/security-secagg.md, "Phased sessions"):
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -40,7 +41,7 @@ from .secagg_flp import ValidityEncoding
 from .secagg_messages import AggregationRefused
 from .secagg_validity import Submission, ValidatedAggregate, run_validated_aggregation, submit
 
-__all__ = ["PhasedResult", "phase_session", "radius_schedule", "run_phased_session"]
+__all__ = ["PhasedResult", "phase_session", "public_schedule", "radius_schedule", "run_phased_session"]
 
 #: ``tamper(phase, vehicle, submission) -> submission``: a malicious vehicle's change to what it sends.
 Tamper = Callable[[int, int, Submission], Submission]
@@ -102,6 +103,28 @@ def radius_schedule(radius: float, phases: int, grow: float = 1.0) -> list[float
         ``K - 1`` radii.
     """
     return [radius * max(1.0, grow / 2.0 ** j) for j in range(check_int("phases", phases, low=1) - 1)]
+
+
+def public_schedule(offset: float, radius: float, final: int = 2) -> tuple[int, float]:
+    """``(K, grow)`` that work off the largest phase-1 offset: ``grow = 2^ceil(log2(offset / R))``, halved per
+    phase down to ``R``, then ``final`` phases at ``R``.
+
+    Parameters
+    ----------
+    offset : float
+        The largest shift of ``m_1`` one vehicle can cause, public: ``2 ||B||_2 / n`` for the wide box ``B``.
+    radius : float
+        ``R``.
+    final : int
+        Phases at ``R`` (at least 1).
+
+    Returns
+    -------
+    phases : int
+    grow : float
+    """
+    steps = max(0, math.ceil(math.log2(max(1.0, offset / radius))))
+    return 1 + steps + check_int("final", final, low=1), float(2 ** steps)
 
 
 def _check_encodings(wide: ValidityEncoding, tight: ValidityEncoding | Sequence[ValidityEncoding],

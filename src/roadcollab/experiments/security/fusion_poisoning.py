@@ -24,7 +24,7 @@ Two fusion nodes are compared on the same messages:
   so the malicious vehicle sends its strategy clipped into the box (unclipped it is refused). The node
   computes what the protocol reveals (the sum of the quantised accepted inputs; the proofs themselves are
   exercised in tests/test_secagg_validity.py); ``refused`` counts inputs that were outside the box.
-- ``secagg_bounded``: ``secagg_valid`` as the first of :data:`~.secagg_bounded.BOUNDED_PHASES` sessions over
+- ``secagg_bounded``: ``secagg_valid`` as the first of ``K`` sessions (:func:`~roadcollab.privacy.secagg_phased.public_schedule`) over
   the same vehicles, each later one on deviations from the last result proven inside a public l2 ball
   (:mod:`.secagg_bounded`); ``refused`` counts inputs scaled onto the ball over the phases. Its rows include
   the adaptive strategies :data:`~.secagg_bounded.ADAPTIVE_STRATEGIES`.
@@ -58,8 +58,8 @@ from ...wire.message import InversionMessage
 from ..anomalies.config import AnomalyStudyConfig
 from ..pipeline import FleetPipeline, fleet_and_run_seeds, record_run
 from ..seeds import SeedPlan, run_stream
-from .secagg_bounded import (ADAPTIVE_STRATEGIES, BOUNDED_GROW, BOUNDED_PHASES, ball_radius, bounded_inputs,
-                             centred_clipping)
+from ...privacy.secagg_phased import public_schedule
+from .secagg_bounded import ADAPTIVE_STRATEGIES, BOUNDED_FINAL, ball_radius, bounded_inputs, centred_clipping
 
 __all__ = ["FUSION_STRATEGIES", "FUSION_TARGETS", "PoisoningSummary", "fusion_poisoning_rows"]
 
@@ -119,7 +119,8 @@ class _Run:
     Ys: list                   # each vehicle's record spectrum
     guard: ReceiverGuard       # vehicle 1's guard (the receiver of the aggregate)
     box: object = None         # (SpectralBox, ValidityEncoding) of the secagg_valid node
-    radius: float = 0.0        # the l2 ball of the secagg_bounded node's later phases
+    radius: float = 0.0        # the l2 ball of the secagg_bounded node's last phases
+    schedule: tuple = (1, 1.0)  # its (phases, grow)
 
     @property
     def grid(self):
@@ -274,7 +275,8 @@ def _secagg_bounded_node(run: _Run, msgs: list[InversionMessage],
     """The phased, centred-clipping secure aggregate (:mod:`.secagg_bounded`), then vehicle 1's guard."""
     box, _ = run.box
     first, raw = bounded_inputs(run, msgs)
-    m, clipped = centred_clipping(first, raw, run.radius, BOUNDED_PHASES, adaptive=adaptive, grow=BOUNDED_GROW)
+    phases, grow = run.schedule
+    m, clipped = centred_clipping(first, raw, run.radius, phases, adaptive=adaptive, grow=grow)
     agg = run.grid.irfft(box.from_vector(m))
     est = run.pipe.estimators[0]
     Z, _ = run.guard.substitute(run.message(agg, len(first)), run.Ys[0], est.invert(run.Ys[0], posterior=True))
@@ -350,10 +352,13 @@ def fusion_poisoning_rows(config: AnomalyStudyConfig, seed: int, *, n_runs: int 
     acc = {(s, t): [] for s in strategies for t in targets}
     box = validity_box(pipe, guard) if {"secagg_valid", "secagg_bounded"} & set(targets) else None
     radius = ball_radius(public_error(pipe, guard), exp.n_vehicles) if "secagg_bounded" in targets else 0.0
+    schedule = (public_schedule(2 * float(np.linalg.norm(box[1].bounds)) / exp.n_vehicles, radius, BOUNDED_FINAL)
+                if box is not None and radius > 0 else (1, 1.0))
     nodes = {"mean": _mean_node, "robust": _robust_node, "secagg_guarded": _secagg_node,
              "secagg_valid": _secagg_valid_node, "secagg_bounded": _secagg_bounded_node}
     for r in range(n_runs):
-        run = dataclasses.replace(_honest_run(pipe, run_seeds[r], road_spec, guard), box=box, radius=radius)
+        run = dataclasses.replace(_honest_run(pipe, run_seeds[r], road_spec, guard), box=box, radius=radius,
+                                  schedule=schedule)
         rng = np.random.default_rng(run_stream(run_seeds[r], "privacy"))
         honest = [run.message(z) for z in run.z]
         for target in targets:

@@ -7,7 +7,7 @@ vehicles runs ``phases`` validated sessions on one segment (:mod:`roadcollab.pri
 - phase 1: the wide box of ``secagg_valid``; the public result is ``m_1 = mean u_i``;
 - phase ``k > 1``: vehicle ``i`` submits ``d_i = u_i - m_{k-1}`` proven inside the l2 ball
   ``||d_i|| <= R_k`` (``R_k = R max(1, grow / 2^(k-2))``: wider balls first work off the phase-1 offset
-  in fewer phases; honest vehicles scale ``d_i`` down onto the ball instead of being refused), and
+  in fewer phases, ``grow`` and ``K`` from the largest offset ``2 ||B|| / n``, public; honest vehicles scale ``d_i`` down onto the ball instead of being refused), and
   ``m_k = m_{k-1} + mean d_i`` (centred clipping; Karimireddy, He and Jaggi, ICML 2021, eq. 2).
 
 The radius is public: ``R^2 = kappa2 (1 - 1/n) sum_{k,t} C_kt`` with ``C`` the public expected inversion
@@ -33,15 +33,13 @@ import numpy as np
 
 from ...privacy.secagg_phased import radius_schedule
 
-__all__ = ["ADAPTIVE_STRATEGIES", "BOUNDED_GROW", "BOUNDED_KAPPA2", "BOUNDED_PHASES", "ball_radius",
-           "centred_clipping"]
+__all__ = ["ADAPTIVE_STRATEGIES", "BOUNDED_FINAL", "BOUNDED_KAPPA2", "ball_radius", "centred_clipping"]
 
 ADAPTIVE_STRATEGIES = ("adaptive_anti_road", "adaptive_fake", "adaptive_erase")
-#: ``kappa2``, phases and radius schedule of the study node (docs/security-secagg.md: 0.25, 5 phases with
-#: radii 4R, 2R, R, R meet 2x on every row; a constant R needs 10 phases).
+#: ``kappa2`` of the study node and its phases at ``R`` after the halving ones
+#: (:func:`~roadcollab.privacy.secagg_phased.public_schedule`; docs/security-secagg.md).
 BOUNDED_KAPPA2 = 0.25
-BOUNDED_PHASES = 5
-BOUNDED_GROW = 4.0
+BOUNDED_FINAL = 2
 
 
 def ball_radius(C: np.ndarray, n: int, kappa2: float = BOUNDED_KAPPA2) -> float:
