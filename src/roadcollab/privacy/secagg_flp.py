@@ -47,7 +47,6 @@ Privacy needs that ``A`` and ``B`` do not collude; the sum is correct only if ne
 
 from __future__ import annotations
 
-import hashlib
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -58,102 +57,9 @@ from numpy.typing import ArrayLike
 
 from .._validation import check_int, check_real
 from ..errors import ParameterError
-from . import _goldilocks
+from ._prio_field import GOLDILOCKS, Field, _intt, _ntt
 
 __all__ = ["Field", "GOLDILOCKS", "ValidityEncoding", "Proof", "prove", "query", "decide"]
-
-
-@dataclass(frozen=True)
-class Field:
-    """A prime field ``F_p`` with a large power-of-two subgroup (for NTTs).
-
-    Attributes
-    ----------
-    p : int
-        The prime.
-    generator : int
-        A generator of the multiplicative group ``F_p^*``.
-    """
-
-    p: int
-    generator: int
-
-    @property
-    def nbytes(self) -> int:
-        """Bytes of one element on the wire."""
-        return (self.p.bit_length() + 7) // 8
-
-    def root(self, n: int) -> int:
-        """A primitive ``n``-th root of unity (``n`` a power of two dividing ``p - 1``).
-
-        Parameters
-        ----------
-        n : int
-            Order.
-        """
-        if n & (n - 1) or (self.p - 1) % n:
-            raise ParameterError(f"the field has no primitive {n}-th root of unity (p = {self.p})")
-        return pow(self.generator, (self.p - 1) // n, self.p)
-
-    def inv(self, a: int) -> int:
-        """``a^-1`` in ``F_p``.
-
-        Parameters
-        ----------
-        a : int
-            Non-zero element.
-        """
-        return pow(int(a), self.p - 2, self.p)
-
-    def elements(self, seed: bytes, label: bytes, n: int) -> np.ndarray:
-        """``n`` pseudo-random elements from SHAKE128 (16 bytes each, reduced: bias ``< p / 2^128``).
-
-        Parameters
-        ----------
-        seed : bytes
-            XOF seed.
-        label : bytes
-            Domain separation.
-        n : int
-            Elements.
-        """
-        data = hashlib.shake_128(b"roadcollab-prio/" + label + b"/" + seed).digest(16 * n)
-        words = np.frombuffer(data, dtype="<u8").astype(object).reshape(n, 2)
-        out: np.ndarray = (words[:, 0] << 64 | words[:, 1]) % self.p
-        return out
-
-    def to_bytes(self, a: np.ndarray) -> bytes:
-        """Fixed-width little-endian encoding of a vector of elements.
-
-        Parameters
-        ----------
-        a : (n,) object ndarray
-            Elements in ``[0, p)``.
-        """
-        w = self.nbytes
-        return b"".join(int(v).to_bytes(w, "little") for v in a)
-
-
-GOLDILOCKS = Field(2 ** 64 - 2 ** 32 + 1, 7)
-
-
-def _ntt(a: np.ndarray, w: int, p: int) -> np.ndarray:
-    """Evaluations at ``w^0, ..., w^(n-1)`` of the polynomials whose coefficients are the rows of ``a``."""
-    n = a.shape[-1]
-    if p == _goldilocks.P and n > 1:
-        return _goldilocks.ntt(np.asarray(a).astype(np.uint64), w).astype(object)
-    if n == 1:
-        return a
-    even, odd = _ntt(a[..., 0::2], w * w % p, p), _ntt(a[..., 1::2], w * w % p, p)
-    tw = np.array([pow(w, k, p) for k in range(n // 2)], dtype=object)
-    t = odd * tw % p
-    return np.concatenate([(even + t) % p, (even - t) % p], axis=-1)
-
-
-def _intt(a: np.ndarray, w: int, f: Field) -> np.ndarray:
-    """Coefficients of the polynomials whose values at ``w^0, ..., w^(n-1)`` are the rows of ``a``."""
-    n = a.shape[-1]
-    return _ntt(a, f.inv(w), f.p) * f.inv(n) % f.p
 
 
 @dataclass(frozen=True)
@@ -169,6 +75,13 @@ class ValidityEncoding:
     chunk : int, optional
         ``c``, bits per gadget call; default ``ceil(sqrt(T))``.
     field : Field
+    norm : float, optional
+        ``R > 0``: also prove ``||u||_2 <= R`` (every non-zero bound must then be the same). With
+        ``d_l = 2 q_l - (2^b - 1) = 2 u_l / s`` (exact integers) the circuit adds ``rho_0 (sum_l d_l^2 + v - N)``,
+        ``N = floor((2 R / s)^2)``, the ``sum_l d_l^2`` from ``L`` more Mul-gadget inputs ``(rho_0 d_l, d_l)``
+        and ``v`` a slack in ``[0, 2^bit_length(N))`` sent as bits after the coordinates' (so
+        ``sum d_l^2 <= N``; libprio's Prio3FixedPointBoundedL2VecSum). No sum wraps modulo ``p``
+        (checked: ``L (2^b)^2 + 2^bits(N) < p``).
 
     Attributes
     ----------
@@ -182,8 +95,11 @@ class ValidityEncoding:
     resolution: float
     chunk: int = 0
     field: Field = GOLDILOCKS
+    norm: float = 0.0
     bits: np.ndarray = dc_field(init=False, repr=False)
     scale: np.ndarray = dc_field(init=False, repr=False)
+    norm_q: int = dc_field(init=False, repr=False, default=0)
+    slack_bits: int = dc_field(init=False, repr=False, default=0)
 
     def __post_init__(self) -> None:
         B = np.asarray(self.bounds, float).ravel()
@@ -197,8 +113,56 @@ class ValidityEncoding:
         object.__setattr__(self, "bits", bits)
         with np.errstate(divide="ignore", invalid="ignore"):
             object.__setattr__(self, "scale", np.where(bits > 0, 2 * B / (2.0 ** bits - 1), 0.0))
-        c = self.chunk or max(1, math.isqrt(max(self.n_bits - 1, 0)) + 1)
+        if self.norm:
+            self._norm_layout(B, bits)
+        c = self.chunk or max(1, math.isqrt(max(self.n_pairs - 1, 0)) + 1)
         object.__setattr__(self, "chunk", check_int("chunk", c, low=1))
+
+    def _norm_layout(self, B: np.ndarray, bits: np.ndarray) -> None:
+        R = check_real("norm", self.norm, low=0.0, low_open=True)
+        nz = B[B > 0]
+        if nz.size == 0 or np.any(nz != nz[0]):
+            raise ParameterError("norm: every non-zero bound must be the same (one fixed-point scale)")
+        s = float(self.scale[B > 0][0])
+        N = int(math.floor((2 * R / s) ** 2))
+        if B.size * (2 ** int(bits.max())) ** 2 + 2 ** N.bit_length() >= self.field.p:
+            raise ParameterError(f"norm: {B.size} squares of {int(bits.max())}-bit values wrap the field "
+                                 "(coarser resolution or fewer coordinates)")
+        object.__setattr__(self, "norm_q", N)
+        object.__setattr__(self, "slack_bits", N.bit_length())
+
+    @property
+    def coordinate_bits(self) -> int:
+        """``sum b_l``: the bits of the coordinates (without the norm slack)."""
+        return int(self.bits.sum())
+
+    @property
+    def n_rho(self) -> int:
+        """Elements of the joint randomness: one per bit, plus ``rho_0`` with a norm."""
+        return self.n_bits + (1 if self.norm else 0)
+
+    @property
+    def n_pairs(self) -> int:
+        """Inputs of the gadget: ``T`` bits, plus ``L`` squares with a norm."""
+        return self.n_bits + (self.length if self.norm else 0)
+
+    @property
+    def honest_radius(self) -> float:
+        """The largest ``||u||`` that stays inside the norm after rounding: ``(sqrt(N) - sqrt(L)) s / 2``."""
+        s = float(np.max(self.scale))
+        return max(0.0, (math.isqrt(self.norm_q) - math.sqrt(self.length)) * s / 2)
+
+    def onto_ball(self, u: ArrayLike) -> tuple[np.ndarray, bool]:
+        """``u`` scaled down onto :attr:`honest_radius` if longer (what an honest vehicle sends), and whether it was.
+
+        Parameters
+        ----------
+        u : (L,) array_like
+            Input, finite.
+        """
+        u = np.asarray(u, float).ravel()
+        r, n = self.honest_radius, float(np.sqrt(np.sum(u * u)))
+        return (u, False) if n <= r else (u * (r / n), True)
 
     @property
     def length(self) -> int:
@@ -207,13 +171,13 @@ class ValidityEncoding:
 
     @property
     def n_bits(self) -> int:
-        """``T = sum b_l``."""
-        return int(self.bits.sum())
+        """``T = sum b_l``, plus the norm slack's bits."""
+        return self.coordinate_bits + self.slack_bits
 
     @property
     def calls(self) -> int:
-        """``M = ceil(T / c)`` gadget calls (at least 1)."""
-        return max(1, -(-self.n_bits // self.chunk))
+        """``M = ceil(pairs / c)`` gadget calls (at least 1)."""
+        return max(1, -(-self.n_pairs // self.chunk))
 
     @property
     def domain(self) -> int:
@@ -260,7 +224,19 @@ class ValidityEncoding:
             raise ParameterError(f"{outside} coordinates of the input are outside the public bounds")
         with np.errstate(divide="ignore", invalid="ignore"):
             q = np.where(self.bits > 0, np.rint((u + self.bounds) / self.scale), 0).astype(np.int64)
+        if self.norm and self.squares(q) > self.norm_q:
+            raise ParameterError(f"the input's norm is outside the public bound {self.norm:g} (onto_ball first)")
         return self.encode_raw(q)
+
+    def squares(self, q: ArrayLike) -> int:
+        """``sum_l d_l^2``, ``d_l = 2 q_l - (2^b_l - 1)``: the norm check's integer (``(2 ||u|| / s)^2``).
+
+        Parameters
+        ----------
+        q : (L,) array_like of int
+            Offset values.
+        """
+        return sum((2 * int(v) - (1 << int(b)) + 1) ** 2 for v, b in zip(np.asarray(q).ravel(), self.bits))
 
     def quantize(self, u: ArrayLike) -> np.ndarray:
         """What the aggregate holds of an input inside the box: ``q s - B`` per coordinate, (L,) float.
@@ -291,6 +267,9 @@ class ValidityEncoding:
         q = [int(v) for v in np.asarray(q).ravel()]
         if bits is None:
             bits = [(v >> k) & 1 for v, b in zip(q, self.bits) for k in range(int(b))]
+            # The slack N - sum d^2 (modulo its range if the norm is exceeded: a cheater's best guess).
+            v = (self.norm_q - self.squares(q)) % (1 << self.slack_bits) if self.norm else 0
+            bits += [(v >> k) & 1 for k in range(self.slack_bits)]
         return np.array(q + [int(b) for b in bits], dtype=object) % self.field.p
 
     def decode_sum(self, total_q: np.ndarray, n: int) -> np.ndarray:
@@ -323,13 +302,20 @@ class Proof:
     elements: np.ndarray
 
 
-def _wires(enc: ValidityEncoding, bits: np.ndarray, rho: np.ndarray, leader: bool) -> np.ndarray:
-    """Wire values (shares) at the call points: ``(2c, M)``; ``a = rho x``, ``b = x - 1`` (the 1 is the leader's)."""
-    p, c, M = enc.field.p, enc.chunk, enc.calls
+def _wires(enc: ValidityEncoding, x: np.ndarray, rho: np.ndarray, leader: bool) -> np.ndarray:
+    """Wire values (shares) at the call points: ``(2c, M)``; ``a = rho x``, ``b = x - 1`` (the 1 is the leader's)
+    for every bit, then ``a = rho_0 d``, ``b = d`` for every coordinate with a norm (``d = 2 q - (2^b - 1)``)."""
+    p, c, M, L, T = enc.field.p, enc.chunk, enc.calls, enc.length, enc.n_bits
     one = 1 if leader else 0
-    pad = c * M - bits.size
-    a = np.concatenate([bits * rho % p, np.zeros(pad, dtype=object)])
-    b = np.concatenate([(bits - one) % p, np.full(pad, (-one) % p, dtype=object)])
+    bits = x[L:]
+    a, b = bits * rho[:T] % p, (bits - one) % p
+    if enc.norm:
+        off = np.array([(1 << int(k)) - 1 for k in enc.bits], dtype=object) * one
+        d = (2 * x[:L] - off) % p
+        a, b = np.concatenate([a, d * int(rho[T]) % p]), np.concatenate([b, d])
+    pad = c * M - a.size
+    a = np.concatenate([a, np.zeros(pad, dtype=object)])
+    b = np.concatenate([b, np.full(pad, (-one) % p, dtype=object)])
     w = np.empty((2 * c, M), dtype=object)
     w[0::2] = a.reshape(M, c).T
     w[1::2] = b.reshape(M, c).T
@@ -345,7 +331,7 @@ def prove(enc: ValidityEncoding, x: np.ndarray, rho: np.ndarray, seeds: np.ndarr
     x : (L + T,) object ndarray
         From :meth:`ValidityEncoding.encode`.
     rho : (T,) object ndarray
-        Joint randomness.
+        Joint randomness (:attr:`ValidityEncoding.n_rho` elements).
     seeds : (2c,) object ndarray
         Uniform wire seeds (zero knowledge).
 
@@ -356,7 +342,7 @@ def prove(enc: ValidityEncoding, x: np.ndarray, rho: np.ndarray, seeds: np.ndarr
     f, P, M = enc.field, enc.domain, enc.calls
     vals = np.zeros((2 * enc.chunk, P), dtype=object)
     vals[:, 0] = seeds
-    vals[:, 1:M + 1] = _wires(enc, x[enc.length:], rho, True)
+    vals[:, 1:M + 1] = _wires(enc, x, rho, True)
     coef = _intt(vals, f.root(P), f)
     ext = np.zeros((2 * enc.chunk, 2 * P), dtype=object)
     ext[:, :P] = coef
@@ -402,7 +388,7 @@ def query(enc: ValidityEncoding, x: np.ndarray, proof: Proof, rho: np.ndarray, r
     pi = proof.elements
     vals = np.zeros((2 * c, P), dtype=object)
     vals[:, 0] = pi[:2 * c]
-    vals[:, 1:M + 1] = _wires(enc, x[L:], rho, leader)
+    vals[:, 1:M + 1] = _wires(enc, x, rho, leader)
     w_r = vals.dot(_lagrange(f, P, r)) % p
     g = pi[2 * c:]
     g_r = 0
@@ -412,9 +398,13 @@ def query(enc: ValidityEncoding, x: np.ndarray, proof: Proof, rho: np.ndarray, r
     folded[:] = g[:P]
     folded[:P - 1] = (folded[:P - 1] + g[P:]) % p
     out = int(_ntt(folded[None, :], f.root(P), p)[0, 1:M + 1].sum() % p)
+    Tc = enc.coordinate_bits
+    if enc.norm:             # + rho_0 (v - N): the squares plus the slack must be N
+        v = sum(int(xb) << k for k, xb in enumerate(x[L + Tc:]))
+        out = (out + int(rho[enc.n_bits]) * (v - (enc.norm_q if leader else 0))) % p
     weights = enc.weights()
     dec = np.zeros(L, dtype=object)
-    np.add.at(dec, enc.owner(), x[L:] * weights % p)
+    np.add.at(dec, enc.owner(), x[L:L + Tc] * weights % p)
     check = int(((x[:L] - dec) % p * s).sum() % p)
     return np.concatenate([w_r, np.array([g_r, out, check], dtype=object)])
 
@@ -434,7 +424,7 @@ def decide(enc: ValidityEncoding, verifier: np.ndarray) -> str:
     if check != 0:
         return "its values are not the sums of its bits"
     if out != 0:
-        return "the circuit output is not 0 (a bit is not 0 or 1, or a wrong proof)"
+        return "the circuit output is not 0 (a bit is not 0 or 1, a norm over its bound, or a wrong proof)"
     if (w[0::2] * w[1::2]).sum() % p != g_r:
         return "the proof does not match the wires"
     return ""

@@ -100,7 +100,7 @@ def _parts(session: bytes, vehicle: int, x_a: np.ndarray, blind_a: bytes, seed: 
 
 def _joint(enc: ValidityEncoding, part_a: bytes, part_b: bytes) -> tuple[bytes, np.ndarray]:
     jr = _h(b"joint", part_a, part_b)
-    return jr, enc.field.elements(jr, b"rho", max(enc.n_bits, 1))[:enc.n_bits]
+    return jr, enc.field.elements(jr, b"rho", max(enc.n_rho, 1))[:enc.n_rho]
 
 
 def signed_bytes(session: bytes, vehicle: int, part_a: bytes, part_b: bytes) -> bytes:

@@ -24,6 +24,10 @@ Two fusion nodes are compared on the same messages:
   so the malicious vehicle sends its strategy clipped into the box (unclipped it is refused). The node
   computes what the protocol reveals (the sum of the quantised accepted inputs; the proofs themselves are
   exercised in tests/test_secagg_validity.py); ``refused`` counts inputs that were outside the box.
+- ``secagg_bounded``: ``secagg_valid`` as the first of ``K`` sessions (:func:`~roadcollab.privacy.secagg_phased.public_schedule`) over
+  the same vehicles, each later one on deviations from the last result proven inside a public l2 ball
+  (:mod:`.secagg_bounded`); ``refused`` counts inputs scaled onto the ball over the phases. Its rows include
+  the adaptive strategies :data:`~.secagg_bounded.ADAPTIVE_STRATEGIES`.
 
 Strategies (the attacker knows its own honest ``z``, the true anomalies and the fleet size ``n``):
 ``scale_10``, ``scale_1e3`` (``z`` times a factor), ``negate``, ``tone`` (a 2 Hz sine of 10 x the
@@ -54,12 +58,14 @@ from ...wire.message import InversionMessage
 from ..anomalies.config import AnomalyStudyConfig
 from ..pipeline import FleetPipeline, fleet_and_run_seeds, record_run
 from ..seeds import SeedPlan, run_stream
+from ...privacy.secagg_phased import public_schedule
+from .secagg_bounded import ADAPTIVE_STRATEGIES, BOUNDED_FINAL, ball_radius, bounded_inputs, centred_clipping
 
 __all__ = ["FUSION_STRATEGIES", "FUSION_TARGETS", "PoisoningSummary", "fusion_poisoning_rows"]
 
 FUSION_STRATEGIES = ("scale_10", "scale_1e3", "negate", "tone", "noise_3x", "extreme", "count", "fake_pothole",
                      "erase_potholes")
-FUSION_TARGETS = ("mean", "robust", "secagg_guarded", "secagg_valid")
+FUSION_TARGETS = ("mean", "robust", "secagg_guarded", "secagg_valid", "secagg_bounded")
 _FAKE_DEPTH = 0.05       # m
 _FAKE_LENGTH = 0.5       # m
 _TOLERANCE = 1.0         # m, as the anomaly study
@@ -113,6 +119,8 @@ class _Run:
     Ys: list                   # each vehicle's record spectrum
     guard: ReceiverGuard       # vehicle 1's guard (the receiver of the aggregate)
     box: object = None         # (SpectralBox, ValidityEncoding) of the secagg_valid node
+    radius: float = 0.0        # the l2 ball of the secagg_bounded node's last phases
+    schedule: tuple = (1, 1.0)  # its (phases, grow)
 
     @property
     def grid(self):
@@ -214,12 +222,31 @@ def _secagg_node(run: _Run, msgs: list[InversionMessage]) -> tuple[np.ndarray, i
     return run.grid.irfft(Z), int(report.refused)
 
 
+def public_error(pipe: FleetPipeline, guard: ReceiverGuard) -> np.ndarray:
+    """``C``: the public expected inversion error per active bin and track, the largest over the fleet.
+
+    Parameters
+    ----------
+    pipe : FleetPipeline
+    guard : ReceiverGuard
+        Vehicle 1's guard (the others are built from the pipeline).
+
+    Returns
+    -------
+    (K_active, 2) ndarray
+        (m/s)^2, spectrum units.
+    """
+    guards = [guard] + [ReceiverGuard(e, pipe.road_moment, pipe.config.sensor_noise_std) for e in pipe.estimators[1:]]
+    out: np.ndarray = np.max([np.real(np.einsum("ktt->kt", gd._inversion_error(pipe.road_moment)))
+                              for gd in guards], axis=0)
+    return out
+
+
 def validity_box(pipe: FleetPipeline, guard: ReceiverGuard, kappa: float = 6.0):
     """The public box of the ``secagg_valid`` node: ``(SpectralBox, ValidityEncoding)`` (module docstring)."""
     g = pipe.grid
     S = np.real(np.einsum("ktt->kt", pipe.road_moment))
-    guards = [guard] + [ReceiverGuard(e, pipe.road_moment, pipe.config.sensor_noise_std) for e in pipe.estimators[1:]]
-    C = np.max([np.real(np.einsum("ktt->kt", gd._inversion_error(pipe.road_moment))) for gd in guards], axis=0)
+    C = public_error(pipe, guard)
     box = SpectralBox(g.active, np.sqrt((g.weight[g.active, None] ** 2 * S + C) / 2), tuple(guard.bands), kappa=kappa)
     return box, box.encoding()
 
@@ -241,6 +268,30 @@ def _secagg_valid_node(run: _Run, msgs: list[InversionMessage]) -> tuple[np.ndar
     est = run.pipe.estimators[0]
     Z, report = run.guard.substitute(run.message(agg, len(us)), run.Ys[0], est.invert(run.Ys[0], posterior=True))
     return run.grid.irfft(Z), int(outside)
+
+
+def _secagg_bounded_node(run: _Run, msgs: list[InversionMessage],
+                         adaptive: tuple[int, np.ndarray] | None = None) -> tuple[np.ndarray, int]:
+    """The phased, centred-clipping secure aggregate (:mod:`.secagg_bounded`), then vehicle 1's guard."""
+    box, _ = run.box
+    first, raw = bounded_inputs(run, msgs)
+    phases, grow = run.schedule
+    m, clipped = centred_clipping(first, raw, run.radius, phases, adaptive=adaptive, grow=grow)
+    agg = run.grid.irfft(box.from_vector(m))
+    est = run.pipe.estimators[0]
+    Z, _ = run.guard.substitute(run.message(agg, len(first)), run.Ys[0], est.invert(run.Ys[0], posterior=True))
+    return run.grid.irfft(Z), clipped
+
+
+def _adaptive(strategy: str, run: _Run, j: int) -> tuple[np.ndarray, np.ndarray]:
+    """An adaptive attacker's phase-1 lie and its direction in the validated space (:mod:`.secagg_bounded`)."""
+    box, _ = run.box
+    z, n = run.z[j], run.z.shape[0]
+    if strategy == "adaptive_anti_road":
+        return -10 * z, -box.to_vector(run.grid.rfft(z))
+    sig = (run.signature(_fake_site(run)) if strategy == "adaptive_fake"
+           else -sum((run.signature(a) for a in run.road.anomalies), np.zeros_like(z)))
+    return z + n * sig, box.to_vector(run.grid.rfft(sig))
 
 
 def _reported(target: str, run: _Run, zf: np.ndarray, own: list) -> list[Detection]:
@@ -299,11 +350,15 @@ def fusion_poisoning_rows(config: AnomalyStudyConfig, seed: int, *, n_runs: int 
     # Vehicle 1's guard is per-vehicle setup (posterior plants, expected discrepancy): built once.
     guard = ReceiverGuard(pipe.estimators[0], pipe.road_moment, exp.sensor_noise_std)
     acc = {(s, t): [] for s in strategies for t in targets}
-    box = validity_box(pipe, guard) if "secagg_valid" in targets else None
+    box = validity_box(pipe, guard) if {"secagg_valid", "secagg_bounded"} & set(targets) else None
+    radius = ball_radius(public_error(pipe, guard), exp.n_vehicles) if "secagg_bounded" in targets else 0.0
+    schedule = (public_schedule(2 * float(np.linalg.norm(box[1].bounds)) / exp.n_vehicles, radius, BOUNDED_FINAL)
+                if box is not None and radius > 0 else (1, 1.0))
     nodes = {"mean": _mean_node, "robust": _robust_node, "secagg_guarded": _secagg_node,
-             "secagg_valid": _secagg_valid_node}
+             "secagg_valid": _secagg_valid_node, "secagg_bounded": _secagg_bounded_node}
     for r in range(n_runs):
-        run = dataclasses.replace(_honest_run(pipe, run_seeds[r], road_spec, guard), box=box)
+        run = dataclasses.replace(_honest_run(pipe, run_seeds[r], road_spec, guard), box=box, radius=radius,
+                                  schedule=schedule)
         rng = np.random.default_rng(run_stream(run_seeds[r], "privacy"))
         honest = [run.message(z) for z in run.z]
         for target in targets:
@@ -317,9 +372,21 @@ def fusion_poisoning_rows(config: AnomalyStudyConfig, seed: int, *, n_runs: int 
                 own = run.own[:malicious] + [run.detect(z_m)] + run.own[malicious + 1:]
                 zf, refused = node(run, msgs)
                 rep = _reported(target, run, zf, own)
-                acc[s, target].append((mse_h, _score(run, zf), new_false_detections(rep, rep_h, run.road.anomalies, tolerance=_TOLERANCE),
-                                       lost_anomalies(rep, rep_h, run.road.anomalies, tolerance=_TOLERANCE), refused))
+                acc[s, target].append(_scored(run, mse_h, zf, rep, rep_h, refused))
+            for s in ADAPTIVE_STRATEGIES if target == "secagg_bounded" else ():
+                z_m, direction = _adaptive(s, run, malicious)
+                msgs = honest[:malicious] + [run.message(z_m)] + honest[malicious + 1:]
+                own = run.own[:malicious] + [run.detect(z_m)] + run.own[malicious + 1:]
+                zf, refused = _secagg_bounded_node(run, msgs, adaptive=(malicious, direction))
+                acc.setdefault((s, target), []).append(_scored(run, mse_h, zf, _reported(target, run, zf, own), rep_h,
+                                                               refused))
     return [_row(s, t, v) for (s, t), v in acc.items()]
+
+
+def _scored(run: _Run, mse_h: float, zf: np.ndarray, rep: list, rep_h: list, refused: int) -> tuple:
+    anomalies = run.road.anomalies
+    return (mse_h, _score(run, zf), new_false_detections(rep, rep_h, anomalies, tolerance=_TOLERANCE),
+            lost_anomalies(rep, rep_h, anomalies, tolerance=_TOLERANCE), refused)
 
 
 def _row(strategy: str, target: str, vals: list[tuple]) -> PoisoningSummary:

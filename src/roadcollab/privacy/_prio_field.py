@@ -1,0 +1,109 @@
+"""The prime field of :mod:`.secagg_flp`: elements, XOF expansion and NTTs.
+
+``F_p``, ``p = 2^64 - 2^32 + 1`` (Goldilocks, 2-adicity 32) by default; small fields in tests.
+"""
+
+from __future__ import annotations
+
+import hashlib
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..errors import ParameterError
+from . import _goldilocks
+
+__all__ = ["Field", "GOLDILOCKS"]
+
+
+@dataclass(frozen=True)
+class Field:
+    """A prime field ``F_p`` with a large power-of-two subgroup (for NTTs).
+
+    Attributes
+    ----------
+    p : int
+        The prime.
+    generator : int
+        A generator of the multiplicative group ``F_p^*``.
+    """
+
+    p: int
+    generator: int
+
+    @property
+    def nbytes(self) -> int:
+        """Bytes of one element on the wire."""
+        return (self.p.bit_length() + 7) // 8
+
+    def root(self, n: int) -> int:
+        """A primitive ``n``-th root of unity (``n`` a power of two dividing ``p - 1``).
+
+        Parameters
+        ----------
+        n : int
+            Order.
+        """
+        if n & (n - 1) or (self.p - 1) % n:
+            raise ParameterError(f"the field has no primitive {n}-th root of unity (p = {self.p})")
+        return pow(self.generator, (self.p - 1) // n, self.p)
+
+    def inv(self, a: int) -> int:
+        """``a^-1`` in ``F_p``.
+
+        Parameters
+        ----------
+        a : int
+            Non-zero element.
+        """
+        return pow(int(a), self.p - 2, self.p)
+
+    def elements(self, seed: bytes, label: bytes, n: int) -> np.ndarray:
+        """``n`` pseudo-random elements from SHAKE128 (16 bytes each, reduced: bias ``< p / 2^128``).
+
+        Parameters
+        ----------
+        seed : bytes
+            XOF seed.
+        label : bytes
+            Domain separation.
+        n : int
+            Elements.
+        """
+        data = hashlib.shake_128(b"roadcollab-prio/" + label + b"/" + seed).digest(16 * n)
+        words = np.frombuffer(data, dtype="<u8").astype(object).reshape(n, 2)
+        out: np.ndarray = (words[:, 0] << 64 | words[:, 1]) % self.p
+        return out
+
+    def to_bytes(self, a: np.ndarray) -> bytes:
+        """Fixed-width little-endian encoding of a vector of elements.
+
+        Parameters
+        ----------
+        a : (n,) object ndarray
+            Elements in ``[0, p)``.
+        """
+        w = self.nbytes
+        return b"".join(int(v).to_bytes(w, "little") for v in a)
+
+
+GOLDILOCKS = Field(2 ** 64 - 2 ** 32 + 1, 7)
+
+
+def _ntt(a: np.ndarray, w: int, p: int) -> np.ndarray:
+    """Evaluations at ``w^0, ..., w^(n-1)`` of the polynomials whose coefficients are the rows of ``a``."""
+    n = a.shape[-1]
+    if p == _goldilocks.P and n > 1:
+        return _goldilocks.ntt(np.asarray(a).astype(np.uint64), w).astype(object)
+    if n == 1:
+        return a
+    even, odd = _ntt(a[..., 0::2], w * w % p, p), _ntt(a[..., 1::2], w * w % p, p)
+    tw = np.array([pow(w, k, p) for k in range(n // 2)], dtype=object)
+    t = odd * tw % p
+    return np.concatenate([(even + t) % p, (even - t) % p], axis=-1)
+
+
+def _intt(a: np.ndarray, w: int, f: Field) -> np.ndarray:
+    """Coefficients of the polynomials whose values at ``w^0, ..., w^(n-1)`` are the rows of ``a``."""
+    n = a.shape[-1]
+    return _ntt(a, f.inv(w), f.p) * f.inv(n) % f.p
