@@ -54,6 +54,8 @@ from ...detection.detector import MAX_ROAD_VELOCITY, Detection, detect_anomalies
 from ...detection.scoring import lost_anomalies, new_false_detections
 from ...errors import ParameterError
 from ...models.anomaly import Anomaly
+from ...models.profile import TimeRoad
+from ...privacy.secagg_flp import ValidityEncoding
 from ...wire.message import InversionMessage
 from ..anomalies.config import AnomalyStudyConfig
 from ..pipeline import FleetPipeline, fleet_and_run_seeds, record_run
@@ -112,19 +114,26 @@ class PoisoningSummary:
 @dataclass(frozen=True, eq=False)
 class _Run:
     pipe: FleetPipeline
-    road: object
+    road: TimeRoad
     z: np.ndarray              # (V, nfft, 2) honest inversions
     truth: np.ndarray          # (N, 2) band-limited true road velocity
-    own: list                  # each vehicle's own detections (honest)
-    Ys: list                   # each vehicle's record spectrum
+    own: list[list[Detection]]  # each vehicle's own detections (honest)
+    Ys: list[np.ndarray]                  # each vehicle's record spectrum
     guard: ReceiverGuard       # vehicle 1's guard (the receiver of the aggregate)
-    box: object = None         # (SpectralBox, ValidityEncoding) of the secagg_valid node
+    box: tuple[SpectralBox, ValidityEncoding] | None = None   # of the secagg_valid node
     radius: float = 0.0        # the l2 ball of the secagg_bounded node's last phases
     schedule: tuple = (1, 1.0)  # its (phases, grow)
 
     @property
     def grid(self):
         return self.pipe.grid
+
+    @property
+    def validity(self) -> tuple[SpectralBox, ValidityEncoding]:
+        """``box``, which the validated targets need."""
+        if self.box is None:
+            raise ParameterError("the validated targets need the run's validity box")
+        return self.box
 
     def message(self, z, count: int = 1) -> InversionMessage:
         g = self.grid
@@ -253,7 +262,7 @@ def validity_box(pipe: FleetPipeline, guard: ReceiverGuard, kappa: float = 6.0):
 
 def _secagg_valid_node(run: _Run, msgs: list[InversionMessage]) -> tuple[np.ndarray, int]:
     """The validated secure aggregate (module docstring), then vehicle 1's guard as ``_secagg_node``."""
-    box, enc = run.box
+    box, enc = run.validity
     us, outside = [], 0
     for m in msgs:
         with np.errstate(over="ignore", invalid="ignore"):
@@ -273,7 +282,7 @@ def _secagg_valid_node(run: _Run, msgs: list[InversionMessage]) -> tuple[np.ndar
 def _secagg_bounded_node(run: _Run, msgs: list[InversionMessage],
                          adaptive: tuple[int, np.ndarray] | None = None) -> tuple[np.ndarray, int]:
     """The phased, centred-clipping secure aggregate (:mod:`.secagg_bounded`), then vehicle 1's guard."""
-    box, _ = run.box
+    box, _ = run.validity
     first, raw = bounded_inputs(run, msgs)
     phases, grow = run.schedule
     m, clipped = centred_clipping(first, raw, run.radius, phases, adaptive=adaptive, grow=grow)
@@ -285,7 +294,7 @@ def _secagg_bounded_node(run: _Run, msgs: list[InversionMessage],
 
 def _adaptive(strategy: str, run: _Run, j: int) -> tuple[np.ndarray, np.ndarray]:
     """An adaptive attacker's phase-1 lie and its direction in the validated space (:mod:`.secagg_bounded`)."""
-    box, _ = run.box
+    box, _ = run.validity
     z, n = run.z[j], run.z.shape[0]
     if strategy == "adaptive_anti_road":
         return -10 * z, -box.to_vector(run.grid.rfft(z))
@@ -349,7 +358,7 @@ def fusion_poisoning_rows(config: AnomalyStudyConfig, seed: int, *, n_runs: int 
     road_spec = config.road_spec()
     # Vehicle 1's guard is per-vehicle setup (posterior plants, expected discrepancy): built once.
     guard = ReceiverGuard(pipe.estimators[0], pipe.road_moment, exp.sensor_noise_std)
-    acc = {(s, t): [] for s in strategies for t in targets}
+    acc: dict[tuple[str, str], list[tuple]] = {(s, t): [] for s in strategies for t in targets}
     box = validity_box(pipe, guard) if {"secagg_valid", "secagg_bounded"} & set(targets) else None
     radius = ball_radius(public_error(pipe, guard), exp.n_vehicles) if "secagg_bounded" in targets else 0.0
     schedule = (public_schedule(2 * float(np.linalg.norm(box[1].bounds)) / exp.n_vehicles, radius, BOUNDED_FINAL)

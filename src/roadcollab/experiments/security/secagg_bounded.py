@@ -124,7 +124,7 @@ def bounded_inputs(run: Any, msgs: Sequence[Any]) -> tuple[list[np.ndarray], lis
     first, raw : lists of (L,) ndarray
         Non-finite inputs cannot be encoded and are in neither list (not counted).
     """
-    box, enc = run.box
+    box, enc = run.validity
     first, raw = [], []
     for m in msgs:
         with np.errstate(over="ignore", invalid="ignore"):
