@@ -18,7 +18,9 @@ Drives (:func:`simulate_city`, :data:`CITY_ROUTES`): ``main`` then ``cross`` at 
 its measure from the T-junction to its start (turning left) at 14 and 16.5 m/s. Each runs from 5 m
 after its route's start to 5 m before its end, 100 Hz accelerometers with noise 0.05 m/s^2, a
 ``speed_mps`` column, and 5 Hz GPS fixes with independent N(0, 3 m) errors east and north.
-Vehicles: :func:`~roadcollab.models.vehicle.sample_fleet` with the default spread.
+Vehicles: :func:`~roadcollab.models.vehicle.sample_fleet` with the default spread; a drive is simulated
+with its vehicle's true parameters and its parameters file carries the vehicle's estimate of them
+(10 % error per parameter), the source of each vehicle's IRI bias (docs/map.md).
 """
 
 from __future__ import annotations
@@ -91,6 +93,9 @@ class CityTruth:
         The roads each drive travels.
     routes : list of tuple
         Each drive's route: pieces ``(road_id, from_m, to_m)`` (:data:`CITY_ROUTES`).
+    vehicles : tuple of Vehicle
+        Each drive's vehicle: the true parameters it was simulated with and the estimated ones its
+        parameters file carries (``FleetSpec().estimate_uncertainty``, 10 % per parameter).
     """
 
     network: RoadNetwork
@@ -100,6 +105,7 @@ class CityTruth:
     drives: list
     roads_driven: list
     routes: list
+    vehicles: tuple = ()
 
     def road_profile(self, road_id: str, direction: int = 1) -> tuple[np.ndarray, np.ndarray]:
         """Lane coordinate (m) and (n, 2) elevation (m) of one lane's true profile, on the road only.
@@ -307,7 +313,7 @@ def simulate_city(*, seed: int = 0, network: RoadNetwork | None = None, speeds=N
         gps.append(_gps(d, network, route, rng))
     truth = CityTruth(network=network, lanes=lanes, profiles=profiles, potholes=tuple(potholes), drives=drives,
                       roads_driven=[tuple(r for r, *_ in route) for route, _ in plan],
-                      routes=[route for route, _ in plan])
+                      routes=[route for route, _ in plan], vehicles=tuple(fleet))
     return truth, gps
 
 
