@@ -109,10 +109,10 @@ def test_assign_prefers_a_feasible_pair_over_an_infeasible_one_at_a_small_tolera
 
 
 def test_assign_maximises_the_number_of_pairs_before_the_distance():
-    # d0-t0 and d1-t1 are 0.9 m apart (sum 1.8); d0-t1 is 0.1 m but d1-t0 is incompatible (left vs right):
-    # the most pairs is two, so (d0, t0), (d1, t1) although d0-t1 alone is closer.
-    dets = [_det(10.0, side="both"), _det(11.8, side="right")]
-    truth = [_truth(9.1, side="left"), _truth(10.9, side="right")]
+    # d0-t0 and d1-t1 are 0.9 m apart (sum 1.8); d0-t1 is 0.1 m but d1-t0 is 1.9 m (infeasible): the most
+    # pairs is two, so (d0, t0), (d1, t1) although d0-t1 alone is closer than 1.8 m.
+    dets = [_det(10.0), _det(11.0)]
+    truth = [_truth(9.1), _truth(10.1)]
     m = match_detections(dets, truth, tolerance=1.0)
     assert m.n_matched == 2 and set(m.pairs) == {(0, 0), (1, 1)}
 
