@@ -47,7 +47,7 @@ docs: $(STAMP)
 
 # A bounded mutation pass over the numerical core configured in [tool.mutmut] (docs/mutation.md).
 mutation: $(STAMP)
-	timeout 1800 $(BIN)/mutmut run --max-children 2 || true
+	timeout 1800 $(BIN)/mutmut run --max-children 1 || true
 	$(BIN)/mutmut results
 
 bench: $(STAMP)
