@@ -23,12 +23,12 @@ import scipy.linalg
 
 from .kernels import compiled_available, jit_options
 
-__all__ = ["schur_lyapunov", "complex_schur"]
+__all__ = ["schur_lyapunov", "schur_certificate", "complex_schur"]
 
 _KERNEL: dict[str, Any] = {}
 
 #: The functions compiled by :func:`_build` (rebound in place, so compiled callers find compiled callees).
-_COMPILED_NAMES = ("_stein_schur", "_real_to_complex")
+_COMPILED_NAMES = ("_stein_parts", "_stein_schur", "_certificate", "_real_to_complex")
 
 
 def _build() -> dict[str, Any]:
@@ -36,20 +36,22 @@ def _build() -> dict[str, Any]:
     if _KERNEL:
         return _KERNEL
     if not compiled_available():
-        _KERNEL.update(schur=None, rsf2csf=None)
+        _KERNEL.update(schur=None, certificate=None, rsf2csf=None)
         return _KERNEL
     import numba
 
     jit = numba.njit(**jit_options())
     for name in _COMPILED_NAMES:
         globals()[name] = jit(globals()[name])
-    _KERNEL.update(schur=globals()["_stein_schur"], rsf2csf=globals()["_real_to_complex"])
+    _KERNEL.update(schur=globals()["_stein_schur"], certificate=globals()["_certificate"],
+                   rsf2csf=globals()["_real_to_complex"])
     return _KERNEL
 
 
-def _stein_schur(R: np.ndarray) -> np.ndarray:   # pragma: no cover - compiled
-    """``Y`` of ``R^H Y R - Y = -I`` for an upper triangular ``R`` (module docstring). Complex numbers
-    as real pairs, plain loops: no array expressions, which cost seconds of first-run compilation."""
+def _stein_parts(R: np.ndarray) -> tuple[np.ndarray, np.ndarray]:   # pragma: no cover - compiled
+    """``Y`` of ``R^H Y R - Y = -I`` for an upper triangular ``R`` (module docstring) as ``(Yr, Yi)``,
+    row ``j`` = column ``j`` of ``Y``. Complex numbers as real pairs, plain loops: no array expressions,
+    which cost seconds of first-run compilation."""
     n = R.shape[0]
     Rr = np.empty((n, n))
     Ri = np.empty((n, n))                           # R^H column k = conj(R row k)
@@ -94,11 +96,79 @@ def _stein_schur(R: np.ndarray) -> np.ndarray:   # pragma: no cover - compiled
             for i in range(k + 1, n):
                 hr[i] -= Rr[k, i] * cr + Ri[k, i] * ci
                 hi[i] -= Rr[k, i] * ci - Ri[k, i] * cr
+    return Yr, Yi
+
+
+def _stein_schur(R: np.ndarray) -> np.ndarray:   # pragma: no cover - compiled
+    """``Y`` of ``R^H Y R - Y = -I`` for an upper triangular ``R``, complex (:func:`_stein_parts`)."""
+    n = R.shape[0]
+    Yr, Yi = _stein_parts(R)
     Y = np.empty((n, n), dtype=np.complex128)
     for j in range(n):
         for k in range(n):
             Y[k, j] = complex(Yr[j, k], Yi[j, k])
     return Y
+
+
+def _certificate(R: np.ndarray, U: np.ndarray, A: np.ndarray) -> tuple[np.ndarray, float, float]:   # pragma: no cover - compiled
+    """The Stein solve, ``X = Re(U Y U^H)`` symmetrised, and the residual figures of
+    :func:`~roadcollab.lti.stability._verified_gain` in one call: ``(X, ||A^T X A - X + I||_F,
+    ||X||_F (1 + ||A||_F^2))``; the residual is NaN when ``X`` is not finite. Real pairs, plain loops."""
+    n = R.shape[0]
+    Yr, Yi = _stein_parts(R)
+    Ur = np.empty((n, n))
+    Ui = np.empty((n, n))
+    for i in range(n):
+        for j in range(n):
+            Ur[i, j] = U[i, j].real
+            Ui[i, j] = U[i, j].imag
+    Wr = np.zeros((n, n))                           # W = U Y, Y[k, j] = Yr[j, k] + i Yi[j, k]
+    Wi = np.zeros((n, n))
+    for a in range(n):
+        for k in range(n):
+            ur, ui = Ur[a, k], Ui[a, k]
+            for j in range(n):
+                Wr[a, j] += ur * Yr[j, k] - ui * Yi[j, k]
+                Wi[a, j] += ur * Yi[j, k] + ui * Yr[j, k]
+    X = np.empty((n, n))                            # Re(W U^H)
+    for a in range(n):
+        for b in range(n):
+            s = 0.0
+            for j in range(n):
+                s += Wr[a, j] * Ur[b, j] + Wi[a, j] * Ui[b, j]
+            X[a, b] = s
+    finite = True
+    nx = 0.0
+    for a in range(n):                              # 0.5 (X + X^T)
+        for b in range(a, n):
+            v = 0.5 * (X[a, b] + X[b, a])
+            X[a, b] = v
+            X[b, a] = v
+            if not np.isfinite(v):
+                finite = False
+            nx += v * v if a == b else 2.0 * v * v
+    na = 0.0
+    for a in range(n):
+        for b in range(n):
+            na += A[a, b] * A[a, b]
+    P = np.zeros((n, n))                            # X A
+    for a in range(n):
+        for k in range(n):
+            x = X[a, k]
+            for b in range(n):
+                P[a, b] += x * A[k, b]
+    res = 0.0
+    for a in range(n):                              # A^T P - X + I
+        for b in range(n):
+            s = 0.0
+            for k in range(n):
+                s += A[k, a] * P[k, b]
+            s -= X[a, b]
+            if a == b:
+                s += 1.0
+            res += s * s
+    resid = np.sqrt(res) if finite else np.nan
+    return X, resid, np.sqrt(nx) * (1.0 + na)
 
 
 def _real_to_complex(T: np.ndarray, Z: np.ndarray) -> None:   # pragma: no cover - compiled
@@ -168,3 +238,30 @@ def schur_lyapunov(R: np.ndarray, U: np.ndarray) -> np.ndarray:
     Y = _build()["schur"](np.ascontiguousarray(R, complex))
     X: np.ndarray = np.real(U @ Y @ U.conj().T)
     return X
+
+
+def schur_certificate(R: np.ndarray, U: np.ndarray, A: np.ndarray) -> tuple[np.ndarray, float, float]:
+    """``X`` of ``A^T X A - X = -I`` from ``A = U R U^H`` and the figures its verification needs, in one
+    compiled call (the Stein solve, ``X = Re(U Y U^H)`` symmetrised, the residual): what
+    :func:`schur_lyapunov` followed by the residual of
+    :func:`~roadcollab.lti.stability._verified_gain` compute, to round-off.
+
+    Parameters
+    ----------
+    R, U : (n, n) complex ndarray
+        ``R`` upper triangular.
+    A : (n, n) ndarray
+        Real, finite.
+
+    Returns
+    -------
+    X : (n, n) ndarray
+        Symmetric.
+    resid : float
+        ``||A^T X A - X + I||_F`` (NaN if ``X`` is not finite).
+    scale : float
+        ``||X||_F (1 + ||A||_F^2)``.
+    """
+    X, resid, scale = _build()["certificate"](np.ascontiguousarray(R, complex), np.ascontiguousarray(U, complex),
+                                               np.ascontiguousarray(A, float))
+    return X, float(resid), float(scale)

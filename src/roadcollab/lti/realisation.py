@@ -165,7 +165,9 @@ class StateSpaceData:
         (:meth:`schur`); the frequency response reuses whichever exists. A system a receiver got
         through its :class:`SystemCache` is certified from the Schur form directly: the receiver
         evaluates an obfuscated system through that form anyway (its eigenvectors are too ill
-        conditioned for the pole-residue path), so the eigen route would be extra work.
+        conditioned for the pole-residue path), so the eigen route would be extra work. On the
+        compiled path every system is certified that way, so a sender's check of its outgoing
+        message is the receiver's check of the same bytes.
 
         Returns
         -------
@@ -181,6 +183,12 @@ class StateSpaceData:
             return spectral_radius_and_gain(A)
         if self.__dict__.get("_received"):
             return spectral_radius_and_gain(A, schur=self.schur())
+        if kernel_path() == "compiled":
+            # The computation a receiver makes on these bytes (the branch above): a sender validating
+            # its outgoing message then knows the receiver's certificate passes, and pays a Schur form
+            # instead of an eigendecomposition (docs/speed.md, "Fifth pass"). Not memoised as the
+            # object's Schur form, so its frequency response takes the same path as before.
+            return spectral_radius_and_gain(A, schur=_complex_schur(A))
         return spectral_radius_and_gain(A, schur=self.schur, eig=self.eig())
 
     def to_control(self):
