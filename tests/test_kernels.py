@@ -256,3 +256,24 @@ def test_a_sender_validates_its_outgoing_message_with_the_receivers_certificate(
                 assert resid <= stability.LYAPUNOV_RTOL * scale and abs(resid - resid0) <= 1e-6 * scale
     bad = np.full((3, 3), np.nan)
     assert np.isnan(schur_certificate(bad.astype(complex), np.eye(3, dtype=complex), np.eye(3))[1])
+
+
+@needs_numba
+def test_compiled_schur_form_calls_dgees_as_scipy_does():
+    """``complex_schur`` calls LAPACK's ``dgees`` directly with a cached workspace: the same real Schur
+    form as ``scipy.linalg.schur``, bit for bit, before the compiled rotations."""
+    import scipy.linalg
+
+    from roadcollab.lti import _cert_kernel
+
+    rng = np.random.default_rng(11)
+    for n in (1, 3, 14, 22, 22):
+        for close in (False, True):
+            A = _system(rng, n, close)[0]
+            Tr, Zr = scipy.linalg.schur(A, output="real")
+            T, U = Tr.astype(complex), Zr.astype(complex)
+            _cert_kernel._build()["rsf2csf"](T, U)
+            T1, U1 = _cert_kernel.complex_schur(A)
+            assert np.array_equal(T, T1) and np.array_equal(U, U1)
+    with pytest.raises(ValueError, match="finite"):
+        _cert_kernel.complex_schur(np.full((2, 2), np.nan))
