@@ -277,3 +277,27 @@ def test_compiled_schur_form_calls_dgees_as_scipy_does():
             assert np.array_equal(T, T1) and np.array_equal(U, U1)
     with pytest.raises(ValueError, match="finite"):
         _cert_kernel.complex_schur(np.full((2, 2), np.nan))
+
+
+@needs_numba
+def test_compiled_hiding_similarity_is_the_reference_one_to_round_off():
+    """``random_similarity`` on the compiled path (Householder ``QR`` and products in one call) gives the
+    reference's balanced ``Q^T A Q``, ``Q^T B``, ``C Q`` to round-off and leaves the generator in the same
+    state."""
+    from roadcollab.lti.realisation import StateSpaceData, random_similarity
+
+    rng = np.random.default_rng(12)
+    for n in (1, 2, 9, 22):
+        sys = StateSpaceData(0.2 * rng.standard_normal((n, n)), rng.standard_normal((n, 2)),
+                             1e3 * rng.standard_normal((2, n)), np.zeros((2, 2)), 0.005)
+        out = {}
+        for path in kernels.KERNELS:
+            gen = np.random.default_rng(13)
+            with kernels.use_kernels(path):
+                out[path] = random_similarity(sys, gen)
+            out[path + "_state"] = gen.bit_generator.state
+        assert out["compiled_state"] == out["reference_state"]
+        a, b = out["reference"], out["compiled"]
+        for x, y in ((a.A, b.A), (a.B, b.B), (a.C, b.C)):
+            assert np.max(np.abs(x - y)) <= 1e-13 * np.max(np.abs(x))
+        assert np.array_equal(a.D, b.D)
