@@ -216,3 +216,88 @@ def test_compiled_certificate_and_schur_form_agree_with_the_reference():
     with kernels.use_kernels("compiled"):
         assert spectral_radius_and_gain(jordan, schur=scipy.linalg.schur(jordan, output="complex"))[1] == np.inf
         assert spectral_radius_and_gain(jordan, schur=complex_schur(jordan))[1] == np.inf
+
+
+@needs_numba
+def test_a_sender_validates_its_outgoing_message_with_the_receivers_certificate():
+    """On the compiled path a sender certifies its obfuscated ``T~``, ``S~`` as a receiver does on the
+    decoded bytes (Schur form, fused Stein solve and residual): the same radius and gain, bit for bit;
+    and the fused certificate's figures are those of the reference residual check, to round-off."""
+    from roadcollab.collaboration.relay import Exchange, Relay
+    from roadcollab.experiments.bench.study import _config_for
+    from roadcollab.experiments.pipeline import FleetPipeline
+    from roadcollab.lti import stability
+    from roadcollab.lti._cert_kernel import complex_schur, schur_certificate, schur_lyapunov
+    from roadcollab.lti.realisation import SystemCache
+    from roadcollab.models.vehicle import sample_fleet
+    from roadcollab.wire import protocol
+
+    cfg = _config_for(2000)
+    pipe = FleetPipeline(cfg, sample_fleet(2, cfg.fleet, rng=7))
+    roads = np.random.default_rng(8)
+    relay = Relay(pipe.estimators, Exchange("paper", cfg.obfuscation), rng=9, unguarded=True)
+    with kernels.use_kernels("compiled"):
+        for _ in range(4):
+            w = pipe.road(roads).velocity[:pipe.grid.n_samples]
+            sent = relay.send(0, pipe.estimators[0].estimate(w[:pipe.grid.n_samples]))
+            got = protocol.decode(protocol.encode(sent.message), systems=SystemCache())
+            for name in ("T", "S"):
+                mine, theirs = getattr(sent.message, name), getattr(got, name)
+                assert mine.stability() == theirs.stability()
+                assert np.isfinite(mine.stability()[1])
+                A = np.asarray(mine.A, dtype=float)
+                R, U = complex_schur(A)
+                X, resid, scale = schur_certificate(R, U, A)
+                X0 = schur_lyapunov(R, U)
+                X0 = 0.5 * (X0 + X0.T)
+                assert np.linalg.norm(X - X0) <= 1e-12 * np.linalg.norm(X0)
+                assert abs(scale - np.linalg.norm(X0) * (1 + np.linalg.norm(A) ** 2)) <= 1e-12 * scale
+                resid0 = np.linalg.norm(A.T @ X0 @ A - X0 + np.eye(A.shape[0]))
+                assert resid <= stability.LYAPUNOV_RTOL * scale and abs(resid - resid0) <= 1e-6 * scale
+    bad = np.full((3, 3), np.nan)
+    assert np.isnan(schur_certificate(bad.astype(complex), np.eye(3, dtype=complex), np.eye(3))[1])
+
+
+@needs_numba
+def test_compiled_schur_form_calls_dgees_as_scipy_does():
+    """``complex_schur`` calls LAPACK's ``dgees`` directly with a cached workspace: the same real Schur
+    form as ``scipy.linalg.schur``, bit for bit, before the compiled rotations."""
+    import scipy.linalg
+
+    from roadcollab.lti import _cert_kernel
+
+    rng = np.random.default_rng(11)
+    for n in (1, 3, 14, 22, 22):
+        for close in (False, True):
+            A = _system(rng, n, close)[0]
+            Tr, Zr = scipy.linalg.schur(A, output="real")
+            T, U = Tr.astype(complex), Zr.astype(complex)
+            _cert_kernel._build()["rsf2csf"](T, U)
+            T1, U1 = _cert_kernel.complex_schur(A)
+            assert np.array_equal(T, T1) and np.array_equal(U, U1)
+    with pytest.raises(ValueError, match="finite"):
+        _cert_kernel.complex_schur(np.full((2, 2), np.nan))
+
+
+@needs_numba
+def test_compiled_hiding_similarity_is_the_reference_one_to_round_off():
+    """``random_similarity`` on the compiled path (Householder ``QR`` and products in one call) gives the
+    reference's balanced ``Q^T A Q``, ``Q^T B``, ``C Q`` to round-off and leaves the generator in the same
+    state."""
+    from roadcollab.lti.realisation import StateSpaceData, random_similarity
+
+    rng = np.random.default_rng(12)
+    for n in (1, 2, 9, 22):
+        sys = StateSpaceData(0.2 * rng.standard_normal((n, n)), rng.standard_normal((n, 2)),
+                             1e3 * rng.standard_normal((2, n)), np.zeros((2, 2)), 0.005)
+        out = {}
+        for path in kernels.KERNELS:
+            gen = np.random.default_rng(13)
+            with kernels.use_kernels(path):
+                out[path] = random_similarity(sys, gen)
+            out[path + "_state"] = gen.bit_generator.state
+        assert out["compiled_state"] == out["reference_state"]
+        a, b = out["reference"], out["compiled"]
+        for x, y in ((a.A, b.A), (a.B, b.B), (a.C, b.C)):
+            assert np.max(np.abs(x - y)) <= 1e-13 * np.max(np.abs(x))
+        assert np.array_equal(a.D, b.D)

@@ -23,12 +23,12 @@ import scipy.linalg
 
 from .kernels import compiled_available, jit_options
 
-__all__ = ["schur_lyapunov", "complex_schur"]
+__all__ = ["schur_lyapunov", "schur_certificate", "complex_schur"]
 
 _KERNEL: dict[str, Any] = {}
 
 #: The functions compiled by :func:`_build` (rebound in place, so compiled callers find compiled callees).
-_COMPILED_NAMES = ("_stein_schur", "_real_to_complex")
+_COMPILED_NAMES = ("_stein_parts", "_stein_schur", "_certificate", "_real_to_complex")
 
 
 def _build() -> dict[str, Any]:
@@ -36,20 +36,22 @@ def _build() -> dict[str, Any]:
     if _KERNEL:
         return _KERNEL
     if not compiled_available():
-        _KERNEL.update(schur=None, rsf2csf=None)
+        _KERNEL.update(schur=None, certificate=None, rsf2csf=None)
         return _KERNEL
     import numba
 
     jit = numba.njit(**jit_options())
     for name in _COMPILED_NAMES:
         globals()[name] = jit(globals()[name])
-    _KERNEL.update(schur=globals()["_stein_schur"], rsf2csf=globals()["_real_to_complex"])
+    _KERNEL.update(schur=globals()["_stein_schur"], certificate=globals()["_certificate"],
+                   rsf2csf=globals()["_real_to_complex"])
     return _KERNEL
 
 
-def _stein_schur(R: np.ndarray) -> np.ndarray:   # pragma: no cover - compiled
-    """``Y`` of ``R^H Y R - Y = -I`` for an upper triangular ``R`` (module docstring). Complex numbers
-    as real pairs, plain loops: no array expressions, which cost seconds of first-run compilation."""
+def _stein_parts(R: np.ndarray) -> tuple[np.ndarray, np.ndarray]:   # pragma: no cover - compiled
+    """``Y`` of ``R^H Y R - Y = -I`` for an upper triangular ``R`` (module docstring) as ``(Yr, Yi)``,
+    row ``j`` = column ``j`` of ``Y``. Complex numbers as real pairs, plain loops: no array expressions,
+    which cost seconds of first-run compilation."""
     n = R.shape[0]
     Rr = np.empty((n, n))
     Ri = np.empty((n, n))                           # R^H column k = conj(R row k)
@@ -94,11 +96,87 @@ def _stein_schur(R: np.ndarray) -> np.ndarray:   # pragma: no cover - compiled
             for i in range(k + 1, n):
                 hr[i] -= Rr[k, i] * cr + Ri[k, i] * ci
                 hi[i] -= Rr[k, i] * ci - Ri[k, i] * cr
+    return Yr, Yi
+
+
+def _stein_schur(R: np.ndarray) -> np.ndarray:   # pragma: no cover - compiled
+    """``Y`` of ``R^H Y R - Y = -I`` for an upper triangular ``R``, complex (:func:`_stein_parts`)."""
+    n = R.shape[0]
+    Yr, Yi = _stein_parts(R)
     Y = np.empty((n, n), dtype=np.complex128)
     for j in range(n):
         for k in range(n):
             Y[k, j] = complex(Yr[j, k], Yi[j, k])
     return Y
+
+
+def _certificate(R: np.ndarray, U: np.ndarray, A: np.ndarray) -> tuple[np.ndarray, float, float]:   # pragma: no cover - compiled
+    """The Stein solve, ``X = Re(U Y U^H)`` symmetrised, and the residual figures of
+    :func:`~roadcollab.lti.stability._verified_gain` in one call: ``(X, ||A^T X A - X + I||_F,
+    ||X||_F (1 + ||A||_F^2))``; the residual is NaN when ``X`` is not finite. Real pairs, plain loops,
+    every inner loop a contiguous ``axpy`` (so numba vectorises it; reductions it cannot reorder)."""
+    n = R.shape[0]
+    Yr, Yi = _stein_parts(R)                        # Y[k, j] = Yr[j, k] + i Yi[j, k]
+    Ur = np.empty((n, n))
+    Ui = np.empty((n, n))
+    Ha = np.empty((n, n))                           # U^H = Ha + i Hb
+    Hb = np.empty((n, n))
+    for i in range(n):
+        for j in range(n):
+            a, b = U[i, j].real, U[i, j].imag
+            Ur[i, j] = a
+            Ui[i, j] = b
+            Ha[j, i] = a
+            Hb[j, i] = -b
+    Va = np.zeros((n, n))                           # V = Y U^H
+    Vb = np.zeros((n, n))
+    for k in range(n):
+        for j in range(n):
+            ya, yb = Yr[j, k], Yi[j, k]
+            for b in range(n):
+                Va[k, b] += ya * Ha[j, b] - yb * Hb[j, b]
+                Vb[k, b] += ya * Hb[j, b] + yb * Ha[j, b]
+    X = np.zeros((n, n))                            # Re(U V)
+    for a in range(n):
+        for k in range(n):
+            ur, ui = Ur[a, k], Ui[a, k]
+            for b in range(n):
+                X[a, b] += ur * Va[k, b] - ui * Vb[k, b]
+    finite = True
+    nx = 0.0
+    for a in range(n):                              # 0.5 (X + X^T)
+        for b in range(a, n):
+            v = 0.5 * (X[a, b] + X[b, a])
+            X[a, b] = v
+            X[b, a] = v
+            if not np.isfinite(v):
+                finite = False
+            nx += v * v if a == b else 2.0 * v * v
+    na = 0.0
+    for a in range(n):
+        for b in range(n):
+            na += A[a, b] * A[a, b]
+    P = np.zeros((n, n))                            # X A
+    for a in range(n):
+        for k in range(n):
+            x = X[a, k]
+            for b in range(n):
+                P[a, b] += x * A[k, b]
+    M = np.zeros((n, n))                            # A^T P
+    for k in range(n):
+        for a in range(n):
+            c = A[k, a]
+            for b in range(n):
+                M[a, b] += c * P[k, b]
+    res = 0.0
+    for a in range(n):                              # ||A^T X A - X + I||_F
+        for b in range(n):
+            s = M[a, b] - X[a, b]
+            if a == b:
+                s += 1.0
+            res += s * s
+    resid = np.sqrt(res) if finite else np.nan
+    return X, resid, np.sqrt(nx) * (1.0 + na)
 
 
 def _real_to_complex(T: np.ndarray, Z: np.ndarray) -> None:   # pragma: no cover - compiled
@@ -131,6 +209,15 @@ def _real_to_complex(T: np.ndarray, Z: np.ndarray) -> None:   # pragma: no cover
         T[m, m - 1] = 0.0
 
 
+#: ``dgees``'s optimal workspace by matrix order (a pure function of ``n`` for one LAPACK build).
+_LWORK: dict[int, int] = {}
+
+
+def _no_sort(wr: float, wi: float) -> None:
+    """``dgees``'s selection callback when no eigenvalues are reordered (``sort_t = 0``)."""
+    return None
+
+
 def complex_schur(A: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """A complex Schur form ``A = U T U^H`` from LAPACK's real Schur form (``dgees``, half the time of
     ``zgees`` at n = 22) and one compiled Givens rotation per 2x2 block. A valid complex Schur form
@@ -139,13 +226,31 @@ def complex_schur(A: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     Parameters
     ----------
     A : (n, n) real ndarray
-        Finite.
+        Finite, ``n >= 1``.
 
     Returns
     -------
     T, U : (n, n) complex ndarray
+
+    Raises
+    ------
+    ValueError
+        If ``A`` is not a finite non-empty square matrix.
+    numpy.linalg.LinAlgError
+        If LAPACK finds no Schur form.
     """
-    Tr, Zr = scipy.linalg.schur(np.asarray(A, dtype=float), output="real")
+    A = np.asarray(A, dtype=float)
+    n = A.shape[0]
+    if A.ndim != 2 or n != A.shape[1] or n == 0 or not np.isfinite(A).all():
+        raise ValueError(f"expected a finite, non-empty square matrix, got shape {A.shape}")
+    lwork = _LWORK.get(n)
+    if lwork is None:           # LAPACK's optimal workspace, queried once per order as scipy's schur does
+        lwork = _LWORK[n] = int(scipy.linalg.lapack.dgees(_no_sort, A, lwork=-1)[-2][0])
+    # dgees directly: scipy.linalg.schur's call with the same workspace, bit for bit (tested), without
+    # its batch wrapper and per-call workspace query (about 40 of 130 us at n = 22, docs/speed.md).
+    Tr, _, _, _, Zr, _, info = scipy.linalg.lapack.dgees(_no_sort, A, lwork=lwork)
+    if info != 0:
+        raise np.linalg.LinAlgError(f"dgees failed (info={info})")
     T = Tr.astype(np.complex128)
     U = Zr.astype(np.complex128)
     _build()["rsf2csf"](T, U)
@@ -168,3 +273,30 @@ def schur_lyapunov(R: np.ndarray, U: np.ndarray) -> np.ndarray:
     Y = _build()["schur"](np.ascontiguousarray(R, complex))
     X: np.ndarray = np.real(U @ Y @ U.conj().T)
     return X
+
+
+def schur_certificate(R: np.ndarray, U: np.ndarray, A: np.ndarray) -> tuple[np.ndarray, float, float]:
+    """``X`` of ``A^T X A - X = -I`` from ``A = U R U^H`` and the figures its verification needs, in one
+    compiled call (the Stein solve, ``X = Re(U Y U^H)`` symmetrised, the residual): what
+    :func:`schur_lyapunov` followed by the residual of
+    :func:`~roadcollab.lti.stability._verified_gain` compute, to round-off.
+
+    Parameters
+    ----------
+    R, U : (n, n) complex ndarray
+        ``R`` upper triangular.
+    A : (n, n) ndarray
+        Real, finite.
+
+    Returns
+    -------
+    X : (n, n) ndarray
+        Symmetric.
+    resid : float
+        ``||A^T X A - X + I||_F`` (NaN if ``X`` is not finite).
+    scale : float
+        ``||X||_F (1 + ||A||_F^2)``.
+    """
+    X, resid, scale = _build()["certificate"](np.ascontiguousarray(R, complex), np.ascontiguousarray(U, complex),
+                                               np.ascontiguousarray(A, float))
+    return X, float(resid), float(scale)

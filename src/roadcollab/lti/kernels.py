@@ -16,13 +16,14 @@ Two paths compute the same quantities:
   is another valid one; the certificate's residual is checked either way).
 
 The block diagonalisation of a received system (reordering, Sylvester splits, eigenvalue clustering:
-:mod:`roadcollab.lti._blockdiag_kernel`) and ``Psi``'s pole residues are compiled too.
+:mod:`roadcollab.lti._blockdiag_kernel`), ``Psi``'s pole residues and the hiding similarity of ``T~``, ``S~``
+(:mod:`roadcollab.lti._hide_kernel`) are compiled too.
 
 The default is ``"reference"`` (numpy). The compiled path passes the 300-segment exactness test and
-makes ``paper`` about 2.1-2.5x faster per segment than the reference path (the bench's alternating
+makes ``paper`` about 2.2-2.6x faster per segment than the reference path (the bench's alternating
 line), but every process that uses it pays 1.2-1.5 s of numba start-up (import, cache load, code
-generation) and about 145 MiB, and a fresh installation compiles for about 21-24 s (docs/speed.md,
-"Fourth pass"). So it is opt-in, for long runs. The
+generation) and about 145 MiB, and a fresh installation compiles for about 20 s (docs/speed.md,
+"Fifth pass"). So it is opt-in, for long runs. The
 environment variable ``ROADCOLLAB_KERNELS=compiled`` (or ``reference``) sets the default, and
 :func:`use_kernels` selects a path for a block of code (``roadcollab bench --kernels``).
 

@@ -10,6 +10,7 @@ import scipy.linalg
 
 from .response import content_key, dlti_frequency_response
 from ._cert_kernel import complex_schur as _compiled_schur
+from ._hide_kernel import qr_similarity as _compiled_qr_similarity
 from .kernels import kernel_path
 from .stability import spectral_radius_and_gain
 
@@ -21,7 +22,8 @@ def _complex_schur(A: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         return _compiled_schur(A)
     return scipy.linalg.schur(A, output="complex")
 
-__all__ = ["StateSpaceData", "SystemCache", "continuous_poles", "series", "minreal", "random_orthogonal", "similarity"]
+__all__ = ["StateSpaceData", "SystemCache", "continuous_poles", "series", "minreal", "random_orthogonal", "similarity",
+           "random_similarity"]
 
 
 def continuous_poles(poles_z, dt: float) -> np.ndarray:
@@ -165,7 +167,9 @@ class StateSpaceData:
         (:meth:`schur`); the frequency response reuses whichever exists. A system a receiver got
         through its :class:`SystemCache` is certified from the Schur form directly: the receiver
         evaluates an obfuscated system through that form anyway (its eigenvectors are too ill
-        conditioned for the pole-residue path), so the eigen route would be extra work.
+        conditioned for the pole-residue path), so the eigen route would be extra work. On the
+        compiled path every system is certified that way, so a sender's check of its outgoing
+        message is the receiver's check of the same bytes.
 
         Returns
         -------
@@ -181,6 +185,12 @@ class StateSpaceData:
             return spectral_radius_and_gain(A)
         if self.__dict__.get("_received"):
             return spectral_radius_and_gain(A, schur=self.schur())
+        if kernel_path() == "compiled":
+            # The computation a receiver makes on these bytes (the branch above): a sender validating
+            # its outgoing message then knows the receiver's certificate passes, and pays a Schur form
+            # instead of an eigendecomposition (docs/speed.md, "Fifth pass"). Not memoised as the
+            # object's Schur form, so its frequency response takes the same path as before.
+            return spectral_radius_and_gain(A, schur=_complex_schur(A))
         return spectral_radius_and_gain(A, schur=self.schur, eig=self.eig())
 
     def to_control(self):
@@ -321,6 +331,40 @@ def random_orthogonal(n: int, rng: np.random.Generator) -> np.ndarray:
     return Q * np.sign(np.diag(R))
 
 
+def random_similarity(sys: StateSpaceData, rng: np.random.Generator) -> StateSpaceData:
+    """``similarity(sys, random_orthogonal(sys.order, rng), balance=True)``: the hiding transform of an
+    obfuscated realisation. On the compiled path the ``QR`` factor, its sign fix and the products are
+    one numba call (:mod:`~roadcollab.lti._hide_kernel`; same ``Q`` to round-off, the generator advanced
+    by the same draw).
+
+    Parameters
+    ----------
+    sys : StateSpaceData
+    rng : numpy.random.Generator
+
+    Returns
+    -------
+    StateSpaceData
+    """
+    n = sys.order
+    if kernel_path() != "compiled" or n == 0:
+        return similarity(sys, random_orthogonal(n, rng), balance=True)
+    G = rng.standard_normal((n, n))
+    A, B, C = _balanced(sys)
+    A2, B2, C2 = _compiled_qr_similarity(G, A, B, C)
+    return StateSpaceData(A2, B2, C2, sys.D.copy(), sys.dt)
+
+
+def _balanced(sys: StateSpaceData) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``(A, B, C)`` with the states scaled by LAPACK ``dgebal`` (powers of two, no permutation)."""
+    # LAPACK dgebal directly: what scipy.linalg.matrix_balance(A, permute=False, separate=True)
+    # calls, the same output bit for bit, without its wrapper (29 -> 9 us at n = 18, measured).
+    A, _, _, scale, info = scipy.linalg.lapack.dgebal(np.asarray(sys.A, dtype=float), scale=1, permute=0)
+    if info < 0:
+        raise ValueError(f"dgebal failed (info={info})")
+    return A, sys.B / scale[:, None], sys.C * scale[None, :]
+
+
 def similarity(sys: StateSpaceData, Q: np.ndarray, *, balance: bool = False) -> StateSpaceData:
     """Realisation ``(Q^T A Q, Q^T B, C Q, D)`` for orthogonal ``Q``: same transfer matrix,
     same conditioning, no visible block structure.
@@ -346,12 +390,5 @@ def similarity(sys: StateSpaceData, Q: np.ndarray, *, balance: bool = False) -> 
     -------
     StateSpaceData
     """
-    A, B, C = sys.A, sys.B, sys.C
-    if balance and sys.order:
-        # LAPACK dgebal directly: what scipy.linalg.matrix_balance(A, permute=False, separate=True)
-        # calls, the same output bit for bit, without its wrapper (29 -> 9 us at n = 18, measured).
-        A, _, _, scale, info = scipy.linalg.lapack.dgebal(np.asarray(A, dtype=float), scale=1, permute=0)
-        if info < 0:
-            raise ValueError(f"dgebal failed (info={info})")
-        B, C = B / scale[:, None], C * scale[None, :]
+    A, B, C = _balanced(sys) if balance and sys.order else (sys.A, sys.B, sys.C)
     return StateSpaceData(Q.T @ A @ Q, Q.T @ B, C @ Q, sys.D.copy(), sys.dt)

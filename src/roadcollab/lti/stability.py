@@ -29,7 +29,7 @@ import numpy as np
 import numpy.typing as npt
 import scipy.linalg
 
-from ._cert_kernel import schur_lyapunov as _compiled_schur_lyapunov
+from ._cert_kernel import schur_certificate as _compiled_schur_certificate
 from .kernels import kernel_path
 
 __all__ = ["LYAPUNOV_RTOL", "spectral_radius_and_gain"]
@@ -47,6 +47,12 @@ def _verified_gain(A: np.ndarray, X: np.ndarray) -> float:
     eye = np.eye(A.shape[0])
     resid = np.linalg.norm(A.T @ X @ A - X + eye)
     scale = np.linalg.norm(X) * (1.0 + np.linalg.norm(A) ** 2)
+    return _checked_gain(X, float(resid), float(scale))
+
+
+def _checked_gain(X: np.ndarray, resid: float, scale: float) -> float:
+    """``sqrt(cond X)`` for a finite symmetric ``X`` whose residual ``resid`` passes against
+    ``LYAPUNOV_RTOL * scale`` and which is positive definite; inf otherwise (NaN figures fail)."""
     ev = np.linalg.eigvalsh(X)
     if not (resid <= LYAPUNOV_RTOL * scale and ev[0] > 0.0):
         return math.inf
@@ -80,8 +86,12 @@ def _schur_lyapunov(R: np.ndarray, U: np.ndarray) -> np.ndarray:
 def _schur_gain(A: np.ndarray, schur: tuple[np.ndarray, np.ndarray]) -> float:
     """The verified gain from :func:`_schur_lyapunov` (inf if it fails)."""
     try:
-        if kernel_path() == "compiled":     # the Stein solve compiled (docs/speed.md, "Third pass")
-            return _verified_gain(A, _compiled_schur_lyapunov(*schur))
+        if kernel_path() == "compiled":
+            # The Stein solve, X and its residual in one compiled call (docs/speed.md, "Fifth pass").
+            X, resid, scale = _compiled_schur_certificate(schur[0], schur[1], A)
+            if not (math.isfinite(resid) and math.isfinite(scale)):
+                return math.inf
+            return _checked_gain(X, resid, scale)
         return _verified_gain(A, _schur_lyapunov(*schur))
     except (np.linalg.LinAlgError, ValueError):
         return math.inf

@@ -32,7 +32,7 @@ import numpy as np
 
 from ..errors import ParameterError
 from ..wire.message import ExchangeMessage
-from ..lti.realisation import StateSpaceData, random_orthogonal, series, similarity
+from ..lti.realisation import StateSpaceData, random_similarity, series
 from ..estimation.grid import SegmentGrid, bin_index
 from ..lti.batch2x2 import inv2x2, matvec, receiver_z
 from ..lti.kernels import kernel_path
@@ -100,8 +100,8 @@ class ObfuscationChannel:
         psi2 = draw_obfuscator(spec, grid, rng=rng)
         T_t = series(T, psi1.system)                        # Psi1 T
         S_t = series(series(psi2.system, S), psi1.system)   # Psi1 S Psi2
-        T_t = similarity(T_t, random_orthogonal(T_t.order, rng), balance=True)
-        S_t = similarity(S_t, random_orthogonal(S_t.order, rng), balance=True)
+        T_t = random_similarity(T_t, rng)     # similarity(T_t, random_orthogonal(n, rng), balance=True)
+        S_t = random_similarity(S_t, rng)
         om = grid.omega_dt
         if kernel_path() == "compiled":
             # From the design's poles and residues (Obfuscator.frequency_response): no eigendecomposition
