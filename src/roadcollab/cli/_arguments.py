@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import argparse
 from dataclasses import dataclass
-from typing import Callable, NoReturn
+from typing import Any, Callable, Generic, Literal, NoReturn, Protocol, TypeVar, cast, overload
 
 from ..reporting.wording import plural
 
@@ -24,6 +24,25 @@ __all__ = ["CommandParser", "Range", "add_check", "ranged", "ranged_list", "coun
 
 #: Largest root seed: ``config.json`` records it, and JSON readers keep integers exactly up to 2^53.
 SEED_MAX = 2 ** 53
+
+_V = TypeVar("_V", covariant=True)
+
+
+class RangedType(Protocol, Generic[_V]):
+    """What :func:`ranged` and :func:`ranged_list` return: an argparse ``type`` carrying its :class:`Range`."""
+
+    range: Range
+    __name__: str
+
+    def __call__(self, text: str, /) -> _V: ...
+
+
+def _with_range(parse: Callable[[str], Any], rng: Range, what: str) -> RangedType[Any]:
+    """``parse`` with its ``range`` attribute and argparse's ``__name__`` (named in some messages)."""
+    typed = cast("RangedType[Any]", parse)
+    typed.range = rng
+    typed.__name__ = what
+    return typed
 
 
 @dataclass(frozen=True)
@@ -91,8 +110,17 @@ def _num(v: float) -> str:
     return f"{v:g}"
 
 
+@overload
+def ranged(what: str, low: float, high: float, unit: str = "", *, integer: Literal[True]) -> RangedType[int]: ...
+
+
+@overload
 def ranged(what: str, low: float, high: float, unit: str = "", *, integer: bool = False
-           ) -> Callable[[str], float | int]:
+           ) -> RangedType[float | int]: ...
+
+
+def ranged(what: str, low: float, high: float, unit: str = "", *, integer: bool = False
+           ) -> RangedType[Any]:
     """argparse ``type``: a number in ``[low, high]`` (see :class:`Range`); the range is ``type.range``.
 
     Parameters
@@ -113,16 +141,14 @@ def ranged(what: str, low: float, high: float, unit: str = "", *, integer: bool 
     """
     rng = Range(what, low, high, unit, integer)
 
-    def parse(text: str):
+    def parse(text: str) -> float | int:
         return rng.parse(text)
 
-    parse.range = rng
-    parse.__name__ = what  # argparse names the type in some messages
-    return parse
+    return _with_range(parse, rng, what)
 
 
 def ranged_list(what: str, low: float, high: float, unit: str = "", *, integer: bool = False,
-                most: int = 50) -> Callable[[str], tuple]:
+                most: int = 50) -> RangedType[tuple[float | int, ...]]:
     """argparse ``type``: comma-separated numbers, each in ``[low, high]``, at most ``most`` of them.
 
     Parameters
@@ -139,7 +165,7 @@ def ranged_list(what: str, low: float, high: float, unit: str = "", *, integer: 
     """
     rng = Range(what, low, high, unit, integer)
 
-    def parse(text: str) -> tuple:
+    def parse(text: str) -> tuple[float | int, ...]:
         parts = [p.strip() for p in text.split(",")]
         if not text.strip() or "" in parts:
             raise argparse.ArgumentTypeError(f"expected comma-separated {what}s from {rng.text()} such as "
@@ -148,9 +174,7 @@ def ranged_list(what: str, low: float, high: float, unit: str = "", *, integer: 
             raise argparse.ArgumentTypeError(f"expected at most {most} values, got {len(parts)}")
         return tuple(rng.parse(p) for p in parts)
 
-    parse.range = rng
-    parse.__name__ = what
-    return parse
+    return _with_range(parse, rng, what)
 
 
 def add_check(parser: argparse.ArgumentParser, check: Callable[[argparse.Namespace], str | None]) -> None:
@@ -166,7 +190,7 @@ def add_check(parser: argparse.ArgumentParser, check: Callable[[argparse.Namespa
     checks = getattr(parser, "roadcollab_checks", None)
     if checks is None:
         checks = []
-        parser.roadcollab_checks = checks
+        cast(Any, parser).roadcollab_checks = checks   # argparse has no place for them: an attribute of ours
     checks.append(check)
 
 
@@ -210,12 +234,12 @@ MAX_ROWS = ranged("row limit", 1, 50_000_000, integer=True)
 MAX_FILE_MB = ranged("file size limit", 0.01, 10_000, "MB")
 
 
-def count(what: str, low: int, high: int) -> Callable[[str], int]:
+def count(what: str, low: int, high: int) -> RangedType[int]:
     """argparse ``type``: a whole number of ``what`` from ``low`` to ``high`` (see :func:`ranged`)."""
     return ranged(what, low, high, integer=True)
 
 
-def help_range(parse) -> str:
+def help_range(parse: RangedType[object]) -> str:
     """``"1 to 60 m/s"``: the range of a :func:`ranged` type, for the option's help."""
     return parse.range.text()
 

@@ -8,7 +8,7 @@ import shlex
 import textwrap
 import time
 from pathlib import Path
-from typing import TYPE_CHECKING, Callable, Sequence
+from typing import TYPE_CHECKING, Callable, Sequence, TypeVar
 
 import re
 
@@ -63,6 +63,9 @@ def _int_at_least(low: int, what: str) -> Callable[[str], int]:
 
 positive_int = _int_at_least(1, "positive")
 nonneg_int = _int_at_least(0, "non-negative")
+
+#: What a subcommand's work returns.
+_T = TypeVar("_T")
 
 
 def positive_float(text: str) -> float:
@@ -360,8 +363,8 @@ def progress(total: int, description: str) -> tuple[Progress, Callable[[int], No
     return prog, (lambda done: prog.update(task, completed=done))
 
 
-def run_with_progress(total: int, description: str, work: Callable[[Callable[[int], None]], object]
-                      ) -> tuple[object, float]:
+def run_with_progress(total: int, description: str, work: Callable[[Callable[[int], None]], _T]
+                      ) -> tuple[_T, float]:
     """Run ``work(advance)`` under a progress bar (:func:`progress`).
 
     Parameters
@@ -375,7 +378,7 @@ def run_with_progress(total: int, description: str, work: Callable[[Callable[[in
 
     Returns
     -------
-    result : object
+    result
         What ``work`` returned.
     elapsed : float
         Wall time of ``work``, s.

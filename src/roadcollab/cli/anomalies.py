@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+from typing import Any
 
 from ._arguments import NOISE, help_range, iso_class
 from ._common import (input_paths, command_parser, add_dask_options, add_road_options, add_study_options, check_dask_options,
@@ -72,7 +73,7 @@ def run(args: argparse.Namespace, command_line: str) -> int:
     check_dask_options(args)
     with staged_output(args.out, NAME, input_paths(args)) as out:
         exp = config_from_args(ns)
-        kw = {"depths": (), "noise_levels": ()} if args.no_sweeps else {}
+        kw: dict[str, Any] = {"depths": (), "noise_levels": ()} if args.no_sweeps else {}
         cfg = AnomalyStudyConfig(experiment=exp, n_runs=args.runs, **kw)
         result, elapsed = run_with_progress(cfg.n_runs, NAME, lambda cb: run_anomaly_study(
             cfg, args.seed, progress=cb, **dask_options(args)))

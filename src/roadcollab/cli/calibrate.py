@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+from typing import Any
 
 from ._arguments import SEED_MAX, add_check, count, help_range, ranged
 from ._common import (input_paths, MAX_VEHICLES, command_parser, add_dask_options, add_out_option, check_dask_options, dask_options,
@@ -119,7 +120,7 @@ def run(args: argparse.Namespace, command_line: str) -> int:
     from ..reporting.calibration_report import write_calibration
     from ..reporting.records import staged_output
 
-    kw = {}
+    kw: dict[str, Any] = {}   # grid overrides, by AnomalyCalibrationConfig field
     if args.snr_thresholds is not None:
         kw["snr_thresholds"] = tuple(args.snr_thresholds)
     if args.min_depths_mm is not None:

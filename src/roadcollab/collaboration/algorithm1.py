@@ -376,8 +376,9 @@ class CollaborativeEstimator:
                                  f"attach one (ReceiverGuard(...).attach(), fleet_guards(..., attach=True)) "
                                  f"or pass unguarded=True to apply it as the paper's Algorithm 1 does")
         if Wf is None:
-            Wf = (np.zeros_like(Y) if message is None else self.learn(message) if unguarded
-                  else self.guard.feedforward(message, Y, sender=sender)[0])
+            guard = self.guard      # not None unless unguarded (refused above)
+            Wf = (np.zeros_like(Y) if message is None else self.learn(message) if unguarded or guard is None
+                  else guard.feedforward(message, Y, sender=sender)[0])
         return VehicleEstimate(W_obs=DY, W_hat=DY + Wf, Wf=Wf, Y=Y, P_f=self.P_f, grid=self.grid,
                                offset=self._offset)
 

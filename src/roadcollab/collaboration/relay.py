@@ -256,6 +256,7 @@ class Relay:
         if guard is None:       # without unguarded=True, estimate refuses a message it cannot guard
             return self.send(j, est.estimate(y, learn_from, Y=Y, unguarded=self.unguarded), incoming)
         Y = est.spectrum(y) if Y is None else Y
+        assert learn_from is not None   # a guard only with a message, and the fused chain returned above
         Wf, report = guard.feedforward(learn_from, Y)
         return replace(self.send(j, est.estimate(y, Wf=Wf, Y=Y), incoming), guard=report)
 

@@ -254,7 +254,11 @@ def _bank(spec: DetectorSpec, ds: float) -> _Bank:
     """Template bank for a sample spacing ``ds`` (m). ``_shape`` is signed, so a positive
     amplitude is a depression for pothole templates and a raise for bump templates."""
     half_env = 0.5 * spec.enveloping_length
-    kinds, lengths, taps, leads, rows = [], [], [], [], []
+    kinds: list[str] = []
+    lengths: list[float] = []
+    taps: list[int] = []
+    leads: list[float] = []
+    rows: list[np.ndarray] = []
     for kind, grid in (("pothole", spec.pothole_lengths), ("bump", spec.bump_lengths)):
         for L in grid:
             # Samples from half an enveloping width (plus one sample) before the anomaly start
@@ -283,9 +287,9 @@ def _bank(spec: DetectorSpec, ds: float) -> _Bank:
     for j, h in enumerate(rows):
         H[j, :h.size] = h
     energy = np.sum(H**2, axis=1)
-    lengths, leads = np.array(lengths), np.array(leads)
-    shift = np.round((leads + 0.5 * lengths) / ds).astype(np.intp)
-    return _Bank(tuple(kinds), lengths, np.array(taps), leads, shift, H, energy)
+    length_m, lead_m = np.array(lengths), np.array(leads)
+    shift = np.round((lead_m + 0.5 * length_m) / ds).astype(np.intp)
+    return _Bank(tuple(kinds), length_m, np.array(taps), lead_m, shift, H, energy)
 
 
 def _track_candidates(snr: np.ndarray, amp: np.ndarray, bank: _Bank, last: np.ndarray, spec: DetectorSpec,
@@ -414,8 +418,8 @@ def _merge_tracks(per_track: list[list[tuple]], spec: DetectorSpec) -> list[Dete
     centers = [[s + 0.5 * L for _, _, s, L, _ in cands] for cands in per_track]
     pairs = sorted((abs(cl - cr), i, k) for i, cl in enumerate(centers[0]) for k, cr in enumerate(centers[1])
                    if abs(cl - cr) <= spec.merge_tolerance)
-    used = [set(), set()]       # paired (merged or cross-talk): not reported one-sided
-    keep = [set(), set()]       # the stronger member of a cross-talk pair, reported one-sided
+    used: list[set[int]] = [set(), set()]   # paired (merged or cross-talk): not reported one-sided
+    keep: list[set[int]] = [set(), set()]   # the stronger member of a cross-talk pair, reported one-sided
     out = []
     for _, i, k in pairs:
         if i in used[0] or k in used[1]:

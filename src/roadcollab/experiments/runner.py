@@ -26,7 +26,7 @@ import threading
 import time
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from dataclasses import dataclass
-from typing import Callable, Sequence
+from typing import Any, Callable, TypeVar
 
 from threadpoolctl import threadpool_limits
 
@@ -34,6 +34,9 @@ from .._validation import check_int
 from ..errors import ParameterError
 
 __all__ = ["map_runs", "pool_context", "local_dask_cluster"]
+
+#: One run's result, as the task returns it.
+_R = TypeVar("_R")
 
 #: The task and shared object of this process when it is a pool worker (set once by the pool's
 #: initializer, in the worker process only; the parent never writes it).
@@ -201,9 +204,9 @@ def _dask_map(task: Callable, extra: tuple, n_runs: int, scheduler: str, chunk_s
     return results
 
 
-def map_runs(task: Callable[[Sequence[int]], list], n_runs: int, *, workers: int | None = None,
+def map_runs(task: Callable[..., list[_R]], n_runs: int, *, workers: int | None = None,
              scheduler: str | None = None, progress: Callable[[int], None] | None = None,
-             chunk_size: int | None = None, shared: object | None = None) -> list:
+             chunk_size: int | None = None, shared: object | None = None) -> list[_R]:
     """Evaluate ``task(indices) -> list of results`` over ``range(n_runs)`` in chunks.
 
     With ``shared``, the task is called as ``task(indices, shared)``.
@@ -247,18 +250,19 @@ def map_runs(task: Callable[[Sequence[int]], list], n_runs: int, *, workers: int
         workers = check_int("workers", workers, low=1, high=256)
     if scheduler is not None and workers is not None:
         raise ParameterError("give either workers (a local pool) or scheduler (a Dask cluster), not both")
-    task = _SingleThreaded(task)
-    extra = () if shared is None else (shared,)
+    single = _SingleThreaded(task)
+    extra: tuple[Any, ...] = () if shared is None else (shared,)
     if workers is None and scheduler is None:
-        out = []
+        out: list[_R] = []
         for i in range(n_runs):
-            out.extend(task([i], *extra))
+            out.extend(single([i], *extra))
             if progress is not None:
                 progress(i + 1)
         return out
     if scheduler is not None:
-        results = _dask_map(task, extra, n_runs, scheduler, chunk_size, progress)
+        results = _dask_map(single, extra, n_runs, scheduler, chunk_size, progress)
     else:
+        assert workers is not None  # neither None above, and scheduler is None here
         chunks = _chunks(n_runs, chunk_size or max(1, -(-n_runs // (4 * workers))))
-        results = _pool_map(task, extra, chunks, workers, progress)
+        results = _pool_map(single, extra, chunks, workers, progress)
     return [r for chunk in results for r in chunk]

@@ -43,7 +43,7 @@ from __future__ import annotations
 import dataclasses
 import time
 from dataclasses import dataclass
-from typing import Callable
+from typing import Callable, Sequence
 
 import numpy as np
 
@@ -59,6 +59,9 @@ from ..runner import map_runs
 
 __all__ = ["calibrate_anomalies"]
 
+#: One run's tallies: ``(grid index, condition index, estimator) -> MatchTally``.
+_Tallies = dict[tuple[int, int, str], MatchTally]
+
 
 @dataclass(frozen=True)
 class _CalibrationTask:
@@ -67,7 +70,7 @@ class _CalibrationTask:
 
     config: AnomalyCalibrationConfig
 
-    def __call__(self, indices, cache: PipelineCache) -> list[dict]:
+    def __call__(self, indices: Sequence[int], cache: PipelineCache) -> list[_Tallies]:
         config = self.config
         study = config.study_config()
         grid = [dataclasses.replace(study, detector=spec) for spec in config.grid()]
@@ -79,7 +82,7 @@ class _CalibrationTask:
             rs = run_seed_sequences(seed, config.runs_per_seed)[k % config.runs_per_seed]
             # Estimates once per condition; only detection and scoring per grid point.
             ests = [run_estimates(pipe, rs, road_spec=spec) for spec in (default, *by_depth)]
-            rec: dict = {}
+            rec: _Tallies = {}
             for g, cfg in enumerate(grid):   # grid-major: the detector's template cache stays warm
                 for c, est in enumerate(ests):
                     matches = score_estimates(est, cfg, pooled)[1]

@@ -12,35 +12,81 @@ from __future__ import annotations
 
 import dataclasses
 from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any, TypeVar, get_type_hints
 
 from ...detection.scoring import DetectionScores
 from ...models.anomaly import Anomaly
 
 __all__ = ["DetectionRow", "VehicleDetectionRow", "DepthDetectionRow", "NoiseDetectionRow", "MapRow", "AnomalyMap"]
 
-_SCORES = [(f.name, f.type) for f in dataclasses.fields(DetectionScores)]
+_SCORES: list[tuple[str, Any]] = [(f.name, f.type) for f in dataclasses.fields(DetectionScores)]
+_RowT = TypeVar("_RowT", bound="_ScoredRow")
 
 
-def _scored_row(name: str, keys: list[tuple[str, type]], doc: str) -> type:
-    """A frozen row type: ``keys``, then the fields of DetectionScores; built with ``of``."""
-    def of(cls, scores: DetectionScores, **key):
+class _ScoredRow:
+    """Base of the scored row types: their keys, then the fields of DetectionScores."""
+
+    if TYPE_CHECKING:   # the fields :func:`_scored_row` appends, declared for the type checker only
+        precision: float
+        recall: float
+        f1: float
+        median_position_error_m: float
+        median_depth_rel_error: float
+        kind_accuracy: float
+        side_accuracy: float
+        n_true: int
+        n_detected: int
+        n_matched: int
+
+        def __init__(self, **fields: Any) -> None: ...
+
+    @classmethod
+    def of(cls: type[_RowT], scores: DetectionScores, **key: Any) -> _RowT:
+        """The row of ``scores`` under ``key`` (the row type's key fields by name)."""
         return cls(**key, **dataclasses.asdict(scores))
 
-    cls = dataclasses.make_dataclass(name, keys + _SCORES, frozen=True, namespace={"of": classmethod(of)})
+
+def _scored_row(keyed: type[_RowT]) -> type[_RowT]:
+    """A frozen row type: the key fields annotated on ``keyed``, then the fields of DetectionScores;
+    built with ``of``. The class statement only names the keys (and gives the docstring); the type
+    is a new dataclass, so the CSV columns stay in that order."""
+    keys = list(get_type_hints(keyed).items())
+    cls = dataclasses.make_dataclass(keyed.__name__, keys + _SCORES, bases=(_ScoredRow,), frozen=True)
     cls.__module__ = __name__   # pickled by reference to this module's name
-    cls.__doc__ = doc + "\n\n" + "Build with ``Row.of(scores, **keys)`` (keys: " + \
+    cls.__doc__ = (keyed.__doc__ or "") + "\n\n" + "Build with ``Row.of(scores, **keys)`` (keys: " + \
         ", ".join(k for k, _ in keys) + ")."
     return cls
 
 
-DetectionRow = _scored_row("DetectionRow", [("estimator", str)],
-                           "One estimator of ``detection.csv`` (default condition, vehicles 2..V pooled).")
-VehicleDetectionRow = _scored_row("VehicleDetectionRow", [("vehicle", int), ("estimator", str)],
-                                  "One (vehicle, estimator) of ``detection_per_vehicle.csv`` (vehicle 1-based).")
-DepthDetectionRow = _scored_row("DepthDetectionRow", [("depth_m", float), ("estimator", str)],
-                                "One (depth, estimator) of ``f1_vs_depth.csv`` (every anomaly ``depth_m`` deep, m).")
-NoiseDetectionRow = _scored_row("NoiseDetectionRow", [("sensor_noise_std", float), ("estimator", str)],
-                                "One (noise level, estimator) of ``f1_vs_noise.csv`` (m/s^2).")
+@_scored_row
+class DetectionRow(_ScoredRow):
+    """One estimator of ``detection.csv`` (default condition, vehicles 2..V pooled)."""
+
+    estimator: str
+
+
+@_scored_row
+class VehicleDetectionRow(_ScoredRow):
+    """One (vehicle, estimator) of ``detection_per_vehicle.csv`` (vehicle 1-based)."""
+
+    vehicle: int
+    estimator: str
+
+
+@_scored_row
+class DepthDetectionRow(_ScoredRow):
+    """One (depth, estimator) of ``f1_vs_depth.csv`` (every anomaly ``depth_m`` deep, m)."""
+
+    depth_m: float
+    estimator: str
+
+
+@_scored_row
+class NoiseDetectionRow(_ScoredRow):
+    """One (noise level, estimator) of ``f1_vs_noise.csv`` (m/s^2)."""
+
+    sensor_noise_std: float
+    estimator: str
 
 
 @dataclass(frozen=True)

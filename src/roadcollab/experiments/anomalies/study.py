@@ -31,12 +31,12 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass
-from typing import Callable
+from typing import Callable, Sequence, TypedDict
 
 import numpy as np
 
 from ..._validation import check_int
-from ...detection.scoring import MatchTally
+from ...detection.scoring import MatchResult, MatchTally
 from ...errors import ParameterError
 from ...models.vehicle import Vehicle, sample_fleet
 from .config import ESTIMATORS, AnomalyStudyConfig
@@ -47,6 +47,19 @@ from .estimates import RunEstimates, run_estimates
 from ..pipeline import PipelineCache
 from ..runner import map_runs
 from ..seeds import SeedPlan
+
+#: Matches of one condition: ``(estimator, vehicle) -> MatchResult`` (vehicle 0-based).
+_Matches = dict[tuple[str, int], MatchResult]
+
+
+class _RunRecord(TypedDict):
+    """What one run hands back: the default condition's matches, those per noise level and per
+    depth (by sweep index), and run 0's map example."""
+
+    main: _Matches
+    noise: dict[int, _Matches]
+    depth: dict[int, _Matches]
+    map: AnomalyMap | None
 
 __all__ = ["AnomalyStudyResult", "run_anomaly_study"]
 
@@ -95,18 +108,18 @@ class _AnomalyTask:
     config: AnomalyStudyConfig
     seed: int
 
-    def __call__(self, indices, cache: PipelineCache) -> list[dict]:
+    def __call__(self, indices: Sequence[int], cache: PipelineCache) -> list[_RunRecord]:
         config, exp = self.config, self.config.experiment
         pipe, default, by_depth = condition_roads(config, self.seed, cache)
         runs_ss = run_seed_sequences(self.seed, config.n_runs)
         V = exp.n_vehicles
         pooled = range(1, V)   # vehicles 2..V
-        out = []
+        out: list[_RunRecord] = []
         for i in indices:
             rs = runs_ss[i]
             est = run_estimates(pipe, rs, road_spec=default)
             dets, matches = score_estimates(est, config, range(V))
-            rec = {"main": matches, "noise": {}, "depth": {},
+            rec: _RunRecord = {"main": matches, "noise": {}, "depth": {},
                    "map": _map_example(est, dets, config) if i == 0 else None}
             for k, level in enumerate(config.noise_levels):
                 nm = matches   # the default condition itself (same seeds) ...
@@ -172,6 +185,7 @@ def run_anomaly_study(config: AnomalyStudyConfig, seed: int, *, progress: Callab
             for (name, _j), m in dm.items():
                 by_depth[k, name].add(m)
     map_example = runs[0]["map"]
+    assert map_example is not None   # run 0 always carries it
 
     detection_rows = [DetectionRow.of(main[name].scores(), estimator=name) for name in ESTIMATORS]
     vehicle_rows = [VehicleDetectionRow.of(per_vehicle[(name, j)].scores(), vehicle=j + 1, estimator=name)

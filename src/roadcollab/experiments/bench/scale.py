@@ -67,7 +67,7 @@ class _SegmentTask:
     seed: int
     mechanism: str
 
-    def __call__(self, indices, cache: PipelineCache) -> list[SegmentOutcome]:
+    def __call__(self, indices: Sequence[int], cache: PipelineCache) -> list[SegmentOutcome]:
         pipe = cache.pipeline(self.config, self.seed)
         grid, n, sl = pipe.grid, pipe.grid.n_samples, self.config.scored
         plan = SeedPlan(self.seed)

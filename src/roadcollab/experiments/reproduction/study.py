@@ -21,7 +21,7 @@ applications (anomaly detection) use are :func:`roadcollab.experiments.anomalies
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Callable
+from typing import Callable, Sequence
 
 import numpy as np
 from threadpoolctl import threadpool_limits
@@ -309,7 +309,7 @@ class _ReproductionTask:
     privacy: bool
     iri_segment_length: float | None = None
 
-    def __call__(self, indices, cache: PipelineCache) -> list[RunResult]:
+    def __call__(self, indices: Sequence[int], cache: PipelineCache) -> list[RunResult]:
         plan = SeedPlan(self.seed)
         out = []
         for i in indices:

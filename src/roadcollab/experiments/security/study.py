@@ -14,7 +14,7 @@ secure aggregation use the first ``replica_runs`` segments
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Callable
+from typing import Callable, Sequence
 
 import numpy as np
 
@@ -90,7 +90,7 @@ class _AttackTask:
     seed: int
     key: bytes
 
-    def __call__(self, indices, cache: PipelineCache) -> list[SegmentAttacks]:
+    def __call__(self, indices: Sequence[int], cache: PipelineCache) -> list[SegmentAttacks]:
         pipe = cache.pipeline(self.config.experiment, self.seed)
         seeds = SeedPlan(self.seed).runs(self.config.n_runs)
         return [attack_segment(pipe, self.config, r, seeds[r], self.key) for r in indices]

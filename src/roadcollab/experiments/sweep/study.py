@@ -34,7 +34,7 @@ The grid is :class:`~roadcollab.experiments.sweep.config.SweepConfig`, the resul
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Callable
+from typing import Callable, Sequence
 
 import numpy as np
 
@@ -68,7 +68,7 @@ class _SweepTask:
     config: SweepConfig
     seed: int
 
-    def __call__(self, indices, cache: PipelineCache) -> list[dict]:
+    def __call__(self, indices: Sequence[int], cache: PipelineCache) -> list[dict]:
         cfg = self.config
         points = cfg.points()
         out = []
