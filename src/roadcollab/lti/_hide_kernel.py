@@ -18,7 +18,7 @@ from .kernels import compiled_available, jit_options
 __all__ = ["qr_similarity"]
 
 _KERNEL: dict[str, Any] = {}
-_COMPILED_NAMES = ("_qr_similarity",)
+_COMPILED_NAMES = ("_mul", "_mul_t", "_qr_similarity")   # callees first: compiled in order
 
 
 def _build() -> dict[str, Any]:
@@ -35,6 +35,28 @@ def _build() -> dict[str, Any]:
         globals()[name] = jit(globals()[name])
     _KERNEL.update(hide=globals()["_qr_similarity"])
     return _KERNEL
+
+
+def _mul(X: np.ndarray, Y: np.ndarray) -> np.ndarray:   # pragma: no cover - compiled
+    """``X Y``, row by row (contiguous inner loop)."""
+    out = np.zeros((X.shape[0], Y.shape[1]))
+    for i in range(X.shape[0]):
+        for k in range(X.shape[1]):
+            a = X[i, k]
+            for j in range(Y.shape[1]):
+                out[i, j] += a * Y[k, j]
+    return out
+
+
+def _mul_t(X: np.ndarray, Y: np.ndarray) -> np.ndarray:   # pragma: no cover - compiled
+    """``X^T Y`` (contiguous inner loop)."""
+    out = np.zeros((X.shape[1], Y.shape[1]))
+    for k in range(X.shape[0]):
+        for i in range(X.shape[1]):
+            q = X[k, i]
+            for j in range(Y.shape[1]):
+                out[i, j] += q * Y[k, j]
+    return out
 
 
 def _qr_similarity(G: np.ndarray, A: np.ndarray, B: np.ndarray, C: np.ndarray
@@ -82,33 +104,8 @@ def _qr_similarity(G: np.ndarray, A: np.ndarray, B: np.ndarray, C: np.ndarray
         if R[j, j] < 0.0:
             for i in range(n):
                 Q[i, j] = -Q[i, j]
-    m = B.shape[1]
-    p = C.shape[0]
-    AQ = np.zeros((n, n))
-    for i in range(n):
-        for k in range(n):
-            a = A[i, k]
-            for j in range(n):
-                AQ[i, j] += a * Q[k, j]
-    A2 = np.zeros((n, n))
-    for k in range(n):
-        for i in range(n):
-            q = Q[k, i]
-            for j in range(n):
-                A2[i, j] += q * AQ[k, j]
-    B2 = np.zeros((n, m))
-    for k in range(n):
-        for i in range(n):
-            q = Q[k, i]
-            for j in range(m):
-                B2[i, j] += q * B[k, j]
-    C2 = np.zeros((p, n))
-    for i in range(p):
-        for k in range(n):
-            c = C[i, k]
-            for j in range(n):
-                C2[i, j] += c * Q[k, j]
-    return A2, B2, C2
+    AQ = _mul(A, Q)
+    return _mul_t(Q, AQ), _mul_t(Q, B), _mul(C, Q)
 
 
 def qr_similarity(G: np.ndarray, A: np.ndarray, B: np.ndarray, C: np.ndarray

@@ -23,21 +23,16 @@ _SCORES: list[tuple[str, Any]] = [(f.name, f.type) for f in dataclasses.fields(D
 _RowT = TypeVar("_RowT", bound="_ScoredRow")
 
 
-class _ScoredRow:
+if TYPE_CHECKING:   # the fields :func:`_scored_row` appends, as the type checker sees them
+    _Scores = DetectionScores
+else:
+    _Scores = object
+
+
+class _ScoredRow(_Scores):
     """Base of the scored row types: their keys, then the fields of DetectionScores."""
 
-    if TYPE_CHECKING:   # the fields :func:`_scored_row` appends, declared for the type checker only
-        precision: float
-        recall: float
-        f1: float
-        median_position_error_m: float
-        median_depth_rel_error: float
-        kind_accuracy: float
-        side_accuracy: float
-        n_true: int
-        n_detected: int
-        n_matched: int
-
+    if TYPE_CHECKING:
         def __init__(self, **fields: Any) -> None: ...
 
     @classmethod
