@@ -137,13 +137,15 @@ def match_fixes(network: RoadNetwork, lon, lat, *, sigma_z: float = 5.0, beta: f
     cands = [_candidates(network, x[t], y[t], radius) for t in range(F)]
     road = np.full(F, None, dtype=object)
     meas, dist = np.full(F, np.nan), np.full(F, np.nan)
-    score, back, prev = None, [None] * F, None
+    score: np.ndarray | None = None
+    back: list[tuple[int, np.ndarray] | None] = [None] * F
+    prev: int | None = None
     for t in range(F):
         if not cands[t]:
             score, prev = None, None
             continue
         emit = np.array([-0.5 * (d / sigma_z) ** 2 - _LOG_SQRT_2PI - np.log(sigma_z) for _, _, d in cands[t]])
-        if score is None:
+        if score is None or prev is None:             # the chain starts (score and prev are set together)
             score, back[t] = emit, None
         else:
             gc = float(np.hypot(x[t] - x[prev], y[t] - y[prev]))

@@ -205,6 +205,8 @@ def _feature_road(path: Path, i: int, feat) -> tuple[str, np.ndarray]:
         raise FileFormatError(f"{where}.geometry: expected a LineString, got {short_repr(kind)}")
     coords = geom.get("coordinates")
     try:
+        if not isinstance(coords, list):
+            raise TypeError(coords)
         pts = np.array([[float(c[0]), float(c[1])] for c in coords], dtype=float)
     except (TypeError, ValueError, IndexError, KeyError):
         raise FileFormatError(f"{where}.geometry.coordinates: expected a list of [lon, lat] numbers") from None

@@ -118,7 +118,9 @@ def _read_rows(path: Path, limits: FileLimits) -> tuple[list[int], list[str], tu
     Streams the file; stops with a FileFormatError at the first row past ``limits.max_rows``.
     """
     check_file_size(path, "drive CSV", limits.max_bytes)
-    linenos, rows, header = [], [], None
+    linenos: list[int] = []
+    rows: list[str] = []
+    header: tuple[int, str] | None = None
     try:
         with path.open(encoding="utf-8-sig", newline=None) as fh:
             for lineno, ln in enumerate(fh, start=1):
@@ -232,7 +234,7 @@ def read_drive_log(path, *, limits: FileLimits | None = None) -> DriveLog:
                               f"least {1 / MAX_SAMPLE_RATE:g} s), got {fs:.6g} Hz (step {1 / fs:.3g} s)")
     column = names[3] if len(names) == 4 else None
     extra = values[:, 2].copy() if column else None
-    if column == "distance_m" and np.any(np.diff(extra) <= 0):
+    if column == "distance_m" and extra is not None and np.any(np.diff(extra) <= 0):
         k = int(np.flatnonzero(np.diff(extra) <= 0)[0])
         where = f"near time_s {float(t[k + 1])!r}" if resampled else f"line {linenos[k + 1]}"
         raise FileFormatError(f"{path}: column 4 (distance_m) must increase (the vehicle moves at "

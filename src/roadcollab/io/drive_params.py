@@ -253,7 +253,7 @@ def write_drive_params(path, *, speed: float | None, params: HalfCarParameters, 
         If the suffix is neither ``.toml`` nor ``.json`` (nothing is written).
     """
     path = Path(path)
-    top = {} if speed is None else {"speed_mps": float(speed)}
+    top: dict[str, float | str] = {} if speed is None else {"speed_mps": float(speed)}
     if sensor_noise_std is not None:
         top["sensor_noise_std"] = float(sensor_noise_std)
     if start_m is not None:

@@ -206,11 +206,14 @@ def body_mode_hz(params: HalfCarParameters) -> float:
 
 def _positions(log: DriveLog, speed: float | None, start: float) -> np.ndarray:
     """Road distance of every sample (module docstring), m."""
-    if log.column == "distance_m":
+    if log.column == "distance_m" and log.values is not None:
         return start + (log.values - log.values[0])
-    if log.column == "speed_mps":
+    if log.column == "speed_mps" and log.values is not None:
         v = log.values
         return start + np.concatenate([[0.0], np.cumsum(0.5 * (v[1:] + v[:-1]))]) / log.sample_rate
+    if speed is None:     # read_drive_params requires speed_mps when the log has neither column
+        raise ParameterError("a drive log without a speed_mps or distance_m column needs speed_mps in its "
+                             "parameters file")
     return start + speed * np.arange(log.time.shape[0]) / log.sample_rate
 
 

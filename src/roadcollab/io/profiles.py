@@ -135,8 +135,9 @@ def _parse_line(raw: str, lineno: int, name: str, columns: int | None = None) ->
     tokens = _tokens(raw)
     if not tokens:
         return None
-    values = [parse_ascii_number(t) for t in tokens]
-    if len(values) not in (2, 3) or (columns is not None and len(values) != columns) or None in values:
+    parsed = [parse_ascii_number(t) for t in tokens]
+    values = [v for v in parsed if v is not None]
+    if len(parsed) not in (2, 3) or (columns is not None and len(parsed) != columns) or len(values) != len(parsed):
         same = "" if columns is None else f" (every row has the {columns} columns of the first)"
         raise FileFormatError(f"{name}: line {lineno}: expected {_expected(tokens, columns)}, got {short_repr(raw)}"
                               f"{same}")
@@ -154,7 +155,8 @@ def _parse_rows(text: str, name: str, max_rows: int) -> tuple[list[list[float]],
     """Data rows ``[distance, elevation...]`` with increasing distance, and their 1-based line numbers.
 
     Every row has the columns of the first (2 or 3); a header line of column names may come before it."""
-    rows, lines = [], []
+    rows: list[list[float]] = []
+    lines: list[int] = []
     columns = None
     for lineno, raw in enumerate(text.splitlines(), start=1):
         if not rows and columns is None and _is_header(_tokens(raw)):

@@ -130,17 +130,18 @@ def simulate_response(plant: DiscretePlant, w, *, x0=None) -> np.ndarray:
     """
     w = check_signal("w", w, 2)
     x0 = np.zeros(4) if x0 is None else np.asarray(x0, dtype=float).reshape(4)
-    if not plant._modal:  # defective Ad: plain recursion
+    lam, CV, VinvB, Vinv = plant._lam, plant._CV, plant._VinvB, plant._Vinv
+    if not plant._modal or lam is None or CV is None or VinvB is None or Vinv is None:  # defective Ad: recursion
         import scipy.signal  # heavy (about 1 s); imported when needed, not with the package
 
         _, y, _ = scipy.signal.dlsim((plant.Ad, plant.Bd, plant.C, plant.D, plant.dt), w, x0=x0)
         return y
     # Modal form: one first-order complex recursion per mode, x = V xi (lti.modal).
     keep = plant._keep
-    u = w @ plant._VinvB[keep].T                            # (N, k) complex
-    xi = modal_states(plant._lam[keep], u, (plant._Vinv @ x0)[keep])[:-1]
+    u = w @ VinvB[keep].T                                   # (N, k) complex
+    xi = modal_states(lam[keep], u, (Vinv @ x0)[keep])[:-1]
     # y = C V xi: a conjugate pair contributes 2 Re(c v xi) of the kept mode.
-    return (xi @ (plant._CV[:, keep] * plant._weight).T).real + w @ plant.D.T
+    return (xi @ (CV[:, keep] * plant._weight).T).real + w @ plant.D.T
 
 
 def add_sensor_noise(y, noise_std: float, *, rng=None) -> np.ndarray:

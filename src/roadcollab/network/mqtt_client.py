@@ -80,7 +80,8 @@ class MqttClient:
             # CERT_REQUIRED and the host-name check: a broker without the fleet's certificate is refused.
             self._c.tls_set(ca_certs=str(login.ca_file), cert_reqs=ssl.CERT_REQUIRED,
                             tls_version=ssl.PROTOCOL_TLS_CLIENT)
-        self._c.reconnect_delay_set(min_delay=0.1, max_delay=5)
+        # paho annotates the delays as int but uses them as seconds in float arithmetic (a 0.1 s first retry)
+        self._c.reconnect_delay_set(min_delay=0.1, max_delay=5)  # type: ignore[arg-type]
         self._c.max_inflight_messages_set(100)
         self._c.on_connect = self._on_connect
         self._c.on_disconnect = self._on_disconnect

@@ -13,6 +13,7 @@ grid point ``i`` at ``i * spacing`` metres (the grid of :func:`~roadcollab.exper
 from __future__ import annotations
 
 from dataclasses import asdict, dataclass
+from typing import Any
 
 import numpy as np
 
@@ -136,7 +137,7 @@ class RoadPlan:
         extra = sorted(set(data) - known)
         if extra:
             raise ParameterError(f"{where}: unknown plan keys {extra}; expected some of {sorted(known)}")
-        kwargs = {}
+        kwargs: dict[str, Any] = {}     # str or float per field, checked above
         for k, v in data.items():
             if k in _TEXT:
                 if not isinstance(v, str):

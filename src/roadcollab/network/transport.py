@@ -67,7 +67,9 @@ class MemoryClient:
     """One client of a :class:`MemoryBroker` (a :class:`Transport`)."""
 
     def __init__(self, broker: MemoryBroker) -> None:
-        self.broker, self.filters, self.queue = broker, [], deque()
+        self.broker = broker
+        self.filters: list[str] = []
+        self.queue: deque[tuple[str, bytes]] = deque()
 
     def subscribe(self, topic_filter: str) -> None:
         self.filters.append(topic_filter)

@@ -66,7 +66,7 @@ def read_manifest(folder: Path) -> dict | None:
 
 def _entries(folder: Path) -> list[str]:
     """Relative paths of every file and folder under ``folder`` (symlinks not followed)."""
-    out = []
+    out: list[str] = []
     for root, dirs, files in os.walk(folder):
         rel = Path(root).relative_to(folder)
         out.extend(str(rel / n) if str(rel) != "." else n for n in dirs + files)

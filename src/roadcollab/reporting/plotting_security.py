@@ -7,11 +7,14 @@ from __future__ import annotations
 
 import re
 from pathlib import Path
-from typing import Sequence
+from typing import TYPE_CHECKING, Sequence
 
 import numpy as np
 
 from .plotting_base import plt, save_figure
+
+if TYPE_CHECKING:                 # matplotlib is imported with pyplot, by plotting_base
+    from matplotlib.image import AxesImage
 
 __all__ = ["plot_attack_success", "plot_privacy_frontier"]
 
@@ -69,7 +72,8 @@ def _short(e: float) -> str:
     return f"{mant}e{int(exp)}"
 
 
-def _heat(ax, values: np.ndarray, shown: np.ndarray, text: list[list[str]], cmap: str, norm, ran: np.ndarray) -> object:
+def _heat(ax, values: np.ndarray, shown: np.ndarray, text: list[list[str]], cmap: str, norm, ran: np.ndarray
+          ) -> AxesImage:
     """Cells coloured by ``shown`` (NaN: no colour), annotated with ``text``; cells not run are grey."""
     cm = plt.get_cmap(cmap).with_extremes(bad="white")
     im = ax.imshow(np.ma.masked_invalid(shown), cmap=cm, norm=norm, aspect="auto", interpolation="nearest")

@@ -99,7 +99,10 @@ class SqliteBackend:
         -------
         int
         """
-        return int(self._db.execute(sql, tuple(args)).lastrowid)
+        rowid = self._db.execute(sql, tuple(args)).lastrowid
+        if rowid is None:                 # only a statement that inserts no row leaves it unset
+            raise ParameterError(f"road store: {sql.split()[0]} inserted no row")
+        return int(rowid)
 
     @contextlib.contextmanager
     def transaction(self):
@@ -199,7 +202,10 @@ class PostgresBackend:
         -------
         int
         """
-        return int(self._db.execute(self._sql(sql) + " RETURNING id", tuple(args)).fetchone()[0])
+        row = self._db.execute(self._sql(sql) + " RETURNING id", tuple(args)).fetchone()
+        if row is None:
+            raise ParameterError(f"road store: {sql.split()[0]} inserted no row")
+        return int(row[0])
 
     @contextlib.contextmanager
     def transaction(self):
