@@ -30,6 +30,7 @@ Vehicle 1 has ``w^f = 0``.
 from __future__ import annotations
 
 import functools
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -45,6 +46,9 @@ from ..lti.batch2x2 import inv2x2, matmul, matvec, receiver_z
 from ..lti.response import FrequencyResponseCache
 from ..models.vehicle import FleetSpec, Vehicle
 from .vehicle_estimate import VehicleEstimate
+
+if TYPE_CHECKING:
+    from .guard import ReceiverGuard
 
 __all__ = ["VehicleEstimate", "CollaborativeEstimator", "learning_filters"]
 
@@ -146,8 +150,7 @@ class CollaborativeEstimator:
         # ``protocol.decode(data, systems=self.system_cache)``) once per receiver, not per segment.
         self.response_cache = FrequencyResponseCache()
         self.system_cache = SystemCache()
-        # The guard every received message goes through (ReceiverGuard.attach); None: refused unless unguarded=True.
-        self.guard = None
+        self.guard: ReceiverGuard | None = None   # set by ReceiverGuard.attach; None: refused unless unguarded
 
     # -- realisations sent to the next vehicle ------------------------------------------------
     def _realisations(self) -> tuple[StateSpaceData, StateSpaceData]:
@@ -312,8 +315,7 @@ class CollaborativeEstimator:
 
         For an :class:`InversionMessage` (hardened or fused exchange) the update is
         ``w^f_j = -S_j^-1 T_j z``, identical to the optimal filters applied to ``(T, S, e, w^f)``.
-        No plausibility check is made here: :class:`~roadcollab.collaboration.guard.ReceiverGuard`
-        does that before use.
+        No plausibility check here: :class:`~roadcollab.collaboration.guard.ReceiverGuard` does it before use.
 
         Parameters
         ----------

@@ -244,6 +244,9 @@ class PipelineCache:
     """
 
     def __init__(self) -> None:
+        self._clear()
+
+    def _clear(self) -> None:
         self._pipelines: dict = {}
         self._moments: dict = {}
         self._estimators: dict = {}
@@ -252,7 +255,7 @@ class PipelineCache:
         return {}
 
     def __setstate__(self, state: dict) -> None:
-        self.__init__()
+        self._clear()
 
     def pipeline(self, config: ExperimentConfig, seed: int) -> FleetPipeline:
         """The pipeline of a configuration and the fleet of a root seed (built once).

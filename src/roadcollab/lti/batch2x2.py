@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..errors import ParameterError
 from ._bin_kernel import inv2, matvec2
 from .kernels import kernel_path
 
@@ -59,7 +60,8 @@ def matvec(M: np.ndarray, x: np.ndarray) -> np.ndarray:
     (K, p) ndarray
     """
     if M.shape[-2:] != (2, 2):
-        return np.einsum("kij,kj->ki", M, x)
+        out: np.ndarray = np.einsum("kij,kj->ki", M, x)
+        return out
     if kernel_path() == "compiled":      # one compiled pass over the bins (docs/speed.md, "Third pass")
         y = matvec2(M, x)
         if y is not None:
@@ -162,7 +164,11 @@ def receiver_z(T: np.ndarray | None, S: np.ndarray, E: np.ndarray, Wf: np.ndarra
     -------
     (K, 2) complex ndarray
     """
-    z = matvec(inv2x2(T) if T_inv is None else T_inv, E - matvec(S, Wf))
+    if T_inv is None:
+        if T is None:
+            raise ParameterError("receiver_z needs T or T_inv")
+        T_inv = inv2x2(T)
+    z = matvec(T_inv, E - matvec(S, Wf))
     if weight is not None:
         z *= weight[:, None]
     return z

@@ -63,7 +63,8 @@ class BlockSchur:
         The complex Schur form ``A = U T U^H`` the blocks were computed from (before reordering).
     """
 
-    def __init__(self, R, Bw, Cw, blocks, schur):
+    def __init__(self, R: np.ndarray, Bw: np.ndarray, Cw: np.ndarray, blocks: list[tuple[int, int]],
+                 schur: tuple[np.ndarray, np.ndarray]) -> None:
         self.R, self.Bw, self.Cw, self.blocks, self.schur = R, Bw, Cw, blocks, schur
 
 
@@ -104,7 +105,7 @@ def _reorder(T: np.ndarray, U: np.ndarray, clusters: list[list[int]]) -> tuple[n
     return T, U, [len(g) for g in clusters]
 
 
-def block_schur(A, B, C, *, schur: tuple[np.ndarray, np.ndarray] | None = None,
+def block_schur(A: np.ndarray, B: np.ndarray, C: np.ndarray, *, schur: tuple[np.ndarray, np.ndarray] | None = None,
                 max_coupling: float = MAX_COUPLING, cluster_tol: float = CLUSTER_TOL,
                 cluster_rel: float = CLUSTER_REL) -> BlockSchur:
     """Block-diagonalise ``(A, B, C)`` (module docstring).
@@ -148,7 +149,8 @@ def block_schur(A, B, C, *, schur: tuple[np.ndarray, np.ndarray] | None = None,
         clusters = [sorted(c + near) if k == out else c for k, c in enumerate(clusters) if c is not near]
 
 
-def _decouple(T0, U0, B, C, clusters, max_coupling) -> BlockSchur | int:
+def _decouple(T0: np.ndarray, U0: np.ndarray, B: np.ndarray, C: np.ndarray, clusters: list[list[int]],
+              max_coupling: float) -> BlockSchur | int:
     """One pass of :func:`block_schur`: the form, or the index of the first cluster whose split
     from the rest failed (``||X||_F > max_coupling`` or the Sylvester solve failed). On the compiled
     path the same pass is one call (:mod:`~roadcollab.lti._blockdiag_kernel`)."""
@@ -177,7 +179,7 @@ def _decouple(T0, U0, B, C, clusters, max_coupling) -> BlockSchur | int:
     return BlockSchur(T, Bw, Cw, blocks, (T0, U0))
 
 
-def block_response(bs: BlockSchur, D, z: np.ndarray) -> np.ndarray:
+def block_response(bs: BlockSchur, D: np.ndarray, z: np.ndarray) -> np.ndarray:
     """``C (zI - A)^-1 B + D`` at points ``z`` from a :func:`block_schur` form, (M, p, m).
 
     Parameters
@@ -230,8 +232,7 @@ def block_response(bs: BlockSchur, D, z: np.ndarray) -> np.ndarray:
                 right.append(l)
                 used += 1
     Res = (Cw[:, left].T[:, :, None] * Bw[right][:, None, :]).reshape(len(left), p * m)
-    H = G[:used].T @ Res
-    H = H.reshape(z.size, p, m)
+    H: np.ndarray = (G[:used].T @ Res).reshape(z.size, p, m)
     for i0, i1 in bs.blocks:
         k = i1 - i0
         if k <= SMALL_BLOCK:

@@ -39,6 +39,8 @@ from __future__ import annotations
 import contextlib
 import contextvars
 import os
+from collections.abc import Iterator, Sequence
+from typing import Any
 
 import numpy as np
 
@@ -53,10 +55,10 @@ _CHOICE: contextvars.ContextVar[str | None] = contextvars.ContextVar("roadcollab
 #: Bins per pass of the block kernel: its per-bin arrays (2 x (n + 4 + 2 k_max m) x TILE doubles) stay in cache.
 TILE = 256
 #: The compiled functions once built (``{}`` before the first use; ``None`` values if numba is missing).
-_COMPILED: dict = {}
+_COMPILED: dict[str, Any] = {}
 
 
-def jit_options() -> dict:
+def jit_options() -> dict[str, Any]:
     """The options every compiled kernel of the package is built with (``numba.njit(**jit_options())``).
 
     Returns
@@ -68,7 +70,7 @@ def jit_options() -> dict:
     return {"cache": True, "error_model": "numpy", "nogil": True}
 
 
-def _build() -> dict:   # Long: the kernels are defined here so that numba is imported on first use only
+def _build() -> dict[str, Any]:   # Long: the kernels are defined here so that numba is imported on first use only
     """Import numba and define the kernels (lazily: importing numba costs about 0.3 s)."""
     if _COMPILED:
         return _COMPILED
@@ -79,8 +81,8 @@ def _build() -> dict:   # Long: the kernels are defined here so that numba is im
         return _COMPILED
     jit = numba.njit(**jit_options())
 
-    @jit
-    def block(R, Bw, Cw, D, starts, stops, zr, zi, out):   # pragma: no cover - compiled
+    def block(R: np.ndarray, Bw: np.ndarray, Cw: np.ndarray, D: np.ndarray, starts: np.ndarray,  # pragma: no cover
+              stops: np.ndarray, zr: np.ndarray, zi: np.ndarray, out: np.ndarray) -> None:   # - compiled
         # Long: one tile of bins through every block in one compiled pass, its three block cases inline.
         # H = D + sum_b Cw_b (z I - R_b)^-1 Bw_b, TILE bins at a time so every per-bin array stays in
         # the L1/L2 cache, real and imaginary parts in separate arrays (the bin loops are innermost
@@ -172,8 +174,8 @@ def _build() -> dict:   # Long: the kernels are defined here so that numba is im
                     out[t0 + k, c] = complex(ar[c, k], ai[c, k])
 
 
-    @jit
-    def pole(lr, li, Rr, Ri, Dr, Di, zr, zi, out):   # pragma: no cover - compiled
+    def pole(lr: np.ndarray, li: np.ndarray, Rr: np.ndarray, Ri: np.ndarray, Dr: np.ndarray,  # pragma: no cover
+             Di: np.ndarray, zr: np.ndarray, zi: np.ndarray, out: np.ndarray) -> None:   # - compiled
         # H = D + sum_i Res_i / (z - lambda_i), real and imaginary parts apart, TILE bins at a time;
         # Res (n, p*m), out (M, p*m) complex.
         M = zr.shape[0]
@@ -204,7 +206,8 @@ def _build() -> dict:   # Long: the kernels are defined here so that numba is im
                 for c in range(pm):
                     out[t0 + k, c] = complex(ar[c, k], ai[c, k])
 
-    _COMPILED.update(block=block, pole=pole)
+    # Compiled by calling numba's decorator (an untyped one to mypy), as in the package's other kernel modules.
+    _COMPILED.update(block=jit(block), pole=jit(pole))
     return _COMPILED
 
 
@@ -239,7 +242,7 @@ def kernel_path() -> str:
 
 
 @contextlib.contextmanager
-def use_kernels(name: str):
+def use_kernels(name: str) -> Iterator[None]:
     """Evaluate with the ``"compiled"`` or ``"reference"`` kernels inside a ``with`` block.
 
     Parameters
@@ -261,7 +264,8 @@ def use_kernels(name: str):
         _CHOICE.reset(token)
 
 
-def block_eval(R: np.ndarray, Bw: np.ndarray, Cw: np.ndarray, D: np.ndarray, blocks, z: np.ndarray) -> np.ndarray:
+def block_eval(R: np.ndarray, Bw: np.ndarray, Cw: np.ndarray, D: np.ndarray, blocks: Sequence[tuple[int, int]],
+               z: np.ndarray) -> np.ndarray:
     """``D + sum_b Cw_b (z I - R_b)^-1 Bw_b`` over the diagonal blocks of ``R``, compiled.
 
     Parameters

@@ -3,9 +3,11 @@
 from __future__ import annotations
 
 from collections import OrderedDict
+from typing import Protocol
 
 import numpy as np
 import scipy.linalg
+from numpy.typing import ArrayLike
 
 from .batch2x2 import inv2x2
 from .blockdiag import block_response, block_schur
@@ -14,7 +16,22 @@ from .kernels import kernel_path, pole_residue_eval
 __all__ = ["dlti_frequency_response", "unit_circle", "ss_response", "content_key", "FrequencyResponseCache"]
 
 
-def dlti_frequency_response(Ad, Bd, Cd, Dd, omega_dt: np.ndarray, *,
+class HasResponse(Protocol):
+    """A realisation the cache can key and evaluate (:class:`~roadcollab.lti.realisation.StateSpaceData`)."""
+
+    @property
+    def A(self) -> np.ndarray: ...
+    @property
+    def B(self) -> np.ndarray: ...
+    @property
+    def C(self) -> np.ndarray: ...
+    @property
+    def D(self) -> np.ndarray: ...
+
+    def frequency_response(self, omega_dt: np.ndarray) -> np.ndarray: ...
+
+
+def dlti_frequency_response(Ad: ArrayLike, Bd: ArrayLike, Cd: ArrayLike, Dd: ArrayLike, omega_dt: np.ndarray, *,
                             schur: tuple[np.ndarray, np.ndarray] | None = None,
                             eig: tuple[np.ndarray, np.ndarray] | None = None) -> np.ndarray:
     """Frequency response ``C (zI - A)^-1 B + D`` at ``z = exp(j omega dt)``.
@@ -40,7 +57,7 @@ def dlti_frequency_response(Ad, Bd, Cd, Dd, omega_dt: np.ndarray, *,
 _UNIT_CIRCLE: list[tuple[np.ndarray, np.ndarray]] = []
 
 
-def unit_circle(omega_dt) -> np.ndarray:
+def unit_circle(omega_dt: ArrayLike) -> np.ndarray:
     """``exp(j omega_dt)``, read-only, kept for the last four frequency vectors.
 
     A vehicle evaluates its systems on the same one or two vectors (every bin, the active bins) all the
@@ -70,7 +87,7 @@ def unit_circle(omega_dt) -> np.ndarray:
     return z
 
 
-def ss_response(A, B, C, D, points: np.ndarray, *, schur: tuple[np.ndarray, np.ndarray] | None = None,
+def ss_response(A: ArrayLike, B: ArrayLike, C: ArrayLike, D: ArrayLike, points: np.ndarray, *, schur: tuple[np.ndarray, np.ndarray] | None = None,
                 eig: tuple[np.ndarray, np.ndarray] | None = None) -> np.ndarray:
     """``C (x I - A)^-1 B + D`` at complex points ``x`` (``s`` or ``z``), shape (M, p, m).
 
@@ -106,27 +123,29 @@ def ss_response(A, B, C, D, points: np.ndarray, *, schur: tuple[np.ndarray, np.n
     # T~, S~ of order 12-22 against a 40-digit reference: the same 1e-12..2e-11 relative per bin),
     # at 0.4-0.6 ms instead of 1.1-4 ms (measured on the loaded 2-core machine).
     x = np.asarray(points, dtype=complex).reshape(-1)
-    A, B, C, D = (np.asarray(a, dtype=float) for a in (A, B, C, D))
-    p, m = D.shape
-    if A.shape[0] == 0:
-        return np.broadcast_to(D.astype(complex), (x.size, p, m)).copy()
+    Af, Bf, Cf, Df = (np.asarray(a, dtype=float) for a in (A, B, C, D))
+    p, m = Df.shape
+    if Af.shape[0] == 0:
+        empty: np.ndarray = np.broadcast_to(Df.astype(complex), (x.size, p, m)).copy()
+        return empty
     if schur is None:
-        lam, V = np.linalg.eig(A) if eig is None else eig
+        lam, V = np.linalg.eig(Af) if eig is None else eig
         if np.linalg.cond(V) < 1e2:
-            Cv = C @ V
-            Bv = np.linalg.solve(V, B)
+            Cv = Cf @ V
+            Bv = np.linalg.solve(V, Bf)
             R = (Cv[:, :, None] * Bv[None, :, :]).transpose(1, 0, 2).reshape(lam.size, p * m)
             if kernel_path() == "compiled":
-                return pole_residue_eval(lam, R, D, x)
+                return pole_residue_eval(lam, R, Df, x)
             # np.reciprocal, not 1.0 / x: numpy's complex division (Smith's algorithm) was 7x
             # slower on 3000 x 18 points (1.2 ms vs 0.18 ms, measured); and laid out (n, M), whose
             # rows are long, rather than (M, n) with a short inner axis (2.5x faster for n = 4..8).
-            H = np.reciprocal(x[None, :] - lam[:, None]).T @ R
-            return H.reshape(x.size, p, m) + D
-    return block_response(block_schur(A, B, C, schur=schur), D, x)
+            H: np.ndarray = (np.reciprocal(x[None, :] - lam[:, None]).T @ R).reshape(x.size, p, m) + Df
+            return H
+    return block_response(block_schur(Af, Bf, Cf, schur=schur), Df, x)
 
 
-def _schur_frequency_response(A, B, C, D, z):
+def _schur_frequency_response(A: np.ndarray, B: np.ndarray, C: np.ndarray, D: np.ndarray, z: np.ndarray
+                              ) -> np.ndarray:
     """``C (zI - A)^-1 B + D`` via ``A = U T U^H``: one back substitution for all ``z``.
 
     ``X`` is kept as (n, m, M) so each step is one BLAS product over every frequency
@@ -147,10 +166,11 @@ def _schur_frequency_response(A, B, C, D, z):
         acc *= inv_diag[i]
         X[i] = acc
     H = (Ct @ X.reshape(n, m * z.size)).reshape(C.shape[0], m, z.size)
-    return H.transpose(2, 0, 1) + D
+    out: np.ndarray = H.transpose(2, 0, 1) + D
+    return out
 
 
-def content_key(*arrays) -> bytes:
+def content_key(*arrays: ArrayLike) -> bytes:
     """The exact bytes of float64 arrays with their shapes: a cache key that two different
     inputs can never share (no hash to collide; comparing keys of a few kB is microseconds).
 
@@ -162,10 +182,10 @@ def content_key(*arrays) -> bytes:
     -------
     bytes
     """
-    parts = []
+    parts: list[bytes] = []
     for a in arrays:
-        a = np.ascontiguousarray(a, dtype=float)
-        parts += [repr(a.shape).encode(), a.tobytes()]
+        c = np.ascontiguousarray(a, dtype=float)
+        parts += [repr(c.shape).encode(), c.tobytes()]
     return b"|".join(parts)
 
 
@@ -194,7 +214,7 @@ class FrequencyResponseCache:
         self._store: OrderedDict[bytes, np.ndarray] = OrderedDict()
         self._seen: OrderedDict[int, None] = OrderedDict()
 
-    def response(self, system, omega_dt: np.ndarray, *, inverse: bool = False) -> np.ndarray:
+    def response(self, system: HasResponse, omega_dt: np.ndarray, *, inverse: bool = False) -> np.ndarray:
         """``system.frequency_response(omega_dt)``, read-only, from the cache when seen before.
 
         Parameters

@@ -204,8 +204,8 @@ def load_aggregation(folder) -> AggregationPolicy:
         The fleet folder.
     """
     path, data = _fleet_toml(folder)
-    data = data.get("aggregation")
-    return AggregationPolicy() if data is None else AggregationPolicy.from_dict(data, str(path))
+    table = data.get("aggregation")
+    return AggregationPolicy() if table is None else AggregationPolicy.from_dict(table, str(path))
 
 
 def load_trust(folder) -> FleetTrust:

@@ -121,7 +121,7 @@ class RoadPlan:
         return d
 
     @classmethod
-    def from_dict(cls, data: dict, where: str) -> "RoadPlan":
+    def from_dict(cls, data: object, where: str) -> "RoadPlan":
         """The plan from a table read from ``where`` (unknown or mistyped keys refused, naming ``where``).
 
         Parameters

@@ -155,6 +155,8 @@ class Service:
             body = open_from(payload, self.trust, topic, vid)
             if kind == "hello":
                 return self._hello(vid, decode_json(body, "hello"))
+            if s is None:                      # parse_vehicle gives a segment for every "seg" topic
+                raise MessageError(f"topic {topic!r}: expected .../v/<vid>/seg/<n>")
             return self._segment(vid, s, body, bytes(payload), topic)
         except (MessageError, ParameterError) as err:
             return self._refuse(str(err), vid, topic)

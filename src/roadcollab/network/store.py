@@ -274,7 +274,7 @@ class ServiceStore(RoundTables):
     def status(self) -> dict:
         """Counts for ``roadcollab status``: vehicles, segments, contributions, refusals by reason."""
         one = lambda q: self.db.execute(q).fetchone()[0]  # noqa: E731
-        refused = {}
+        refused: dict[str, int] = {}
         for (reason,) in self.db.execute("SELECT reason FROM events WHERE kind = 'refused'"):
             key = reason.split(":")[0][:80]
             refused[key] = refused.get(key, 0) + 1

@@ -80,7 +80,7 @@ class ObfuscationChannel:
 
     @classmethod
     def draw(cls, T: StateSpaceData, S: StateSpaceData, grid: SegmentGrid, spec: ObfuscationSpec = ObfuscationSpec(),
-             *, rng=None) -> "ObfuscationChannel":
+             *, rng: np.random.Generator | int | None = None) -> "ObfuscationChannel":
         """Draw ``Psi1``, ``Psi2`` and build ``T~``, ``S~`` for a sender's ``T`` and ``S``.
 
         Parameters
@@ -121,23 +121,27 @@ class ObfuscationChannel:
 
     @property
     def psi1_f(self) -> np.ndarray:
-        return self.psi1_all[self.grid.active]
+        out: np.ndarray = self.psi1_all[self.grid.active]
+        return out
 
     @property
     def psi2_inv_f(self) -> np.ndarray:
-        return self.psi2_inv_all[self.grid.active]
+        out: np.ndarray = self.psi2_inv_all[self.grid.active]
+        return out
 
     @property
     def psi1_out(self) -> np.ndarray:
-        return self.psi1_all[~self.grid.active]
+        out: np.ndarray = self.psi1_all[~self.grid.active]
+        return out
 
     @property
     def psi2_inv_out(self) -> np.ndarray:
-        return self.psi2_inv_all[~self.grid.active]
+        out: np.ndarray = self.psi2_inv_all[~self.grid.active]
+        return out
 
 
 def obfuscate(message: ExchangeMessage, grid: SegmentGrid, spec: ObfuscationSpec = ObfuscationSpec(), *,
-              rng=None, T_response: np.ndarray | None = None, S_response: np.ndarray | None = None,
+              rng: np.random.Generator | int | None = None, T_response: np.ndarray | None = None, S_response: np.ndarray | None = None,
               channel: ObfuscationChannel | None = None, construction: str = "direct",
               spectra: tuple[np.ndarray, np.ndarray] | None = None) -> tuple[ExchangeMessage, Obfuscator, Obfuscator]:
     """Apply Algorithm 2 to a plain message (eq. 17).
@@ -194,17 +198,17 @@ def obfuscate(message: ExchangeMessage, grid: SegmentGrid, spec: ObfuscationSpec
     if construction not in ("direct", "consistent"):
         raise ParameterError(f"construction must be 'direct' or 'consistent', got {construction!r}")
     E, Wf = (grid.rfft(message.e), grid.rfft(message.wf)) if spectra is None else spectra
-    T_f = S_f = None
+    consistent: tuple[np.ndarray, np.ndarray] | None = None
     if construction == "consistent":
         om = grid.omega_dt[grid.active]
-        T_f = message.T.frequency_response(om) if T_response is None else T_response
-        S_f = message.S.frequency_response(om) if S_response is None else S_response
+        consistent = (message.T.frequency_response(om) if T_response is None else T_response,
+                      message.S.frequency_response(om) if S_response is None else S_response)
     return obfuscate_spectra(message.T, message.S, E, Wf, grid, spec, rng=rng, channel=channel,
-                             consistent=(T_f, S_f) if construction == "consistent" else None)
+                             consistent=consistent)
 
 
-def obfuscate_spectra(T, S, E: np.ndarray, Wf: np.ndarray, grid: SegmentGrid,
-                      spec: ObfuscationSpec = ObfuscationSpec(), *, rng=None,
+def obfuscate_spectra(T: StateSpaceData, S: StateSpaceData, E: np.ndarray, Wf: np.ndarray, grid: SegmentGrid,
+                      spec: ObfuscationSpec = ObfuscationSpec(), *, rng: np.random.Generator | int | None = None,
                       channel: ObfuscationChannel | None = None,
                       consistent: tuple[np.ndarray, np.ndarray] | None = None
                       ) -> tuple[ExchangeMessage, Obfuscator, Obfuscator]:
@@ -273,7 +277,7 @@ def theorem1_errors(clear: ExchangeMessage, sent: ExchangeMessage, psi1: Obfusca
     """
     band = bin_index(grid.weight >= band_weight)
 
-    def rel(got, ref):
+    def rel(got: np.ndarray, ref: np.ndarray) -> tuple[float, float]:
         num = np.linalg.norm(got - ref, axis=1)
         den = np.linalg.norm(ref, axis=1)
         keep = den > 1e-12 * max(float(den.max()), 1e-300)

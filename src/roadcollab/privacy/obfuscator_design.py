@@ -110,7 +110,8 @@ def _min_relative_separation(roots: np.ndarray) -> float:
     return float(np.min(d[~np.eye(roots.size, dtype=bool)]))
 
 
-def _random_roots(n: int, freq_range, damping_range, complex_fraction, rng) -> np.ndarray:
+def _random_roots(n: int, freq_range: tuple[float, float], damping_range: tuple[float, float],
+                  complex_fraction: float, rng: np.random.Generator) -> np.ndarray:
     """``n`` random left-half-plane roots (complex ones in conjugate pairs), rad/s."""
     roots: list[complex] = []
     lf = np.log(freq_range)
@@ -134,10 +135,11 @@ def _poly(roots: np.ndarray) -> np.ndarray:
     c = np.ones(1, complex)
     for r in roots:
         c = np.convolve(c, np.array([1.0, -r]), mode="full")
-    return c.real.copy()
+    out: np.ndarray = c.real.copy()
+    return out
 
 
-def _polyval_stack(coeffs: np.ndarray, x) -> np.ndarray:
+def _polyval_stack(coeffs: np.ndarray, x: np.ndarray) -> np.ndarray:
     """Horner evaluation of a stack of polynomials ``coeffs`` (..., d+1) at ``x``: shape ``coeffs.shape[:-1] + x.shape``.
 
     Elementwise the same operations as ``np.polyval`` (so the same values), in ``d`` vector steps
@@ -222,7 +224,8 @@ class Obfuscator:
         if kernel_path() == "compiled":
             return pole_residue_eval(zp, res.reshape(zp.size, 4), direct, z)
         H = np.reciprocal(z[None, :] - zp[:, None]).T @ res.reshape(zp.size, 4)
-        return H.reshape(z.size, 2, 2) + direct
+        out: np.ndarray = H.reshape(z.size, 2, 2) + direct
+        return out
 
     def zeros(self) -> np.ndarray:
         """Transmission zeros of the continuous design, roots of ``det N(s)`` (rad/s)."""
@@ -261,7 +264,7 @@ def _realise(poles: np.ndarray, num: np.ndarray) -> tuple[np.ndarray, ...]:
     # One scale per block (it commutes with the block, so A and its eigenvectors stay
     # unchanged) balances the block's input and output coupling.
     for k, (Bk, Ck) in enumerate(zip(blocks_B, blocks_C)):
-        sc = np.sqrt(max(np.linalg.norm(Ck), 1e-12) / np.linalg.norm(Bk))
+        sc = np.sqrt(max(float(np.linalg.norm(Ck)), 1e-12) / np.linalg.norm(Bk))
         blocks_B[k], blocks_C[k] = Bk * sc, Ck / sc
     n = sum(a.shape[0] for a in blocks_A)
     A = np.zeros((n, n))
@@ -294,7 +297,7 @@ def _warped_powers(grid: SegmentGrid, degree: int) -> np.ndarray:
     return P
 
 
-_POWERS: dict[tuple, np.ndarray] = {}
+_POWERS: dict[tuple[int, float, bytes, int], np.ndarray] = {}
 #: ``j^k`` for ``k mod 4``: the coefficient of ``w^k`` in ``N(j w)`` is ``c_k j^k``.
 _J_POWERS = np.array([1.0, 1j, -1.0, -1j])
 
@@ -349,7 +352,7 @@ def _max_gain_range_on_axis(num: np.ndarray, den: np.ndarray, powers: np.ndarray
     return float(np.linalg.norm(num[:, :, 0], 2)) * r
 
 
-def _candidate(spec: ObfuscationSpec, rng) -> tuple[np.ndarray, np.ndarray] | None:
+def _candidate(spec: ObfuscationSpec, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray] | None:
     """One candidate's poles and numerators (2, 2, n + 1), or None when two poles are too close."""
     n = int(rng.integers(spec.order_range[0], spec.order_range[1] + 1))
     poles = _random_roots(n, spec.pole_frequency_range, spec.pole_damping_range, spec.complex_fraction, rng)
@@ -374,7 +377,7 @@ def _obfuscator(poles: np.ndarray, num: np.ndarray, dt: float) -> "Obfuscator":
     return Obfuscator(poles=poles, numerators=num, system=StateSpaceData(Ad, Bd, Cd, Dd, dt))
 
 
-def draw_obfuscator(spec: ObfuscationSpec, grid: SegmentGrid, *, rng=None,
+def draw_obfuscator(spec: ObfuscationSpec, grid: SegmentGrid, *, rng: np.random.Generator | int | None = None,
                     max_attempts: int = 200) -> Obfuscator:
     """Draw one ``Psi`` from ``spec``, discretised for ``grid``.
 

@@ -127,7 +127,7 @@ def _write_config_json(est: DriveEstimates, path: Path, *, command: str, notes: 
         "receiver_guard": est.receiver_guard,
         "cleaning": cleaning,
     }
-    extra = {"notes": notes}
+    extra: dict[str, object] = {"notes": notes}
     if elapsed is not None:
         extra["elapsed_s"] = elapsed
     write_config(path, command=command, seed=None, config=config, extra=extra)

@@ -76,7 +76,7 @@ def reproduction_summary(rows: list[MseRow], bound_rows: list[BoundRow] | None =
     v1 = rows[0]
     later = rows[1:]
     k5 = min(5, V) - 1
-    out = {
+    out: dict[str, float | int | str | bool | None] = {
         "vehicle1_observer_mse": v1.observer_only_mse_mean,
         "vehicle1_observer_over_own_inversion": v1.observer_only_mse_mean / v1.own_inversion_mse_mean,
         "algorithm1_mean_mse": _mean_over("mse_mean", later),

@@ -19,12 +19,13 @@ import time
 import numpy as np
 import scipy.linalg
 
+from ...errors import MessageError
 from ...collaboration.algorithm1 import CollaborativeEstimator
 from ...estimation.grid import SegmentGrid
 from ...lti.realisation import StateSpaceData, random_orthogonal, series, similarity
 from ...privacy.obfuscator_design import ObfuscationSpec, draw_obfuscator
 from ...wire.framing import as_buffer, pack_message, read_array, read_header
-from ...wire.layout import payload_shapes
+from ...wire.layout import SecAggHeader, payload_shapes
 
 __all__ = ["direct_response", "naive_paper_step", "floor_ms", "exactness_figures"]
 
@@ -70,11 +71,14 @@ def _read(data: bytes):
     """Header and arrays of an exchange message, then the naive checks of T and S."""
     buf = as_buffer(data)
     h = read_header(buf)
+    if isinstance(h, SecAggHeader):
+        raise MessageError("expected a relay message, got a secure-aggregation message")
     arrays, offset = {}, h.header_nbytes
     for name, shape in payload_shapes(h):
         arrays[name] = read_array(buf, offset, shape)
         offset += 8 * shape[0] * shape[1]
-    systems = {n: StateSpaceData(*(arrays[f"{n}.{p}"] for p in "ABCD"), 1.0 / h.sample_rate) for n in "TS"}
+    systems = {n: StateSpaceData(arrays[f"{n}.A"], arrays[f"{n}.B"], arrays[f"{n}.C"], arrays[f"{n}.D"],
+                                 1.0 / h.sample_rate) for n in "TS"}
     for s in systems.values():
         _naive_check(s)
     return h, arrays, systems

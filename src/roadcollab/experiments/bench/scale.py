@@ -267,9 +267,9 @@ def run_scale(sizes: Sequence[int], *, n_vehicles: int = 20, workers: int = 2, s
             outcomes = run_segments(config, seed, n, mechanism=mechanism, scheduler=address, progress=cb)
             points.append(_point(outcomes, n_vehicles, workers, time.perf_counter() - t))
             first = outcomes if first is None or len(outcomes) < len(first) else first
-    same = None
-    k = min(check_segments, len(first))
-    if k:
+    same, k = None, 0
+    if first and check_segments:
+        k = min(check_segments, len(first))
         serial = run_segments(config, seed, k, mechanism=mechanism)
         same = all(np.array_equal(a.mse, b.mse) for a, b in zip(serial, first[:k]))
     a, b, worst = _linear_fit(points)

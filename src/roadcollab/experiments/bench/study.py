@@ -29,7 +29,9 @@ from threadpoolctl import threadpool_limits
 
 from ...wire import protocol
 from ..._validation import check_int
-from ...errors import ParameterError
+from ...errors import MessageError, ParameterError
+from ...wire.fields import Message
+from ...wire.message import ExchangeMessage, InversionMessage
 from ...experiments.config import ExperimentConfig
 from ...experiments.pipeline import FleetPipeline
 from ...collaboration.algorithm1 import CollaborativeEstimator
@@ -49,6 +51,13 @@ def _config_for(n_samples: int) -> ExperimentConfig:
     base = ExperimentConfig(n_vehicles=2, n_runs=1, margin=0.0)
     length = n_samples * base.speed / base.sample_rate
     return dataclasses.replace(base, segment_length=length)
+
+
+def _exchange(message: Message) -> ExchangeMessage | InversionMessage:
+    """A decoded relay message (the bench sends only those; a secure-aggregation message is refused)."""
+    if not isinstance(message, (ExchangeMessage, InversionMessage)):
+        raise MessageError(f"expected a relay message, got {type(message).__name__}")
+    return message
 
 
 def bench_segment(n_samples: int = 4000, *, mechanism: str = "paper", repeats: int = 30, seed: int = 0,
@@ -117,7 +126,7 @@ def _bench_segment(n_samples: int, mechanism: str, repeats: int, seed: int) -> d
         y = add_sensor_noise(simulate_response(car.true_plant, w), cfg.sensor_noise_std, rng=rng)
         # Relay.step, split where the receiver's work ends and the sender's begins (no guard here).
         t0 = time.perf_counter()
-        msg_in = protocol.decode(incoming, systems=car.system_cache)
+        msg_in = _exchange(protocol.decode(incoming, systems=car.system_cache))
         result = car.estimate(y, msg_in, unguarded=True)
         t1 = time.perf_counter()
         protocol.encode(relay.send(1, result, msg_in).message)
@@ -225,7 +234,7 @@ def bench_naive(n_samples: int = 4000, *, repeats: int = 30, seed: int = 0) -> d
         if k:                                 # the first segment warms the library receiver's caches
             naive.append(pair["naive"])
             lib.append(pair["library"])
-        ref = car.estimate(y, protocol.decode(incoming), unguarded=True).W_hat
+        ref = car.estimate(y, _exchange(protocol.decode(incoming)), unguarded=True).W_hat
         worst = max(worst, float(np.max(np.abs(W_hat - ref)) / np.max(np.abs(ref))))
     return {"ms_min": min(naive), "ms_median": statistics.median(naive), "library_ms_min": min(lib),
             "library_ms_median": statistics.median(lib), "speedup_min": min(naive) / min(lib),

@@ -210,7 +210,9 @@ def city_profiles(network: RoadNetwork, routes, potholes, *, rng=None) -> tuple[
             lanes[(r, s)] = _with_potholes(base, on)
     profiles = {}
     for route in routes:
-        xs, hs, start = [], [], 0.0
+        xs: list[np.ndarray] = []
+        hs: list[np.ndarray] = []
+        start = 0.0
         pieces = _pieces(route)
         for k, (r, s, a, b) in enumerate(pieces):
             length = network.roads[r].length
@@ -248,7 +250,7 @@ def default_potholes(network: RoadNetwork) -> tuple:
                  for p in ((rid, 0.3 * r.length, "both", 0.05, 0.6), (rid, 0.7 * r.length, "left", 0.04, 0.5)))
 
 
-def _gps(drive: Drive, network: RoadNetwork, route: tuple, rng: np.random.Generator) -> tuple[np.ndarray, ...]:
+def _gps(drive: Drive, network: RoadNetwork, route: tuple, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
     """lat, lon (NaN between fixes) at GPS_RATE with N(0, GPS_SIGMA) errors east and north."""
     step = int(round(SAMPLE_RATE / GPS_RATE))
     k = np.arange(0, drive.n_samples, step)

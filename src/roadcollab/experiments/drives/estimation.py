@@ -44,6 +44,7 @@ from ...collaboration.drive_guard import GUARD_ROAD_DEFAULT, drive_fleet_prior, 
 from ...collaboration.relay import Relay
 from ...detection.detector import DetectorSpec, detect_anomalies
 from ...errors import FileFormatError, ParameterError
+from ...estimation.estimator import JDPNoise
 from ...estimation.grid import SegmentGrid
 from ..config import ExperimentConfig
 from ...io.drives import Drive, common_time_grid
@@ -212,7 +213,7 @@ def _drive_estimators(drives: list[Drive], grid: SegmentGrid, *, speed: float, s
         The design rejects a drive's parameters (a singular or unstable model); the message starts
         with its parameters file and gives the cause.
     """
-    noise_models: dict[float, object] = {}
+    noise_models: dict[float, JDPNoise] = {}
     cars = []
     for j, d in enumerate(drives):
         if d.sensor_noise_std not in noise_models:

@@ -111,6 +111,13 @@ class FleetEstimates:
         return np.sum([covered(e) for e in self.elevation["inversion"]], axis=0)
 
 
+def _posterior(rec: VehicleRecord) -> np.ndarray:
+    """The record's posterior-fused inversion (set by the relay whenever a fleet posterior is given)."""
+    if rec.w_posterior is None:
+        raise ParameterError("a drive's record has no posterior inversion although a fleet posterior was given")
+    return rec.w_posterior
+
+
 def _to_grid(drive: Drive, w: np.ndarray, x: np.ndarray, shift: float) -> np.ndarray:
     """Elevation of a road velocity in the drive's time base, on the distance grid ``x`` (NaN outside)."""
     return elevation_to_distance(drive.positions + shift, integrate_elevation(w, drive.sample_rate), x)
@@ -207,7 +214,7 @@ def estimate_fleet(drives: list[Drive], *, spacing: float = 0.05, align: bool = 
     single = [band(_to_grid(d, r.w_single, x, s)) for d, r, s in zip(drives, recs, offsets)]
     collab = [single[0]] + [band(_to_grid(d, collaborative_velocity(r, d, x, inv[j - 1], s), x, s))
                             for j, (d, r, s) in enumerate(zip(drives, recs, offsets)) if j > 0]
-    fuse_from = inv if fleet is None else [band(_to_grid(d, r.w_posterior, x, s))
+    fuse_from = inv if fleet is None else [band(_to_grid(d, _posterior(r), x, s))
                                            for d, r, s in zip(drives, recs, offsets)]
     elevation = {"single": np.array(single), "inversion": np.array(inv), "collaborative": np.array(collab),
                  "fused": _running_mean(fuse_from)}
@@ -299,8 +306,9 @@ def fused_iri(est: FleetEstimates, segment_length: float) -> tuple[IRISegments |
             notes.append(f"{est.position[run][0]:.1f}-{est.position[run][-1]:.1f} m: {err}")
     if not parts:
         return None, f"IRI was not computed: {'; '.join(notes) or 'no drive covers the grid'}."
-    iri = IRISegments(*(np.concatenate([getattr(p, k) for p in parts]) for k in ("start", "end", "left", "right")),
-                      tracks=parts[0].tracks)
+    def cat(k: str) -> np.ndarray:
+        return np.concatenate([getattr(p, k) for p in parts])
+    iri = IRISegments(start=cat("start"), end=cat("end"), left=cat("left"), right=cat("right"), tracks=parts[0].tracks)
     return iri, (f"IRI was not computed on {'; '.join(notes)}." if notes else None)
 
 

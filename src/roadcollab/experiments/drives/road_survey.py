@@ -207,7 +207,7 @@ def _bootstrap(stack: np.ndarray, sel: np.ndarray, spacing: float, n: int, rng: 
 
 def _detections(est, kept: np.ndarray) -> list[list]:
     """Each pass's own detections (its kept inversion seen by the same virtual vehicle as the fused one)."""
-    out = []
+    out: list[list] = []
     for j in range(kept.shape[0]):
         if np.count_nonzero(np.isfinite(kept[j, :, 0])) < 64:
             out.append([])

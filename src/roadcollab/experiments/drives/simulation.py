@@ -35,7 +35,7 @@ from ...io.drives import Drive, write_drive_csv
 from ...io.profiles import measured_road
 from ...models.profile import RoadProfile
 from ...models.road import RoadSpec, generate_road, with_anomalies
-from ...models.vehicle import FleetSpec, sample_fleet
+from ...models.vehicle import FleetSpec, HalfCarParameters, sample_fleet
 from .mixed_fleet import simulate_drive
 
 __all__ = ["ROADS", "SimulatedDrive", "DriveSimulation", "simulate_drives", "write_drives"]
@@ -62,7 +62,7 @@ class SimulatedDrive:
 
     name: str
     drive: Drive
-    true_params: object
+    true_params: HalfCarParameters
 
 
 @dataclass(frozen=True, eq=False)
@@ -141,7 +141,7 @@ def simulate_drives(*, vehicles: int = 3, speeds=(15.0,), road: str = "measured"
     road_ss, fleet_ss, noise_ss = np.random.SeedSequence(seed).spawn(3)
     profile = _road(road, length_m, np.random.default_rng(road_ss))
     fleet = sample_fleet(vehicles, FleetSpec(), rng=np.random.default_rng(fleet_ss))
-    out = []
+    out: list[SimulatedDrive] = []
     for j, (veh, ss) in enumerate(zip(fleet, noise_ss.spawn(vehicles))):
         d = simulate_drive(profile, veh, speeds[j % len(speeds)], start=_START_M, sample_rate=float(sample_rate),
                            noise_std=float(noise_std), rng=np.random.default_rng(ss))

@@ -201,7 +201,7 @@ def iri_ratios(rows: list[IriRow], estimators) -> list[IriRatio]:
     >>> iri_ratios([], ["fused"])
     []
     """
-    out = []
+    out: list[IriRatio] = []
     if not rows:
         return out
     for name in estimators:

@@ -27,10 +27,12 @@ import numpy as np
 from threadpoolctl import threadpool_limits
 
 from ..._validation import check_int, check_positive
-from ...collaboration.relay import Exchange, Relay
+from ...collaboration.relay import Exchange, Relay, RelayStep
+from ...estimation.grid import SegmentGrid
 from ...errors import ParameterError
 from ...models.vehicle import Vehicle, sample_fleet
 from ...privacy.obfuscation import theorem1_errors
+from ...wire.message import ExchangeMessage
 from ..config import ExperimentConfig
 from ..pipeline import FleetPipeline, PipelineCache, fleet_and_run_seeds, record_run
 from .iri import RunIri, iri_rows, run_iri
@@ -95,6 +97,14 @@ def _estimate_spectra(pipe: FleetPipeline, j: int, Ys: list, plain, priv, fused,
             "fused_posterior": fused_post.estimate_spectrum, "centralized": central[j], "oracle_per_bin": oracle[j]}
 
 
+def _theorem1(step: RelayStep, grid: SegmentGrid) -> tuple[float, float, float, float]:
+    """Eq. 17 measured on one step of the private relay (:func:`~roadcollab.privacy.obfuscation.theorem1_errors`)."""
+    clear, psi = step.clear, step.psi
+    if clear is None or psi is None or not isinstance(step.message, ExchangeMessage):
+        raise ParameterError("a step of the private relay carries no clear message or obfuscators")
+    return theorem1_errors(clear, step.message, psi[0], psi[1], grid)
+
+
 def simulate_run(pipe: FleetPipeline, rng, *, keep_traces: int = 0, privacy: bool = True,
                  iri_segment_length: float | None = None) -> RunResult:
     """One Monte Carlo run: road, measurements, and every estimator on the same records.
@@ -148,7 +158,7 @@ def simulate_run(pipe: FleetPipeline, rng, *, keep_traces: int = 0, privacy: boo
         rel[j] = float(np.max(np.abs(priv[j].result.estimate - r.estimate))) / scale
         rel_h[j] = float(np.max(np.abs(hard[j].result.estimate - r.estimate))) / scale
         if privacy:
-            t1e[j], t1w[j], t1e_b[j], t1w_b[j] = theorem1_errors(priv[j].clear, priv[j].message, *priv[j].psi, grid)
+            t1e[j], t1w[j], t1e_b[j], t1w_b[j] = _theorem1(priv[j], grid)
     iri = None
     if iri_segment_length is not None:  # the last vehicle: the fleet estimates use every record
         iri = run_iri(road.positions[sl.start:sl.stop + 1], w[sl], truth,
@@ -221,11 +231,12 @@ class ReproductionResult:
         for j in range(self.config.n_vehicles):
             col = {name: m[:, j] for name, m in mse.items()}
             nmse = {name: (m[:, j:j + 1] / pw).mean() for name, m in mse.items()}
-            rows.append(MseRow(
-                j + 1, col["algorithm1_private"].mean(), std(col["algorithm1_private"]), col["algorithm1"].mean(),
+            values: list[float] = [
+                col["algorithm1_private"].mean(), std(col["algorithm1_private"]), col["algorithm1"].mean(),
                 col["observer_only"].mean(), std(col["observer_only"]), *(col[name].mean() for name in others),
                 nmse["algorithm1_private"], nmse["observer_only"], *(nmse[name] for name in others),
-                *(w[j] for w in worst)))
+                *(w[j] for w in worst)]
+            rows.append(MseRow(j + 1, *values))
         return rows
 
     def to_rows(self) -> list[MseRow]:

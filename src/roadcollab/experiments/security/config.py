@@ -76,10 +76,10 @@ class AttackStudyConfig:
         if self.secagg_min_inputs is None:
             object.__setattr__(self, "secagg_min_inputs", min(5, n))
         k = check_int("secagg_min_inputs", self.secagg_min_inputs, low=2, high=n)
-        if self.secagg_colluders is None:
-            object.__setattr__(self, "secagg_colluders", (n - k - 1,) if n - k - 1 >= 1 else ())
-        object.__setattr__(self, "secagg_colluders", tuple(self.secagg_colluders))
-        for c in self.secagg_colluders:
+        colluders = ((n - k - 1,) if n - k - 1 >= 1 else ()) if self.secagg_colluders is None else \
+            tuple(self.secagg_colluders)
+        object.__setattr__(self, "secagg_colluders", colluders)
+        for c in colluders:
             check_int("secagg_colluders[]", c, low=1, high=self.experiment.n_vehicles - 1)
         if self.experiment.n_vehicles < 3:
             raise ParameterError(f"experiment.n_vehicles must be >= 3 for the study, got {self.experiment.n_vehicles}")

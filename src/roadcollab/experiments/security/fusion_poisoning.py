@@ -119,7 +119,7 @@ class _Run:
     truth: np.ndarray          # (N, 2) band-limited true road velocity
     own: list[list[Detection]]  # each vehicle's own detections (honest)
     Ys: list[np.ndarray]                  # each vehicle's record spectrum
-    guard: ReceiverGuard       # vehicle 1's guard (the receiver of the aggregate)
+    guard: ReceiverGuard | None  # vehicle 1's guard (the receiver of the aggregate); None: not needed
     box: tuple[SpectralBox, ValidityEncoding] | None = None   # of the secagg_valid node
     radius: float = 0.0        # the l2 ball of the secagg_bounded node's last phases
     schedule: tuple = (1, 1.0)  # its (phases, grow)
@@ -134,6 +134,11 @@ class _Run:
         if self.box is None:
             raise ParameterError("the validated targets need the run's validity box")
         return self.box
+
+    def receiver_guard(self) -> ReceiverGuard:
+        if self.guard is None:
+            raise ParameterError("this honest run was recorded without vehicle 1's receiver guard")
+        return self.guard
 
     def message(self, z, count: int = 1) -> InversionMessage:
         g = self.grid
@@ -157,7 +162,7 @@ class _Run:
         return g.band_limited(g.rfft(np.diff(elev, axis=0) * g.sample_rate))
 
 
-def _honest_run(pipe: FleetPipeline, ss, road_spec, guard: ReceiverGuard) -> _Run:
+def _honest_run(pipe: FleetPipeline, ss, road_spec, guard: ReceiverGuard | None) -> _Run:
     g, cfg = pipe.grid, pipe.config
     road, _, Ys = record_run(pipe, run_stream(ss, "road"), run_stream(ss, "noise"), cfg.sensor_noise_std, road_spec)
     z = np.array([g.irfft(e.invert(Y, posterior=True)) for e, Y in zip(pipe.estimators, Ys)])
@@ -227,7 +232,7 @@ def _secagg_node(run: _Run, msgs: list[InversionMessage]) -> tuple[np.ndarray, i
     clip = SecAggSpec().clip
     agg = np.mean([np.clip(m.z, -clip, clip) for m in msgs], axis=0)
     est = run.pipe.estimators[0]
-    Z, report = run.guard.substitute(run.message(agg, len(msgs)), run.Ys[0], est.invert(run.Ys[0], posterior=True))
+    Z, report = run.receiver_guard().substitute(run.message(agg, len(msgs)), run.Ys[0], est.invert(run.Ys[0], posterior=True))
     return run.grid.irfft(Z), int(report.refused)
 
 
@@ -275,7 +280,7 @@ def _secagg_valid_node(run: _Run, msgs: list[InversionMessage]) -> tuple[np.ndar
         us.append(enc.quantize(u))
     agg = run.grid.irfft(box.from_vector(np.mean(us, axis=0)))
     est = run.pipe.estimators[0]
-    Z, report = run.guard.substitute(run.message(agg, len(us)), run.Ys[0], est.invert(run.Ys[0], posterior=True))
+    Z, report = run.receiver_guard().substitute(run.message(agg, len(us)), run.Ys[0], est.invert(run.Ys[0], posterior=True))
     return run.grid.irfft(Z), int(outside)
 
 
@@ -288,7 +293,7 @@ def _secagg_bounded_node(run: _Run, msgs: list[InversionMessage],
     m, clipped = centred_clipping(first, raw, run.radius, phases, adaptive=adaptive, grow=grow)
     agg = run.grid.irfft(box.from_vector(m))
     est = run.pipe.estimators[0]
-    Z, _ = run.guard.substitute(run.message(agg, len(first)), run.Ys[0], est.invert(run.Ys[0], posterior=True))
+    Z, _ = run.receiver_guard().substitute(run.message(agg, len(first)), run.Ys[0], est.invert(run.Ys[0], posterior=True))
     return run.grid.irfft(Z), clipped
 
 

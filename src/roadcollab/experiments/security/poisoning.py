@@ -321,6 +321,8 @@ def _run_constructions(pipe, guard, mech, run, ys, Ys, score, dz, anomalies) -> 
             with np.errstate(all="ignore"):     # unguarded: Algorithm 1 as it is (may be NaN)
                 ratio_u = score(guard.estimator.estimate(None, msg, Y=Ys[j], unguarded=True).W_hat)[0] / obs
             rep = step.guard
+            if rep is None:                     # a Relay built with a guard reports on every step
+                raise ParameterError("the guarded relay step carries no guard report")
             outcome = ("guard_refused" if rep.whole_message_refused else
                        "guard_partial" if rep.refused_bands else "accepted")
             err = rep.reasons[0] if rep.reasons else ""

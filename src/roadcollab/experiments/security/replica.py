@@ -25,6 +25,7 @@ from typing import Callable
 
 import numpy as np
 
+from ..._validation import check_int
 from ...privacy.attacks import pole_errors
 from ...privacy.baselines.dp import gaussian_sigma
 from ...privacy.baselines.dp_composition import composed_epsilon
@@ -89,7 +90,7 @@ def _errors(fit_inputs, targets, grid, nominal, tick) -> list[np.ndarray]:
 def _cells(config: AttackStudyConfig, n: int, T: int, R: int) -> list[tuple]:
     """(mechanism, attack, road, L, z(seg, j), target indices, composed epsilon) of every fitted cell."""
     eps = tuple(config.dp_epsilons)
-    cells = [("hardened", "replica", road, 1, lambda s, j: s["z"]["hardened"][j], range(T), np.nan)
+    cells: list[tuple] = [("hardened", "replica", road, 1, lambda s, j: s["z"]["hardened"][j], range(T), np.nan)
              for road in ("true", "fused")]
     if R >= _LINK:
         cells += [("hardened", "replica_linked", road, _LINK, lambda s, j: s["z"]["hardened"][j], range(T), np.nan)
@@ -111,7 +112,7 @@ def _cells(config: AttackStudyConfig, n: int, T: int, R: int) -> list[tuple]:
     cells.append(("secure_aggregation", "replica", "true", 1, agg, range(T), np.nan))
     if R >= _LINK:
         cells.append(("secure_aggregation", "replica_linked", "true", _LINK, agg, range(T), np.nan))
-    for c in sorted(set(config.secagg_colluders) | {n - 1}):
+    for c in sorted(set(config.secagg_colluders or ()) | {n - 1}):     # filled in by __post_init__
         cells.append(("secure_aggregation", f"replica_collusion_c{c}", "true", 1,
                       lambda s, j, c=c: s["z_all"][:n - c].mean(axis=0), range(min(T, n - c)), np.nan))
     return cells
@@ -150,7 +151,8 @@ def _secagg(config: AttackStudyConfig, seg: dict, seed: int) -> tuple[float, boo
     for dropped in ((), tuple(range(n, max(n - 2, spec.min_inputs), -1))):
         cost = active_secure_aggregation_cost(list(z), spec, repeats=3, dropped=dropped, rng=seed)
         worst = max(worst, cost["max_rel_error"])
-    legacy = SecAggSpec(min_inputs=config.secagg_min_inputs, threshold=config.secagg_min_inputs)
+    k = check_int("secagg_min_inputs", config.secagg_min_inputs)       # filled in by __post_init__
+    legacy = SecAggSpec(min_inputs=k, threshold=k)
     cost["semi_honest"] = secure_aggregation_cost(z[0], n_vehicles=n, spec=legacy, repeats=3, rng=seed)
     return worst, bool(np.max(np.abs(z)) >= spec.clip), cost, spec
 

@@ -179,7 +179,7 @@ def _band_dist(Z, ref, act, bands) -> np.ndarray:
 
 def _ball_node(run, msgs, pipe, E, k2, bad=None) -> tuple[np.ndarray, int]:
     """The ideal deviation check of :func:`relative_bound_ceiling`, then vehicle 1's guard; honest refusals."""
-    g, act, bands = pipe.grid, pipe.grid.active, run.guard.bands
+    g, act, bands = pipe.grid, pipe.grid.active, run.receiver_guard().bands
     Zs = [g.rfft(m.z) for m in msgs]
     with np.errstate(over="ignore", invalid="ignore"):
         med = np.median(np.real(Zs), axis=0) + 1j * np.median(np.imag(Zs), axis=0)
@@ -200,5 +200,5 @@ def _ball_node(run, msgs, pipe, E, k2, bad=None) -> tuple[np.ndarray, int]:
         out.append(Z)
     agg = g.irfft(np.mean(out, axis=0))
     est = pipe.estimators[0]
-    Zg, _ = run.guard.substitute(run.message(agg, len(out)), run.Ys[0], est.invert(run.Ys[0], posterior=True))
+    Zg, _ = run.receiver_guard().substitute(run.message(agg, len(out)), run.Ys[0], est.invert(run.Ys[0], posterior=True))
     return g.irfft(Zg), refused

@@ -32,6 +32,9 @@ from ...privacy.physical_fit import attack_physical_fit
 from ...wire import protocol
 
 if TYPE_CHECKING:  # annotations only
+    from ...estimation.grid import SegmentGrid
+    from ...wire.message import ExchangeMessage, InversionMessage
+    from ..pipeline import FleetPipeline
     from .config import AttackStudyConfig
 
 __all__ = ["SegmentAttacks", "attack_segment", "target_poles", "dp_mse_key", "EXACT_MECHANISMS",
@@ -126,7 +129,7 @@ def dp_mse_key(epsilon: float) -> str:
 class _Road:
     """A segment's road as the study uses it: the input, the attacker's band-limited copy and the scoring truth."""
 
-    grid: object
+    grid: SegmentGrid
     scored: slice
     w: np.ndarray          # (N, 2) road velocity, m/s
     w_band: np.ndarray     # (nfft, 2) band-limited like z, m/s
@@ -153,7 +156,7 @@ class _Road:
 class _Context:
     """What every step of a segment reads: the fleet, the study, the road and the per-vehicle random streams."""
 
-    pipe: object
+    pipe: FleetPipeline
     config: AttackStudyConfig
     run: int
     key: bytes
@@ -173,9 +176,9 @@ class _Chains:
 
     relays: dict[str, Relay]
     dp_relays: dict[float, Relay]
-    plain: object = None
-    paper: object = None
-    hard: object = None
+    plain: ExchangeMessage | None = None
+    paper: ExchangeMessage | None = None
+    hard: InversionMessage | None = None
     dp: dict = field(default_factory=dict)
     own_proxy: np.ndarray | None = None   # vehicle 1's inversion of its own record, (nfft, 2) m/s
 
@@ -336,7 +339,8 @@ def _record_features(ctx: _Context, chains: _Chains, rec: _Recorder, j: int, pla
     rec.features[("hardened", j)] = _spectral_feature(hard.z, w_band, grid)
     # A receiver without the true road compares with its own inversion (vehicle 1's
     # inversion stands in for a fixed receiver's here).
-    rec.features[("hardened_own_road", j)] = _spectral_feature(hard.z, chains.own_proxy, grid)
+    if chains.own_proxy is not None:     # set on vehicle 1, before any feature is recorded
+        rec.features[("hardened_own_road", j)] = _spectral_feature(hard.z, chains.own_proxy, grid)
 
 
 def _vehicle(ctx: _Context, chains: _Chains, rec: _Recorder, j: int) -> None:

@@ -149,7 +149,10 @@ def run_attack_study(config: AttackStudyConfig, seed: int, *, progress: Callable
     replica = run_replica_attacks(config, seed, pipe, progress=None if progress is None else
                                   (lambda k: progress(config.n_runs + k)))
     attacks = attack_rows(config, pipe, runs, replica)
-    he = baselines.paillier_cost(runs[0].last_z.ravel(), key_bits=config.paillier_bits,
+    last_z = runs[0].last_z
+    if last_z is None:                  # every attack run records its last hardened message
+        raise ParameterError("the first attack run recorded no hardened message")
+    he = baselines.paillier_cost(last_z.ravel(), key_bits=config.paillier_bits,
                                  sample=config.paillier_sample, rng=np.random.default_rng(seed))
     base = baseline_rows(config, runs, he, replica)
     return AttackStudyResult(
