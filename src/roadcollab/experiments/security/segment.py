@@ -21,6 +21,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from ...collaboration.relay import Exchange, Relay
+from ...errors import ParameterError
 from ...lti.arx import arx_poles
 from ..seeds import RUN_STREAMS, run_stream
 from ...lti.batch2x2 import receiver_z
@@ -339,8 +340,9 @@ def _record_features(ctx: _Context, chains: _Chains, rec: _Recorder, j: int, pla
     rec.features[("hardened", j)] = _spectral_feature(hard.z, w_band, grid)
     # A receiver without the true road compares with its own inversion (vehicle 1's
     # inversion stands in for a fixed receiver's here).
-    if chains.own_proxy is not None:     # set on vehicle 1, before any feature is recorded
-        rec.features[("hardened_own_road", j)] = _spectral_feature(hard.z, chains.own_proxy, grid)
+    if chains.own_proxy is None:         # set on vehicle 1, before any feature is recorded
+        raise ParameterError("vehicle 1's own inversion is missing: the segment's vehicles ran out of order")
+    rec.features[("hardened_own_road", j)] = _spectral_feature(hard.z, chains.own_proxy, grid)
 
 
 def _vehicle(ctx: _Context, chains: _Chains, rec: _Recorder, j: int) -> None:
