@@ -34,7 +34,7 @@ test-slow: $(STAMP)
 test-all: $(STAMP)
 	$(BIN)/python -m pytest -m "slow or not slow"
 
-# ruff (check only; the rule set and its reasons are in pyproject.toml) and mypy (strict on lti/ and wire/).
+# ruff (check only; the rule set and its reasons are in pyproject.toml) and mypy (all of src/, strict on lti/, wire/, privacy/).
 lint: $(STAMP)
 	$(BIN)/ruff check src tests tools
 	$(BIN)/mypy

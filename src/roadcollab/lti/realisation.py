@@ -3,9 +3,12 @@
 from __future__ import annotations
 
 from collections import OrderedDict
+from collections.abc import Callable
 from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any, TypeVar, cast
 
 import numpy as np
+import numpy.typing as npt
 import scipy.linalg
 
 from .response import content_key, dlti_frequency_response
@@ -14,19 +17,26 @@ from ._hide_kernel import qr_similarity as _compiled_qr_similarity
 from .kernels import kernel_path
 from .stability import spectral_radius_and_gain
 
+if TYPE_CHECKING:
+    import control
+
+_T = TypeVar("_T")
+
 
 def _complex_schur(A: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """A complex Schur form of a real ``A``: ``zgees`` (scipy) on the reference path; on the compiled path
     ``dgees`` and compiled Givens rotations (0.37 -> 0.18 ms at n = 22, docs/speed.md, "Third pass")."""
     if kernel_path() == "compiled" and A.shape[0] > 0 and np.isfinite(A).all():
-        return _compiled_schur(A)
-    return scipy.linalg.schur(A, output="complex")
+        T, U = _compiled_schur(A)
+    else:
+        T, U = scipy.linalg.schur(A, output="complex")
+    return np.asarray(T), np.asarray(U)
 
 __all__ = ["StateSpaceData", "SystemCache", "continuous_poles", "series", "minreal", "random_orthogonal", "similarity",
            "random_similarity"]
 
 
-def continuous_poles(poles_z, dt: float) -> np.ndarray:
+def continuous_poles(poles_z: npt.ArrayLike, dt: float) -> np.ndarray:
     """Discrete poles mapped to the s-plane, ``log(z) / dt`` (rad/s; ``-inf`` for ``z = 0``).
 
     Parameters
@@ -41,7 +51,7 @@ def continuous_poles(poles_z, dt: float) -> np.ndarray:
     complex ndarray
     """
     with np.errstate(divide="ignore", invalid="ignore"):
-        return np.log(np.asarray(poles_z, dtype=complex)) / dt
+        return np.asarray(np.log(np.asarray(poles_z, dtype=complex)) / dt)
 
 
 @dataclass(frozen=True, eq=False)
@@ -103,7 +113,7 @@ class StateSpaceData:
         full_key = None if received else content_key(self.A, self.B, self.C, self.D, omega_dt)
         last = None if full_key is None else self._memo_get("_response", full_key)
         if last is not None:
-            return last.copy()
+            return np.array(last, copy=True)
         key = self._digest()
         H = dlti_frequency_response(self.A, self.B, self.C, self.D, omega_dt, schur=self._memo_get("_schur", key),
                                     eig=self._memo_get("_eig", key))
@@ -117,12 +127,12 @@ class StateSpaceData:
         A = np.ascontiguousarray(self.A, dtype=float)
         return repr(A.shape).encode() + A.tobytes()
 
-    def _memo_get(self, name: str, key: bytes):
+    def _memo_get(self, name: str, key: bytes) -> Any:
         """The value memoised as ``name`` under exactly ``key``, else None."""
         memo = self.__dict__.get(name)
         return memo[1] if memo is not None and memo[0] == key else None
 
-    def _memo(self, name: str, compute):
+    def _memo(self, name: str, compute: Callable[[], _T]) -> _T:
         """The value memoised as ``name`` for the current ``A``, computing (and keeping) it if needed
         (a frozen dataclass: a private memo, not a field)."""
         key = self._digest()
@@ -130,7 +140,7 @@ class StateSpaceData:
         if value is None:
             value = compute()
             object.__setattr__(self, name, (key, value))
-        return value
+        return cast(_T, value)
 
     def schur(self) -> tuple[np.ndarray, np.ndarray]:
         """Complex Schur form ``A = U T U^H``, memoised on this object (keyed by ``A``'s bytes).
@@ -155,7 +165,11 @@ class StateSpaceData:
         lam : (n,) complex ndarray
         V : (n, n) complex ndarray
         """
-        return self._memo("_eig", lambda: np.linalg.eig(np.asarray(self.A, dtype=float)))
+        def eig() -> tuple[np.ndarray, np.ndarray]:
+            lam, V = np.linalg.eig(np.asarray(self.A, dtype=float))
+            return np.asarray(lam), np.asarray(V)
+
+        return self._memo("_eig", eig)
 
     def stability(self) -> tuple[float, float]:
         """Spectral radius of ``A`` and its certified transient gain (:mod:`~roadcollab.lti.stability`).
@@ -193,7 +207,7 @@ class StateSpaceData:
             return spectral_radius_and_gain(A, schur=_complex_schur(A))
         return spectral_radius_and_gain(A, schur=self.schur, eig=self.eig())
 
-    def to_control(self):
+    def to_control(self) -> control.StateSpace:
         """The realisation as a discrete :class:`control.StateSpace`."""
         import control
 
