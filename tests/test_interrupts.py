@@ -79,6 +79,7 @@ def _check_interrupted(tmp_path, sig, status, extra):
     assert not list(tmp_path.glob(".res.partial-*"))
 
 
+@pytest.mark.slow  # a signal to a process under load: serially with the other interrupt tests
 def test_ctrl_c_serial(tmp_path):
     _check_interrupted(tmp_path, signal.SIGINT, 130, ())
 

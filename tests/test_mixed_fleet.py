@@ -58,6 +58,7 @@ def test_oracle_mapping_through_distance_is_nearly_exact():
     assert np.all(nmse["inversion"] < 2e-3)
 
 
+@pytest.mark.slow  # 10 s end to end
 def test_start_offsets_are_estimated():
     errors = (2.5, -3.0, 1.2, 3.0)
     aligned = mixed_fleet_check(MIXED_SPEEDS, seed=1, start_errors=errors, align=True)

@@ -46,6 +46,7 @@ def test_enroll_bad_input_is_one_line(tmp_path, capsys, args, msg):
     assert msg in err and err.count("\n") == 1
 
 
+@pytest.mark.slow  # 8 s: a served fleet end to end
 def test_status_and_export_of_a_store(tmp_path, capsys):
     paths, _ = write_drives(tmp_path / "drives", speeds=(12.0, 15.0))
     from roadcollab.io.drive_clean import clean_drive

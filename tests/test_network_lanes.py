@@ -28,6 +28,8 @@ from roadcollab.network.roadsync import RoadSync
 from roadcollab.network.store import ServiceStore
 from roadcollab.store import RoadStore
 
+pytestmark = pytest.mark.slow   # 11 s: one networked fleet on four lanes, end to end
+
 DRIVES = (8, 9, 11)
 
 

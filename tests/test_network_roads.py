@@ -37,6 +37,7 @@ def _drives(tmp_path, speeds):
     return paths, drives, RoadPlan(fleet_id="t", min_speed=min(float(d.speeds().min()) for d in drives))
 
 
+@pytest.mark.slow  # 7 s: a served fleet end to end
 def test_road_store_follows_the_service_and_equals_export(tmp_path, capsys):
     paths, drives, plan = _drives(tmp_path, (12.0, 15.0, 18.0))
     svc = ServiceStore(tmp_path / "s.sqlite", plan)

@@ -109,6 +109,7 @@ class DiesAfterShares(RoundAgent):
         return super().on_message(topic, payload)
 
 
+@pytest.mark.slow  # 7 s: a secure round end to end
 def test_a_vehicle_gone_after_its_shares_is_left_behind(drives, plan):
     store = ServiceStore(":memory:", plan)
     auth, trust, broker, agents, cars = _secure_world(drives, plan, store, agent_cls=DiesAfterShares, dead={"v4"})

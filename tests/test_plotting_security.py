@@ -101,6 +101,7 @@ def test_print_size_fonts_and_no_overlapping_text(monkeypatch, tmp_path, plot, d
         assert box.x0 - 1 <= ext.x0 and ext.x1 <= box.x1 + 1 and box.y0 - 1 <= ext.y0 and ext.y1 <= box.y1 + 1, text
 
 
+@pytest.mark.slow  # 14 s: draws Fig. 11 at several sizes
 def test_fig11_writes_every_cell_and_grows_in_height_only(monkeypatch, tmp_path):
     out = _drawn(monkeypatch, ps.plot_attack_success, attack_rows(), tmp_path)
     texts = [t for t, _, _ in out["texts"]]

@@ -115,6 +115,7 @@ def test_without_offset_removal_gravity_moves_the_estimate(fleet):
 
 # --- glitches --------------------------------------------------------------------------------------
 
+@pytest.mark.slow  # 8 s end to end
 def test_a_199_glitch_does_not_move_the_iri(fleet, clean_run, tmp_path, capsys):
     """One 199 m/s^2 sample (just under the fixed 200 m/s^2 bound) in drive 2, 150 m into the road."""
     summary, out = clean_run

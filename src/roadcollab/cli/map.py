@@ -68,7 +68,7 @@ def _write_outputs(out, store, *, tiles: str | None) -> dict:
 
 def map_command(drive_paths: list[str], out_dir, *, store_url, command: str, network_path=None,
                 segment_length: float = 100.0, gps_sigma: float = 5.0, bootstrap: int = 100, seed: int = 0,
-                tiles: str | None = None, limits=None) -> dict:
+                tiles: str | None = None, limits=None, calibrate: bool = False, reference=()) -> dict:
     """Everything ``roadcollab map`` does (module docstring).
 
     Parameters
@@ -95,12 +95,18 @@ def map_command(drive_paths: list[str], out_dir, *, store_url, command: str, net
         Online tile URL template for the web map (default none: offline).
     limits : FileLimits, optional
         Largest drive CSV and most rows.
+    calibrate : bool
+        Fit every vehicle's IRI gain from the segments it shares and divide its inversions by it before
+        fusing (:mod:`roadcollab.experiments.drives.gain_calibration`); writes ``calibration.csv``.
+    reference : sequence of str
+        Vehicles (``vehicle_id``) whose gain is 1: the anchors of their components.
 
     Returns
     -------
     dict
         Summary (counts, files; ``"passes"``: the PassRow of every pass).
     """
+    from ..experiments.drives.gain_calibration import VehicleGain
     from ..experiments.drives.road_survey import PassRow, store_survey, survey_drives
     from ..geo.network import read_network
     from ..io.drives import load_drives
@@ -116,14 +122,16 @@ def map_command(drive_paths: list[str], out_dir, *, store_url, command: str, net
         drives = load_drives(drive_paths, limits=limits)
         network = network if network is not None else _own_tracks(drives)
         survey = survey_drives(drives, network, segment_length=segment_length, sigma_z=gps_sigma,
-                               bootstrap=bootstrap, rng=seed)
+                               bootstrap=bootstrap, calibrate=calibrate, reference=reference, rng=seed)
         with RoadStore.open(store_url) as store:
             n_seg, n_an = store_survey(store, survey, source=command)
             summary = _write_outputs(out, store, tiles=tiles)
         write_rows(out / "passes.csv", survey.passes, PassRow)
+        if calibrate:
+            write_rows(out / "calibration.csv", survey.gains, VehicleGain)
         config = {"drives": list(drive_paths), "network": None if network_path is None else str(network_path),
                   "store": str(store_url), "segment_length_m": segment_length, "gps_sigma_m": gps_sigma,
-                  "bootstrap": bootstrap, "tiles": tiles,
+                  "bootstrap": bootstrap, "tiles": tiles, "calibrate": calibrate, "reference_vehicles": list(reference),
                   "band_low_per_m": {f"{k[0]}:{k[1]:+d}": v for k, v in survey.band_low_per_m.items()}}
         extra = {"written_segments": n_seg, "written_anomalies": n_an, **summary,
                  "elapsed_s": time.perf_counter() - t0}
@@ -151,7 +159,7 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
              "writes the store's content.",
         writes="into --out (replaced as a whole at the end): segments.geojson, anomalies.geojson, roads.gpkg, "
                "segments.csv (linear-reference events), profiles/*.crg (OpenCRG), map.html (offline web map), "
-               "passes.csv, config.json; and updates --store.",
+               "passes.csv, calibration.csv (with --calibrate), config.json; and updates --store.",
         example="roadcollab map --drive d1.csv --drive d2.csv --network roads.geojson --store roads.sqlite "
                 "--out results/map")
     p.add_argument("--drive", action="append", required=True, metavar="FILE",
@@ -175,6 +183,12 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
     p.add_argument("--tiles", default=None, metavar="URL",
                    help="online tile layer for map.html, e.g. https://tile.openstreetmap.org/{z}/{x}/{y}.png "
                         "(default: none, the page works offline)")
+    p.add_argument("--calibrate", action="store_true",
+                   help="fit every vehicle's IRI gain from the segments it shares with other vehicles (drives of one "
+                        "vehicle_id share a gain) and divide its inversions by it before fusing; writes calibration.csv")
+    p.add_argument("--reference-vehicle", action="append", default=[], metavar="ID",
+                   help="with --calibrate: a vehicle_id whose gain is 1 (its parameters identified on a reference "
+                        "section); anchors its vehicles' gains instead of their mean; repeatable")
     add_limit_options(p, "each drive CSV")
     return p
 
@@ -196,7 +210,8 @@ def run(args: argparse.Namespace, command_line: str) -> int:
     """
     s = map_command(args.drive, args.out, store_url=args.store, command=command_line, network_path=args.network,
                     segment_length=args.segment_length, gps_sigma=args.gps_sigma, bootstrap=args.bootstrap,
-                    seed=args.seed, tiles=args.tiles, limits=file_limits(args))
+                    seed=args.seed, tiles=args.tiles, limits=file_limits(args), calibrate=args.calibrate,
+                    reference=args.reference_vehicle)
     roads = sorted({(p.road_id, p.direction) for p in s["passes"]})
     print(f"matched {len(s['passes'])} passes on {len(roads)} lane(s): "
           + ", ".join(f"{r}{d:+d}" for r, d in roads))

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import json
 import math
+import re
 from dataclasses import fields
 from pathlib import Path
 
@@ -43,7 +44,9 @@ PARAMETER_RANGES = {
     "vehicle.stiffness": (2_000.0, 1_500_000.0, "N/m"),
     "vehicle.damping": (50.0, 100_000.0, "N s/m"),
 }
-_TOP_KEYS = ("speed_mps", "vehicle", "sensor_noise_std", "start_m", "accel_unit")
+_TOP_KEYS = ("speed_mps", "vehicle", "sensor_noise_std", "start_m", "accel_unit", "vehicle_id")
+#: A ``vehicle_id``: 1-64 characters, letters, digits and ``._-`` (it names the vehicle in calibration.csv).
+_VEHICLE_ID = re.compile(r"[A-Za-z0-9._-]{1,64}")
 
 
 def read_text(path: Path, what: str, max_bytes: int = PARAMS_MAX_BYTES, flag: str | None = None) -> str:
@@ -189,7 +192,8 @@ def read_drive_params(path, *, speed_column: str | None = None) -> dict:
     dict
         ``speed`` (m/s; None with ``speed_column``), ``sensor_noise_std`` (m/s^2), ``start_m`` (m), ``params``
         (:class:`~roadcollab.models.vehicle.HalfCarParameters`), ``accel_unit`` (a key of :data:`ACCEL_UNITS`;
-        default ``"m/s^2"``).
+        default ``"m/s^2"``), ``vehicle_id`` (str or None: the vehicle that recorded the drive, the same in
+        every drive it recorded; :mod:`roadcollab.experiments.drives.gain_calibration`).
 
     Raises
     ------
@@ -211,6 +215,10 @@ def read_drive_params(path, *, speed_column: str | None = None) -> dict:
     if not isinstance(unit, str) or unit not in ACCEL_UNITS:
         raise FileFormatError(f"{path}: key 'accel_unit' must be one of {', '.join(repr(u) for u in ACCEL_UNITS)} "
                               f"(the unit of the CSV's accel_left and accel_right), got {short_repr(unit)}")
+    vid = data.get("vehicle_id")
+    if vid is not None and not (isinstance(vid, str) and _VEHICLE_ID.fullmatch(vid)):
+        raise FileFormatError(f"{path}: key 'vehicle_id' must be 1-64 letters, digits, '.', '_' or '-' (the same "
+                              f"for every drive of one vehicle), got {short_repr(vid)}")
     veh = data["vehicle"]
     if not isinstance(veh, dict):
         raise FileFormatError(f"{path}: key 'vehicle' must be a table ([vehicle] in TOML, an object in JSON) of "
@@ -218,11 +226,12 @@ def read_drive_params(path, *, speed_column: str | None = None) -> dict:
     _check_keys(path, veh, _VEHICLE_KEYS, _VEHICLE_KEYS, "vehicle.")
     values = {k: _number(path, f"vehicle.{k}", veh[k]) for k in _VEHICLE_KEYS}
     return {"speed": speed, "sensor_noise_std": noise, "start_m": start, "params": HalfCarParameters(**values),
-            "accel_unit": unit}
+            "accel_unit": unit, "vehicle_id": vid}
 
 
 def write_drive_params(path, *, speed: float | None, params: HalfCarParameters, sensor_noise_std: float | None = None,
-                       start_m: float | None = None, accel_unit: str | None = None) -> Path:
+                       start_m: float | None = None, accel_unit: str | None = None,
+                       vehicle_id: str | None = None) -> Path:
     """Write a parameters file (``.toml`` or ``.json`` by suffix), full precision.
 
     Values are not validated here; :func:`read_drive_params` checks them.
@@ -241,6 +250,8 @@ def write_drive_params(path, *, speed: float | None, params: HalfCarParameters, 
         Road distance of the first sample, m; the key is omitted if None (readers then use 0).
     accel_unit : str, optional
         ``"m/s^2"`` or ``"g"``; the key is omitted if None (readers then use m/s^2).
+    vehicle_id : str, optional
+        The vehicle that recorded the drive; the key is omitted if None (each drive is then its own vehicle).
 
     Returns
     -------
@@ -260,6 +271,8 @@ def write_drive_params(path, *, speed: float | None, params: HalfCarParameters, 
         top["start_m"] = float(start_m)
     if accel_unit is not None:
         top["accel_unit"] = str(accel_unit)
+    if vehicle_id is not None:
+        top["vehicle_id"] = str(vehicle_id)
     veh = {k: float(v) for k, v in params.as_dict().items()}
     if path.suffix.lower() == ".json":
         path.write_text(json.dumps({**top, "vehicle": veh}, indent=2) + "\n")

@@ -31,6 +31,8 @@ differences are used: ``time_s`` may start anywhere.
     start_m = 0.0                # optional, +-1e7: road distance of the first sample, m (default 0)
     accel_unit = "m/s^2"         # optional, "m/s^2" (default) or "g" (9.80665 m/s^2): unit of the CSV's
                                  # accel_left and accel_right; anything else is refused
+    vehicle_id = "van-07"        # optional, 1-64 of A-Z a-z 0-9 . _ -: the vehicle that recorded the drive,
+                                 # the same in all of its drives (map's per-vehicle IRI calibration)
 
     [vehicle]                    # required: the vehicle's *estimated* half-car parameters, SI units
     sprung_mass = 750.0          # kg, 100-20000
@@ -117,6 +119,8 @@ class Drive:
         The ``accel_unit`` of the parameters file; ``accel`` is in m/s^2 whatever it is.
     gps : GpsFixes or None
         The ``lat_deg, lon_deg`` fixes of the log, if it has them (:mod:`roadcollab.io.gps`).
+    vehicle_id : str or None
+        The ``vehicle_id`` of the parameters file: drives with the same one were recorded by one vehicle.
     """
 
     csv_path: Path
@@ -134,6 +138,7 @@ class Drive:
     max_jitter: float = 0.0
     accel_unit: str = "m/s^2"
     gps: GpsFixes | None = None
+    vehicle_id: str | None = None
 
     @property
     def n_samples(self) -> int:
@@ -271,7 +276,7 @@ def load_drive(csv_path, params_path=None, *, limits: FileLimits | None = None) 
                  sample_rate=log.sample_rate, speed=speed, start_m=p["start_m"],
                  sensor_noise_std=p["sensor_noise_std"], params=p["params"], positions=positions,
                  speed_source=source, resampled=log.resampled, max_jitter=log.max_jitter,
-                 accel_unit=p["accel_unit"], gps=gps)
+                 accel_unit=p["accel_unit"], gps=gps, vehicle_id=p["vehicle_id"])
 
 
 def load_drives(paths, *, limits: FileLimits | None = None) -> list[Drive]:

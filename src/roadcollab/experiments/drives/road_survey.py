@@ -11,8 +11,12 @@ Pipeline
    alignment catches what the matching left).
 3. Each pass's aligned inversion is kept only on the road (``u_range``) and at least ``edge_m``
    from its record's ends (the inversion's window-edge effects reach about ``2 / n_low``, 48 m at
-   12 m/s; the ends of a pass that continues onto another road are not record ends). The fused
-   profile is their average where any covers.
+   12 m/s; the ends of a pass that continues onto another road are not record ends).
+3b. Every vehicle's IRI gain (its estimated parameters scale its inversion over the IRI band) is fitted
+   from the segments it shares with other vehicles, over all lanes at once
+   (:mod:`~roadcollab.experiments.drives.gain_calibration`; drives of one ``vehicle_id`` share one
+   gain), and each pass's inversion is divided by its vehicle's gain (``calibrate=False``: not). The
+   fused profile is their average where any covers.
 4. Segments (:func:`roadcollab.geo.segments.segment_bounds`, fixed in the road's measure) fully
    covered by the fused profile get the IRI: the mean of the two wheel tracks' IRIs (the mean
    roughness index, MRI, which agencies report as "IRI"), m/km and in/mi; a 95 % bootstrap interval
@@ -40,9 +44,10 @@ from ...geo.segments import IN_PER_MI_PER_M_PER_KM, segment_bounds, segment_lonl
 from ...models.iri import iri
 from ...store import RoadStore
 from .fleet_estimation import estimate_fleet, find_fleet_anomalies
+from .gain_calibration import calibrate_gains
 
 __all__ = ["MIN_BOOTSTRAP_VEHICLES", "SegmentEstimate", "AnomalyEstimate", "PassRow", "RoadSurvey", "survey_drives",
-           "lane_survey", "store_survey"]
+           "lane_survey", "store_survey", "vehicle_of"]
 
 MIN_BOOTSTRAP_VEHICLES = 3   # two drives resample into three distinct sets: no interval worth the name
 
@@ -158,12 +163,15 @@ class RoadSurvey:
         One per drive and road it was placed on.
     band_low_per_m : dict
         ``{(road_id, direction): n_low}``, cycles/m: the wavenumber band the estimate sees.
+    gains : list of VehicleGain
+        Every vehicle's IRI gain, by ``vehicle_id`` (empty when not calibrated).
     """
 
     segments: list
     anomalies: list
     passes: list
     band_low_per_m: dict
+    gains: list = dataclasses.field(default_factory=list)
 
 
 def _kept(est, passes: list[RoadPass], length: float, edge_m: float) -> np.ndarray:
@@ -222,10 +230,69 @@ def _votes(per_pass: list[list], det, tolerance: float) -> int:
                for dets in per_pass)
 
 
+def _windows(x: np.ndarray, dx: float, length: float, s: int, segment_length: float):
+    """``(from_m, to_m, sel)`` of every segment of a lane whose grid points reach both of its ends."""
+    for a, b in segment_bounds(length, segment_length):
+        ua, ub = (a, b) if s > 0 else (length - b, length - a)
+        sel = (x >= ua) & (x <= ub)
+        if np.count_nonzero(sel) >= 2 and x[sel][0] - ua <= dx and ub - x[sel][-1] <= dx:
+            yield a, b, sel
+
+
+def _lane_stack(passes: list[RoadPass], network: RoadNetwork, edge_m: float, spacing: float):
+    """The lane's fleet estimate and its passes' kept inversions (:func:`_kept`)."""
+    length = network.roads[passes[0].road_id].length
+    est = estimate_fleet([p.drive for p in passes], spacing=spacing, align=len(passes) > 1, max_offset=5.0)
+    return est, _kept(est, passes, length, edge_m)
+
+
+def _pass_iris(passes: list[RoadPass], network: RoadNetwork, est, kept: np.ndarray, segment_length: float):
+    """``(vehicle, (road_id, direction, from_m), iri)`` of every pass over every segment it covers completely."""
+    rid, s = passes[0].road_id, passes[0].direction
+    out = []
+    for a, _b, sel in _windows(est.position, est.spacing, network.roads[rid].length, s, segment_length):
+        for p, h in zip(passes, kept):
+            if np.all(np.isfinite(h[sel, 0])):
+                out.append((vehicle_of(p.drive), (rid, s, float(a)), _segment_iri(h[sel], est.spacing)))
+    return out
+
+
+def _lane_results(passes: list[RoadPass], network: RoadNetwork, est, kept: np.ndarray, *, segment_length: float,
+                  bootstrap: int, vote_tolerance: float, rng: np.random.Generator) -> tuple[list, list]:
+    """Segments and anomalies of a lane from its passes' kept inversions."""
+    rid, s = passes[0].road_id, passes[0].direction
+    length = network.roads[rid].length
+    fused, count = _fuse(kept)
+    dx = est.spacing
+    segments = []
+    for a, b, sel in _windows(est.position, dx, length, s, segment_length):
+        if not np.all(count[sel] > 0):
+            continue
+        lo, hi = _bootstrap(kept, sel, dx, bootstrap, rng)
+        behind = int(np.sum(np.mean(np.isfinite(kept[:, sel, 0]), axis=1) >= 0.5))
+        segments.append(SegmentEstimate(rid, s, a, b, _segment_iri(fused[sel], dx), lo, hi, behind,
+                                        dx, fused[sel].copy(), segment_lonlat(network, rid, a, b)))
+    anomalies = []
+    if np.count_nonzero(count) >= 64:
+        fest = dataclasses.replace(est, elevation={**est.elevation, "fused": fused[None]})
+        per_pass = _detections(est, kept)
+        for det in find_fleet_anomalies(fest):
+            m = det.position_m if s > 0 else length - det.position_m
+            lon, lat = lonlat_at(network, rid, m)
+            anomalies.append(AnomalyEstimate(rid, s, float(m), float(lon[0]), float(lat[0]), det.kind, det.side,
+                                             det.depth_m, _votes(per_pass, det, vote_tolerance)))
+    return segments, anomalies
+
+
+def vehicle_of(drive) -> str:
+    """The vehicle that recorded ``drive``: its ``vehicle_id``, or its CSV's path when it names none."""
+    return drive.vehicle_id if drive.vehicle_id is not None else str(drive.csv_path)
+
+
 def lane_survey(passes: list[RoadPass], network: RoadNetwork, *, segment_length: float = 100.0,
                 edge_m: float = 30.0, bootstrap: int = 100, vote_tolerance: float = 2.0, spacing: float = 0.05,
                 rng=None) -> tuple[list, list, float]:
-    """Segments and anomalies of one lane (one road, one direction) from its passes (module docstring).
+    """Segments and anomalies of one lane (one road, one direction) from its passes, uncalibrated.
 
     Parameters
     ----------
@@ -245,38 +312,16 @@ def lane_survey(passes: list[RoadPass], network: RoadNetwork, *, segment_length:
     anomalies : list of AnomalyEstimate
     band_low_per_m : float
     """
-    rng = np.random.default_rng(rng)
-    rid, s = passes[0].road_id, passes[0].direction
-    length = network.roads[rid].length
-    est = estimate_fleet([p.drive for p in passes], spacing=spacing, align=len(passes) > 1, max_offset=5.0)
-    kept = _kept(est, passes, length, edge_m)
-    fused, count = _fuse(kept)
-    x, dx = est.position, est.spacing
-    segments = []
-    for a, b in segment_bounds(length, segment_length):
-        ua, ub = (a, b) if s > 0 else (length - b, length - a)
-        sel = (x >= ua) & (x <= ub)
-        if np.count_nonzero(sel) < 2 or not np.all(count[sel] > 0) or x[sel][0] - ua > dx or ub - x[sel][-1] > dx:
-            continue
-        lo, hi = _bootstrap(kept, sel, dx, bootstrap, rng)
-        behind = int(np.sum(np.mean(np.isfinite(kept[:, sel, 0]), axis=1) >= 0.5))
-        segments.append(SegmentEstimate(rid, s, a, b, _segment_iri(fused[sel], dx), lo, hi, behind,
-                                        dx, fused[sel].copy(), segment_lonlat(network, rid, a, b)))
-    anomalies = []
-    if np.count_nonzero(count) >= 64:
-        fest = dataclasses.replace(est, elevation={**est.elevation, "fused": fused[None]})
-        per_pass = _detections(est, kept)
-        for det in find_fleet_anomalies(fest):
-            m = det.position_m if s > 0 else length - det.position_m
-            lon, lat = lonlat_at(network, rid, m)
-            anomalies.append(AnomalyEstimate(rid, s, float(m), float(lon[0]), float(lat[0]), det.kind, det.side,
-                                             det.depth_m, _votes(per_pass, det, vote_tolerance)))
-    return segments, anomalies, est.band_low_per_m
+    est, kept = _lane_stack(passes, network, edge_m, spacing)
+    seg, anom = _lane_results(passes, network, est, kept, segment_length=segment_length, bootstrap=bootstrap,
+                              vote_tolerance=vote_tolerance, rng=np.random.default_rng(rng))
+    return seg, anom, est.band_low_per_m
 
 
 def survey_drives(drives, network: RoadNetwork, *, segment_length: float = 100.0, sigma_z: float = 5.0,
-                  edge_m: float = 30.0, bootstrap: int = 100, rng=None) -> RoadSurvey:
-    """Match every drive to the network and survey every lane it covers (module docstring).
+                  edge_m: float = 30.0, bootstrap: int = 100, calibrate: bool = False, reference=(),
+                  rng=None) -> RoadSurvey:
+    """Match every drive to the network, calibrate every vehicle's gain and survey every lane (module docstring).
 
     Parameters
     ----------
@@ -291,6 +336,11 @@ def survey_drives(drives, network: RoadNetwork, *, segment_length: float = 100.0
         Dropped at each record end, m.
     bootstrap : int
         IRI interval resamples.
+    calibrate : bool
+        Divide every pass's inversion by its vehicle's IRI gain before fusing
+        (:func:`~roadcollab.experiments.drives.gain_calibration.calibrate_gains`); False: fuse as inverted.
+    reference : iterable of str
+        Vehicles whose gain is 1 (calibrated on a reference section): their components' anchors.
     rng : numpy.random.Generator | int | None
 
     Returns
@@ -300,11 +350,17 @@ def survey_drives(drives, network: RoadNetwork, *, segment_length: float = 100.0
     Raises
     ------
     ParameterError
-        No drive could be placed on any road.
+        No drive could be placed on any road, or a reference vehicle recorded none of the drives.
     """
     check_real("segment_length", segment_length, low=1.0, high=10_000.0)
     check_int("bootstrap", bootstrap, low=0, high=10_000)
     rng = np.random.default_rng(rng)
+    reference = tuple(reference)
+    if reference and not calibrate:
+        raise ParameterError("--reference-vehicle needs --calibrate (it anchors the calibrated gains)")
+    unknown = sorted(set(reference) - {vehicle_of(d) for d in drives})
+    if unknown:
+        raise ParameterError(f"--reference-vehicle {unknown[0]!r}: no drive's parameters file has that vehicle_id")
     lanes: dict = {}
     rows: list[PassRow] = []
     for d in drives:
@@ -315,13 +371,24 @@ def survey_drives(drives, network: RoadNetwork, *, segment_length: float = 100.0
     if not lanes:
         raise ParameterError("no drive could be placed on any road of the network (every fix farther than 50 m "
                              "from every road, or passes shorter than 50 m)")
+    stacks = {key: _lane_stack(passes, network, edge_m, 0.05) for key, passes in lanes.items()}
+    gains: dict = {}
+    if calibrate:
+        gains = calibrate_gains([o for key, (est, kept) in stacks.items()
+                                 for o in _pass_iris(lanes[key], network, est, kept, segment_length)],
+                                reference=reference)
     segments, anomalies, bands = [], [], {}
     for key, passes in lanes.items():
-        seg, anom, bands[key] = lane_survey(passes, network, segment_length=segment_length, edge_m=edge_m,
-                                            bootstrap=bootstrap, rng=rng)
+        est, kept = stacks[key]
+        if gains:
+            kept = kept / np.array([gains[vehicle_of(p.drive)].gain for p in passes])[:, None, None]
+        seg, anom = _lane_results(passes, network, est, kept, segment_length=segment_length, bootstrap=bootstrap,
+                                  vote_tolerance=2.0, rng=rng)
         segments += seg
         anomalies += anom
-    return RoadSurvey(segments=segments, anomalies=anomalies, passes=rows, band_low_per_m=bands)
+        bands[key] = est.band_low_per_m
+    return RoadSurvey(segments=segments, anomalies=anomalies, passes=rows, band_low_per_m=bands,
+                      gains=sorted(gains.values(), key=lambda g: g.vehicle_id))
 
 
 def store_survey(store: RoadStore, survey: RoadSurvey, *, source: str = "", at: str | None = None) -> tuple[int, int]:
