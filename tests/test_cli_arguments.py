@@ -27,6 +27,7 @@ NOT_NUMERIC = {"--out", "--roads", "--map", "--kernels", "--fleet-id", "--drive"
 SPECIAL = {"--paillier-bits"}
 NOT_NUMERIC |= {"--road-id"}   # enroll: a road of --network
 NOT_NUMERIC |= {"--guard-road"}   # estimate, vehicle: a choice of road prior
+NOT_NUMERIC |= {"--reference-vehicle"}   # map: a vehicle_id (its pattern is checked by its type)
 
 
 def _commands():

@@ -20,8 +20,8 @@ from roadcollab.lti import kernels
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("path", [pytest.param("compiled", marks=pytest.mark.skipif(
-    not kernels.compiled_available(), reason="numba not importable")), "reference"])
+@pytest.mark.parametrize("path", [pytest.param("compiled", marks=[pytest.mark.skipif(
+    not kernels.compiled_available(), reason="numba not importable"), pytest.mark.slow]), "reference"])
 def test_theorem1_on_300_bench_segments(path):
     with kernels.use_kernels(path):
         ex = bench_exactness(segments=300, seed=0)

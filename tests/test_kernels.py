@@ -11,7 +11,15 @@ from roadcollab.lti import kernels
 from roadcollab.lti.blockdiag import block_response, block_schur
 from roadcollab.lti.response import ss_response
 
-needs_numba = pytest.mark.skipif(not kernels.compiled_available(), reason="numba not importable")
+_numba = pytest.mark.skipif(not kernels.compiled_available(), reason="numba not importable")
+#: The compiled path: skipped without numba, and slow (the first test of a fresh install compiles every
+#: kernel: 30-40 s of the fast suite's wall time in CI, where the cache is always cold).
+COMPILED = pytest.param("compiled", marks=[_numba, pytest.mark.slow])
+
+
+def needs_numba(test):
+    """Mark a test of the compiled path (see :data:`COMPILED`)."""
+    return pytest.mark.slow(_numba(test))
 
 
 def _direct(A, B, C, D, z):
@@ -131,7 +139,7 @@ def test_compiled_psi_draw_is_the_reference_draw_and_leaves_the_same_generator_s
             draw_obfuscator(strict, grid, rng=np.random.default_rng(0), max_attempts=5)
 
 
-@pytest.mark.parametrize("path", ["compiled", "reference"])
+@pytest.mark.parametrize("path", [COMPILED, "reference"])
 def test_psi_response_from_its_poles_and_residues_is_the_realisation_response(path):
     # Obfuscator.frequency_response (the design's poles and residues through the bilinear map) against
     # a dense solve of the discrete realisation: equal up to the realisation's rounding (measured 7.6e-12

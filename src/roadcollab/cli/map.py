@@ -29,6 +29,16 @@ __all__ = ["NAME", "map_command", "add_parser", "run"]
 NAME = "map"
 
 
+def _vehicle_id(text: str) -> str:
+    """argparse type: a ``vehicle_id`` as the parameters files write it."""
+    from ..io.drive_params import VEHICLE_ID
+
+    if not VEHICLE_ID.fullmatch(text):
+        raise argparse.ArgumentTypeError(f"expected a vehicle_id of 1-64 letters, digits, '.', '_' or '-', got "
+                                         f"{text[:70]!r}")
+    return text
+
+
 def _own_tracks(drives):
     """Each drive's GPS track as a road named after its file (no --network)."""
     from ..errors import FileFormatError
@@ -186,7 +196,7 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
     p.add_argument("--calibrate", action="store_true",
                    help="fit every vehicle's IRI gain from the segments it shares with other vehicles (drives of one "
                         "vehicle_id share a gain) and divide its inversions by it before fusing; writes calibration.csv")
-    p.add_argument("--reference-vehicle", action="append", default=[], metavar="ID",
+    p.add_argument("--reference-vehicle", action="append", default=[], metavar="ID", type=_vehicle_id,
                    help="with --calibrate: a vehicle_id whose gain is 1 (its parameters identified on a reference "
                         "section); anchors its vehicles' gains instead of their mean; repeatable")
     add_limit_options(p, "each drive CSV")

@@ -19,7 +19,7 @@ from ..errors import FileFormatError, ParameterError
 from ..models.vehicle import HalfCarParameters
 from .limits import PARAMS_MAX_BYTES, check_file_size, short_repr
 
-__all__ = ["DEFAULT_SENSOR_NOISE_STD", "ACCEL_UNITS", "STANDARD_GRAVITY", "PARAMETER_RANGES", "params_path_for",
+__all__ = ["VEHICLE_ID", "DEFAULT_SENSOR_NOISE_STD", "ACCEL_UNITS", "STANDARD_GRAVITY", "PARAMETER_RANGES", "params_path_for",
            "read_drive_params", "write_drive_params"]
 
 DEFAULT_SENSOR_NOISE_STD = 0.05
@@ -46,7 +46,7 @@ PARAMETER_RANGES = {
 }
 _TOP_KEYS = ("speed_mps", "vehicle", "sensor_noise_std", "start_m", "accel_unit", "vehicle_id")
 #: A ``vehicle_id``: 1-64 characters, letters, digits and ``._-`` (it names the vehicle in calibration.csv).
-_VEHICLE_ID = re.compile(r"[A-Za-z0-9._-]{1,64}")
+VEHICLE_ID = re.compile(r"[A-Za-z0-9._-]{1,64}")
 
 
 def read_text(path: Path, what: str, max_bytes: int = PARAMS_MAX_BYTES, flag: str | None = None) -> str:
@@ -216,7 +216,7 @@ def read_drive_params(path, *, speed_column: str | None = None) -> dict:
         raise FileFormatError(f"{path}: key 'accel_unit' must be one of {', '.join(repr(u) for u in ACCEL_UNITS)} "
                               f"(the unit of the CSV's accel_left and accel_right), got {short_repr(unit)}")
     vid = data.get("vehicle_id")
-    if vid is not None and not (isinstance(vid, str) and _VEHICLE_ID.fullmatch(vid)):
+    if vid is not None and not (isinstance(vid, str) and VEHICLE_ID.fullmatch(vid)):
         raise FileFormatError(f"{path}: key 'vehicle_id' must be 1-64 letters, digits, '.', '_' or '-' (the same "
                               f"for every drive of one vehicle), got {short_repr(vid)}")
     veh = data["vehicle"]

@@ -285,7 +285,16 @@ def _lane_results(passes: list[RoadPass], network: RoadNetwork, est, kept: np.nd
 
 
 def vehicle_of(drive) -> str:
-    """The vehicle that recorded ``drive``: its ``vehicle_id``, or its CSV's path when it names none."""
+    """The vehicle that recorded ``drive``: its ``vehicle_id``, or its CSV's path when it names none.
+
+    Parameters
+    ----------
+    drive : Drive
+
+    Returns
+    -------
+    str
+    """
     return drive.vehicle_id if drive.vehicle_id is not None else str(drive.csv_path)
 
 
