@@ -69,6 +69,7 @@ def test_merged_clusters_still_exact(path):
     assert _rel(block_response(bs, sys.D, np.exp(1j * om)), direct_response(sys, om)) < 1e-11
 
 
+@pytest.mark.slow  # the compiled path: it compiles the kernels on a fresh install (14 s in CI)
 @pytest.mark.skipif(not compiled_available(), reason="numba not importable")
 def test_compiled_block_diagonalisation_equals_the_lapack_pass():
     """The compiled pass (reordering, Sylvester splits, Bw, Cw) gives the LAPACK path's blocks and, per

@@ -67,7 +67,7 @@ def simulate_command(out_dir, *, command: str, vehicles: int = 3, speeds=(15.0,)
 
 
 def simulate_gps_command(out_dir, *, command: str, network_path=None, vehicles: int = 3, speeds=None,
-                         seed: int = 0) -> dict:
+                         seed: int = 0, shared_vehicles: bool = False) -> dict:
     """``simulate-drives --gps [--network FILE]``: GPS drives on a road network (:mod:`roadcollab.experiments.drives.city`).
 
     Parameters
@@ -84,6 +84,8 @@ def simulate_gps_command(out_dir, *, command: str, network_path=None, vehicles: 
         m/s, cycled (``network_path`` only; the city has its own mix).
     seed : int
         Root seed.
+    shared_vehicles : bool
+        The built-in city with vehicles that make several trips, named by ``vehicle_id`` (for ``map --calibrate``).
 
     Returns
     -------
@@ -96,15 +98,17 @@ def simulate_gps_command(out_dir, *, command: str, network_path=None, vehicles: 
 
     network = None if network_path is None else read_network(network_path)
     with staged_output(out_dir, NAME) as out:
-        files = write_city(out, seed=seed, network=network, speeds=speeds, vehicles=vehicles)
+        files = write_city(out, seed=seed, network=network, speeds=speeds, vehicles=vehicles,
+                           shared_vehicles=shared_vehicles)
         write_config(out / "config.json", command=command, seed=seed,
                      config={"network": None if network_path is None else str(network_path), "vehicles": vehicles,
+                             "shared_vehicles": shared_vehicles,
                              "speeds_mps": None if speeds is None else list(speeds)})
         drives = " ".join(f"--drive {out_dir}/{p.name}" for p in files["drives"])
         (out / "README.md").write_text(
             f"# Simulated GPS drives\n\nMade by `{command}` (true potholes in `truth.json`).\n\nMap them:\n\n"
             f"    roadcollab map {drives} --network {out_dir}/network.geojson --store {out_dir}-roads.sqlite "
-            f"--out {out_dir}-map\n")
+            f"--out {out_dir}-map{' --calibrate' if shared_vehicles else ''}\n")
     return {"out_dir": str(out_dir), "drives": [p.name for p in files["drives"]],
             "network": str(Path(out_dir) / "network.geojson")}
 
@@ -155,6 +159,9 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
     p.add_argument("--network", metavar="FILE", default=None,
                    help="with --gps: a road network GeoJSON (LineStrings with road_id); every road is driven forward "
                         "by --vehicles vehicles at --speeds")
+    p.add_argument("--shared-vehicles", action="store_true",
+                   help="with --gps, the built-in city: 8 vehicles make the 12 drives (each parameters file names its "
+                        "vehicle_id), so that map --calibrate can fit every vehicle's IRI gain")
     return p
 
 
@@ -175,13 +182,17 @@ def run(args: argparse.Namespace, command_line: str) -> int:
     """
     if args.network is not None and not args.gps:
         raise ParameterError("--network applies to --gps only")
+    if args.shared_vehicles and (not args.gps or args.network is not None):
+        raise ParameterError("--shared-vehicles applies to --gps on the built-in city only (without --network)")
     if args.gps:
         given = "--speeds" in command_line.split() or any(a.startswith("--speeds=") for a in command_line.split())
         summary = simulate_gps_command(args.out, command=command_line, network_path=args.network,
-                                       vehicles=args.vehicles, speeds=args.speeds if given else None, seed=args.seed)
+                                       vehicles=args.vehicles, speeds=args.speeds if given else None, seed=args.seed,
+                                       shared_vehicles=args.shared_vehicles)
         print(f"wrote {len(summary['drives'])} GPS drives and {summary['network']}; map them: roadcollab map "
               + " ".join(f"--drive {args.out}/{d}" for d in summary["drives"])
-              + f" --network {summary['network']} --store {args.out}-roads.sqlite --out {args.out}-map")
+              + f" --network {summary['network']} --store {args.out}-roads.sqlite --out {args.out}-map"
+              + (" --calibrate" if args.shared_vehicles else ""))
         return 0
     road = "synthetic" if args.length_m is not None else args.road
     if args.length_m is not None and args.road == "measured" and "--road" in command_line.split():

@@ -66,6 +66,10 @@ CITY_ROUTES = (((("main", 0.0, 600.0), ("cross", 0.0, 500.0)), ROUTE_SPEEDS),
                (((("service", 0.0, 600.0),)), SERVICE_SPEEDS),
                ((("main", 0.0, 300.0), ("side", 0.0, 400.0)), TURN_SPEEDS),
                ((("side", 400.0, 0.0), ("main", 300.0, 0.0)), BACK_SPEEDS))
+#: With ``shared_vehicles``: drive index (0-based) -> the earlier drive whose vehicle drives it too. The
+#: service-road drives (6-7) by the vehicles of drives 1-2, the drives back (11-12) by those of 8-9: eight
+#: vehicles, each linked to the others through the lanes they share (for the per-vehicle calibration).
+SHARED_VEHICLES = {5: 0, 6: 1, 10: 7, 11: 8}
 SAMPLE_RATE = 100.0
 GPS_RATE = 5.0
 GPS_SIGMA = 3.0
@@ -269,8 +273,8 @@ def _gps(drive: Drive, network: RoadNetwork, route: tuple, rng: np.random.Genera
     return full_lat, full_lon
 
 
-def simulate_city(*, seed: int = 0, network: RoadNetwork | None = None, speeds=None, vehicles: int = 3
-                  ) -> tuple[CityTruth, list[tuple[np.ndarray, np.ndarray]]]:
+def simulate_city(*, seed: int = 0, network: RoadNetwork | None = None, speeds=None, vehicles: int = 3,
+                  shared_vehicles: bool = False) -> tuple[CityTruth, list[tuple[np.ndarray, np.ndarray]]]:
     """The simulated drives with their GPS (module docstring).
 
     Parameters
@@ -284,6 +288,9 @@ def simulate_city(*, seed: int = 0, network: RoadNetwork | None = None, speeds=N
         m/s, for a user's network (default 12, 15, 18).
     vehicles : int
         Drives per road of a user's network.
+    shared_vehicles : bool
+        Built-in city only: vehicles make several trips (:data:`SHARED_VEHICLES`); default: every drive its
+        own vehicle.
 
     Returns
     -------
@@ -291,6 +298,7 @@ def simulate_city(*, seed: int = 0, network: RoadNetwork | None = None, speeds=N
     list of (lat, lon)
         Per drive, (N,) arrays with NaN between fixes.
     """
+    builtin = network is None
     if network is None:
         network, potholes = city_network(), CITY_POTHOLES
         plan = [(route, v) for route, vs in CITY_ROUTES for v in vs]
@@ -304,6 +312,8 @@ def simulate_city(*, seed: int = 0, network: RoadNetwork | None = None, speeds=N
     routes = list(dict.fromkeys(route for route, _ in plan))
     lanes, profiles = city_profiles(network, routes, potholes, rng=np.random.default_rng(road_rng))
     fleet = sample_fleet(len(plan), FleetSpec(), rng=np.random.default_rng(fleet_rng))
+    if shared_vehicles and builtin:
+        fleet = [fleet[SHARED_VEHICLES.get(j, j)] for j in range(len(fleet))]
     drives, gps = [], []
     for j, ((route, speed), child) in enumerate(zip(plan, drive_seeds)):
         rng = np.random.default_rng(child)
@@ -336,15 +346,17 @@ def network_geojson(network: RoadNetwork) -> dict:
         for rid, r in network.roads.items()]}
 
 
-def write_city(out, *, seed: int = 0, network: RoadNetwork | None = None, speeds=None, vehicles: int = 3) -> dict:
+def write_city(out, *, seed: int = 0, network: RoadNetwork | None = None, speeds=None, vehicles: int = 3,
+               shared_vehicles: bool = False) -> dict:
     """Write the city: ``network.geojson``, ``drive<j>.csv`` + ``.toml`` and ``truth.json`` into ``out``.
 
     Parameters
     ----------
     out : Path
         An existing directory (the command stages it).
-    seed, network, speeds, vehicles
-        See :func:`simulate_city`.
+    seed, network, speeds, vehicles, shared_vehicles
+        See :func:`simulate_city`; with ``shared_vehicles`` every parameters file names its vehicle
+        (``vehicle_id = "veh<k>"``, k the first drive it made).
 
     Returns
     -------
@@ -352,7 +364,10 @@ def write_city(out, *, seed: int = 0, network: RoadNetwork | None = None, speeds
         ``{"network": path, "drives": [paths], "truth": path}``.
     """
     out = Path(out)
-    truth, gps = simulate_city(seed=seed, network=network, speeds=speeds, vehicles=vehicles)
+    truth, gps = simulate_city(seed=seed, network=network, speeds=speeds, vehicles=vehicles,
+                               shared_vehicles=shared_vehicles)
+    vid_of = (lambda j: f"veh{SHARED_VEHICLES.get(j - 1, j - 1) + 1}") if shared_vehicles and network is None \
+        else None
     net = out / "network.geojson"
     net.write_text(json.dumps(network_geojson(truth.network), indent=1))
     paths = []
@@ -360,9 +375,10 @@ def write_city(out, *, seed: int = 0, network: RoadNetwork | None = None, speeds
         constant = d.speed_source == "parameters"
         p = write_gps_drive_csv(out / f"drive{j}.csv", d.time, d.accel, lat, lon,
                                 column=None if constant else "speed_mps", values=None if constant else d.speeds())
-        write_drive_params(out / f"drive{j}.toml", speed=d.speed if constant else None, params=d.params)
+        write_drive_params(out / f"drive{j}.toml", speed=d.speed if constant else None, params=d.params,
+                           vehicle_id=vid_of(j) if vid_of else None)
         paths.append(p)
-    doc = {"seed": seed, "gps_sigma_m": GPS_SIGMA, "gps_rate_hz": GPS_RATE, "sample_rate_hz": SAMPLE_RATE,
+    doc = {"seed": seed, **({"shared_vehicles": True} if vid_of else {}), "gps_sigma_m": GPS_SIGMA, "gps_rate_hz": GPS_RATE, "sample_rate_hz": SAMPLE_RATE,
            "roads_driven": [list(r) for r in truth.roads_driven],
            "routes": [[list(p) for p in r] for r in truth.routes], "potholes": truth.potholes_lonlat()}
     (out / "truth.json").write_text(json.dumps(doc, indent=1))

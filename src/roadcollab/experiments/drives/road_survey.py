@@ -11,12 +11,12 @@ Pipeline
    alignment catches what the matching left).
 3. Each pass's aligned inversion is kept only on the road (``u_range``) and at least ``edge_m``
    from its record's ends (the inversion's window-edge effects reach about ``2 / n_low``, 48 m at
-   12 m/s; the ends of a pass that continues onto another road are not record ends).
-3b. Every vehicle's IRI gain (its estimated parameters scale its inversion over the IRI band) is fitted
-   from the segments it shares with other vehicles, over all lanes at once
+   12 m/s; the ends of a pass that continues onto another road are not record ends). With
+   ``calibrate``, every vehicle's IRI gain (its estimated parameters scale its inversion over the IRI
+   band) is fitted from the segments it shares with other vehicles, over all lanes at once
    (:mod:`~roadcollab.experiments.drives.gain_calibration`; drives of one ``vehicle_id`` share one
-   gain), and each pass's inversion is divided by its vehicle's gain (``calibrate=False``: not). The
-   fused profile is their average where any covers.
+   gain), and each pass's inversion is divided by its vehicle's gain. The fused profile is their
+   average where any covers.
 4. Segments (:func:`roadcollab.geo.segments.segment_bounds`, fixed in the road's measure) fully
    covered by the fused profile get the IRI: the mean of the two wheel tracks' IRIs (the mean
    roughness index, MRI, which agencies report as "IRI"), m/km and in/mi; a 95 % bootstrap interval
