@@ -30,7 +30,7 @@ from cryptography.hazmat.primitives.kdf.hkdf import HKDF
 
 from ..errors import FileFormatError, MessageError
 
-__all__ = ["RelayKey"]
+__all__ = ["RelayKey", "seal_to"]
 
 _INFO = b"roadcollab/relay/v1|"
 _NONCE = bytes(12)
@@ -38,6 +38,31 @@ _NONCE = bytes(12)
 
 def _key(shared: bytes, topic: str) -> bytes:
     return HKDF(algorithm=hashes.SHA256(), length=32, salt=None, info=_INFO + topic.encode()).derive(shared)
+
+
+def seal_to(public: bytes, topic: str, data: bytes) -> bytes:
+    """``data`` encrypted to the holder of the X25519 key ``public`` for ``topic`` (module docstring's form).
+
+    Parameters
+    ----------
+    public : bytes
+        Raw 32-byte X25519 public key of the recipient.
+    topic : str
+        Bound as associated data and into the key.
+    data : bytes
+
+    Raises
+    ------
+    MessageError
+        ``public`` is not a valid X25519 key.
+    """
+    eph = X25519PrivateKey.generate()
+    try:
+        k = _key(eph.exchange(X25519PublicKey.from_public_bytes(bytes(public))), topic)
+    except ValueError as err:
+        raise MessageError(f"{topic}: invalid X25519 public key of the recipient ({err})") from None
+    pub = eph.public_key().public_bytes(serialization.Encoding.Raw, serialization.PublicFormat.Raw)
+    return pub + ChaCha20Poly1305(k).encrypt(_NONCE, bytes(data), topic.encode())
 
 
 class RelayKey:
@@ -102,10 +127,28 @@ class RelayKey:
             Bound as associated data (a message moved to another topic does not open).
         data : bytes
         """
-        eph = X25519PrivateKey.generate()
-        k = _key(eph.exchange(X25519PublicKey.from_public_bytes(self.public)), topic)
-        pub = eph.public_key().public_bytes(serialization.Encoding.Raw, serialization.PublicFormat.Raw)
-        return pub + ChaCha20Poly1305(k).encrypt(_NONCE, bytes(data), topic.encode())
+        return seal_to(self.public, topic, data)
+
+    def agree(self, public: bytes, info: bytes) -> bytes:
+        """A 32-byte key shared with the holder of ``public``: HKDF-SHA256 of the X25519 secret with ``info``.
+
+        Parameters
+        ----------
+        public : bytes
+            The peer's raw X25519 public key (untrusted bytes: checked).
+        info : bytes
+            Domain separation (protocol, session).
+
+        Raises
+        ------
+        MessageError
+            ``public`` is not a valid X25519 key.
+        """
+        try:
+            shared = self._sk.exchange(X25519PublicKey.from_public_bytes(bytes(public)))
+        except ValueError as err:
+            raise MessageError(f"invalid X25519 public key ({err})") from None
+        return HKDF(algorithm=hashes.SHA256(), length=32, salt=None, info=bytes(info)).derive(shared)
 
     def open(self, topic: str, blob: bytes) -> bytes:
         """The plaintext of :meth:`seal`.

@@ -10,7 +10,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..errors import ParameterError
+from ..errors import MessageError, ParameterError
 from . import _goldilocks
 
 __all__ = ["Field", "GOLDILOCKS"]
@@ -85,6 +85,38 @@ class Field:
         """
         w = self.nbytes
         return b"".join(int(v).to_bytes(w, "little") for v in a)
+
+    def from_bytes(self, data: bytes, n: int, what: str) -> np.ndarray:
+        """The ``n`` elements of :meth:`to_bytes` output from an untrusted sender.
+
+        Parameters
+        ----------
+        data : bytes
+        n : int
+            Expected elements.
+        what : str
+            Named in the error.
+
+        Returns
+        -------
+        (n,) object ndarray
+
+        Raises
+        ------
+        MessageError
+            Another length, or an element not in ``[0, p)``.
+        """
+        w = self.nbytes
+        data = bytes(data)
+        if len(data) != n * w:
+            raise MessageError(f"{what}: expected {n} field elements ({n * w} bytes), got {len(data)} bytes")
+        if w == 8:
+            out = np.frombuffer(data, dtype="<u8").astype(object)
+        else:
+            out = np.array([int.from_bytes(data[k:k + w], "little") for k in range(0, len(data), w)], dtype=object)
+        if n and max(out) >= self.p:
+            raise MessageError(f"{what}: an element is not in F_p")
+        return out.reshape(n)
 
 
 GOLDILOCKS = Field(2 ** 64 - 2 ** 32 + 1, 7)

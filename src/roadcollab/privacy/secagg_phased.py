@@ -41,7 +41,7 @@ from .secagg_flp import ValidityEncoding
 from .secagg_messages import AggregationRefused
 from .secagg_validity import Submission, ValidatedAggregate, run_validated_aggregation, submit
 
-__all__ = ["PhasedResult", "phase_session", "public_schedule", "radius_schedule", "run_phased_session"]
+__all__ = ["PhasedResult", "check_encodings", "phase_session", "public_schedule", "radius_schedule", "run_phased_session"]
 
 #: ``tamper(phase, vehicle, submission) -> submission``: a malicious vehicle's change to what it sends.
 Tamper = Callable[[int, int, Submission], Submission]
@@ -127,8 +127,15 @@ def public_schedule(offset: float, radius: float, final: int = 2) -> tuple[int, 
     return 1 + steps + check_int("final", final, low=1), float(2 ** steps)
 
 
-def _check_encodings(wide: ValidityEncoding, tight: ValidityEncoding | Sequence[ValidityEncoding],
-                     phases: int) -> list[ValidityEncoding]:
+def check_encodings(wide: ValidityEncoding, tight: ValidityEncoding | Sequence[ValidityEncoding],
+                    phases: int) -> list[ValidityEncoding]:
+    """The encodings of phases ``2..K``: ``tight`` repeated or one per phase, each with a norm bound and ``wide``'s length.
+
+    Raises
+    ------
+    ParameterError
+        Another count, an encoding without ``norm``, or another length.
+    """
     phases = check_int("phases", phases, low=1)
     encs = [tight] * (phases - 1) if isinstance(tight, ValidityEncoding) else list(tight)
     if len(encs) != phases - 1:
@@ -204,7 +211,7 @@ def run_phased_session(fleet: Any, inputs: dict[int, ArrayLike], session: bytes,
     -------
     PhasedResult
     """
-    encs = _check_encodings(wide, tight, phases)
+    encs = check_encodings(wide, tight, phases)
     gen = np.random.default_rng(rng)
     subs: dict[int, Submission] = {}
     refused: dict[int, str] = {}

@@ -24,11 +24,45 @@ from .._validation import StrPath
 from ..errors import FileFormatError
 from .secagg_messages import AggregationRefused
 
-__all__ = ["SessionLedger", "view_digest"]
+__all__ = ["SessionLedger", "ReleaseLog", "view_digest"]
 
 _SCHEMA = ("CREATE TABLE IF NOT EXISTS secagg_sessions (session BLOB PRIMARY KEY, roster BLOB NOT NULL, "
            "view BLOB)")
 _MAGIC_TABLE = "secagg_sessions"
+_RELEASE_SCHEMA = ("CREATE TABLE IF NOT EXISTS prio_releases (session BLOB NOT NULL, phase INTEGER NOT NULL, "
+                   "accepted TEXT NOT NULL, PRIMARY KEY (session, phase))")
+
+
+def _check_existing(path: Path, table: str, what: str) -> None:
+    """Refuse (never replace) an existing ``path`` that is not an SQLite file with ``table`` (or empty)."""
+    if not path.is_file():
+        raise FileFormatError(f"{path}: not a regular file (expected a {what})")
+    try:
+        with path.open("rb") as fh:
+            head = fh.read(16)
+        if head and head != b"SQLite format 3\x00":
+            raise FileFormatError(f"{path}: not an SQLite file (expected a {what})")
+        if head:
+            db = sqlite3.connect(f"file:{path}?mode=ro", uri=True)
+            names = {r[0] for r in db.execute("SELECT name FROM sqlite_master WHERE type = 'table'")}
+            db.close()
+            if names and table not in names:
+                raise FileFormatError(f"{path}: an SQLite file without table {table!r} (expected a {what})")
+    except sqlite3.DatabaseError as err:
+        raise FileFormatError(f"{path}: unreadable SQLite file ({err})") from None
+
+
+def _open_db(path: Path | None, table: str, schema: str, what: str) -> sqlite3.Connection:
+    """An autocommit connection (every statement its own transaction, ``synchronous = FULL``) with ``schema``."""
+    if path is not None and path.exists():
+        _check_existing(path, table, what)
+    try:
+        db = sqlite3.connect(":memory:" if path is None else str(path), isolation_level=None)
+        db.execute("PRAGMA synchronous = FULL")
+        db.execute(schema)
+    except sqlite3.DatabaseError as err:
+        raise FileFormatError(f"{path}: cannot open as a {what} ({err})") from None
+    return db
 
 
 def view_digest(ids: Iterable[int]) -> bytes:
@@ -62,33 +96,7 @@ class SessionLedger:
 
     def __init__(self, path: StrPath | None = None) -> None:
         self.path = None if path is None else Path(path)
-        if self.path is not None and self.path.exists():
-            self._check_existing(self.path)
-        try:
-            self._db = sqlite3.connect(":memory:" if self.path is None else str(self.path), isolation_level=None)
-            self._db.execute("PRAGMA synchronous = FULL")
-            self._db.execute(_SCHEMA)
-        except sqlite3.DatabaseError as err:
-            raise FileFormatError(f"{self.path}: cannot open as a secure-aggregation ledger ({err})") from None
-
-    @staticmethod
-    def _check_existing(path: Path) -> None:
-        if not path.is_file():
-            raise FileFormatError(f"{path}: not a regular file (expected a secure-aggregation ledger)")
-        try:
-            with path.open("rb") as fh:
-                head = fh.read(16)
-            if head and head != b"SQLite format 3\x00":
-                raise FileFormatError(f"{path}: not an SQLite file (expected a secure-aggregation ledger)")
-            if head:
-                db = sqlite3.connect(f"file:{path}?mode=ro", uri=True)
-                names = {r[0] for r in db.execute("SELECT name FROM sqlite_master WHERE type = 'table'")}
-                db.close()
-                if names and _MAGIC_TABLE not in names:
-                    raise FileFormatError(f"{path}: an SQLite file without table {_MAGIC_TABLE!r} "
-                                          "(expected a secure-aggregation ledger)")
-        except sqlite3.DatabaseError as err:
-            raise FileFormatError(f"{path}: unreadable SQLite file ({err})") from None
+        self._db = _open_db(self.path, _MAGIC_TABLE, _SCHEMA, "secure-aggregation ledger")
 
     def close(self) -> None:
         """Close the database (further calls fail)."""
@@ -175,3 +183,71 @@ class SessionLedger:
         """
         row = self._row(session)
         return None if row is None else row[1]
+
+
+class ReleaseLog:
+    """An aggregator's persistent record of the sum shares it released (validated sessions, issue 20).
+
+    Each aggregator of :mod:`.secagg_validity` reveals its sum share at most once per (session, phase), and
+    a later phase of a phased session only over phase 1's accepted set (:mod:`.secagg_phased`): two sums
+    over sets that differ by one vehicle would give that vehicle's input away. Kept in SQLite like
+    :class:`SessionLedger`, so a restarted aggregator refuses what it released before the restart.
+
+    Parameters
+    ----------
+    path : str or os.PathLike or None
+        The SQLite file (created if missing; a file that is not a release log is refused, never replaced).
+        ``None``: in memory.
+
+    Raises
+    ------
+    FileFormatError
+        ``path`` exists and is not a release log.
+    """
+
+    def __init__(self, path: StrPath | None = None) -> None:
+        self.path = None if path is None else Path(path)
+        self._db = _open_db(self.path, "prio_releases", _RELEASE_SCHEMA, "validated-aggregation release log")
+
+    def close(self) -> None:
+        """Close the database."""
+        self._db.close()
+
+    def released(self, session: bytes, phase: int) -> tuple[int, ...] | None:
+        """The accepted set of the sum share released for ``(session, phase)``, or None.
+
+        Parameters
+        ----------
+        session : bytes
+            The measurement's ``session_id(segment, epoch)``.
+        phase : int
+        """
+        row = self._db.execute("SELECT accepted FROM prio_releases WHERE session = ? AND phase = ?",
+                               (bytes(session), int(phase))).fetchone()
+        return None if row is None else tuple(int(i) for i in row[0].split(",") if i)
+
+    def release(self, session: bytes, phase: int, accepted: Iterable[int]) -> None:
+        """Record, before the sum share is sent, that ``(session, phase)`` is released over ``accepted``.
+
+        Parameters
+        ----------
+        session : bytes
+        phase : int
+            1 for the first (or only) phase.
+        accepted : iterable of int
+            Protocol ids.
+
+        Raises
+        ------
+        AggregationRefused
+            ``(session, phase)`` was released before (also before a restart), or a later phase's set is
+            not phase 1's.
+        """
+        ids = tuple(sorted(int(i) for i in accepted))
+        if phase > 1 and self.released(session, 1) != ids:
+            raise AggregationRefused(f"phase {phase} is summed only over phase 1's accepted set")
+        try:
+            self._db.execute("INSERT INTO prio_releases (session, phase, accepted) VALUES (?, ?, ?)",
+                             (bytes(session), int(phase), ",".join(map(str, ids))))
+        except sqlite3.IntegrityError:
+            raise AggregationRefused(f"a sum share of phase {phase} of this session was already released") from None

@@ -1,0 +1,215 @@
+"""A vehicle's side of validated, phased sessions (:mod:`.prioround`), and the in-memory driver.
+
+:class:`PrioAgent` answers the leader's invites: phase 1 records the measurement in the vehicle's
+:class:`~roadcollab.privacy.secagg_store.SessionLedger` (one session per (segment, epoch), across
+restarts) and proves its input clipped into the wide box; phase ``k > 1`` first checks the helper's
+signature on the previous result and records phase 1's set (a later phase over another set gets
+nothing), then proves its deviation from the result scaled onto the public ball. The helper's part is
+sealed to the helper's advertised X25519 key (the leader relays it unread). :func:`run_prio_session`
+runs one session over a :class:`~roadcollab.network.transport.MemoryBroker`.
+"""
+
+from __future__ import annotations
+
+import hashlib
+
+import numpy as np
+
+from ..errors import MessageError, ParameterError
+from ..privacy.secagg_messages import AggregationRefused, session_id
+from ..privacy.secagg_phased import phase_session
+from ..privacy.secagg_store import SessionLedger
+from ..privacy.secagg_validity import submit
+from ..wire.certificate import verify_signature
+from ..wire.identity import FleetTrust, VehicleIdentity
+from .messages import seal
+from .priohelper import PrioHelperService
+from .prioround import PrioLeader, PrioParams
+from .priowire import PrioTopics, ids_field, int_field, open_advert, pack, result_bytes, unpack
+from .relaykey import seal_to
+from .service import Publish
+from .transport import MemoryBroker
+
+__all__ = ["PrioAgent", "run_prio_session", "segment_key"]
+
+
+def segment_key(segment: int) -> bytes:
+    """The ledger key of a vehicle's measurement of ``segment`` given to a session of any epoch (16 bytes).
+
+    A vehicle whose input is keyed by segment records this key too, so an aggregator that opens a second
+    session on the segment under another epoch gets nothing (differencing), also after a restart.
+    """
+    return hashlib.sha256(b"roadcollab/prio/segment|" + str(int(segment)).encode()).digest()[:16]
+
+
+class PrioAgent:
+    """A vehicle in the validated sessions it is invited to.
+
+    Parameters
+    ----------
+    identity : VehicleIdentity
+    trust : FleetTrust
+    params : PrioParams
+    ledger : SessionLedger
+        Persistent: one input per (segment, epoch); phase 1's set per session.
+    prefix : str
+    inputs : dict
+        ``{(segment, epoch): u}`` or ``{segment: u}`` with ``u`` of ``params.wide.length`` values: what
+        this vehicle measured.
+    rng : numpy.random.Generator, optional
+        Seeds and blinds (tests); default from the operating system's entropy.
+
+    Attributes
+    ----------
+    refusals : list of str
+        Why it sent nothing for an invite.
+    closed : dict
+        ``{(segment, epoch): outcome}``.
+    """
+
+    def __init__(self, identity: VehicleIdentity, trust: FleetTrust, params: PrioParams, ledger: SessionLedger,
+                 prefix: str, inputs: dict, *, rng: np.random.Generator | None = None) -> None:
+        self.identity, self.trust, self.params, self.ledger = identity, trust, params, ledger
+        self.vid, self.prefix, self.inputs = identity.vehicle_id, prefix, dict(inputs)
+        self.rng = np.random.default_rng() if rng is None else rng
+        self._u: dict[tuple[int, int], np.ndarray] = {}
+        self._answers: dict[tuple[int, int, int], list[Publish]] = {}
+        self.refusals: list[str] = []
+        self.closed: dict[tuple[int, int], str] = {}
+        self.clipped = 0
+
+    @property
+    def subscription(self) -> str:
+        return f"{self.prefix}/prio/+/+/to/{self.vid}"
+
+    def on_message(self, topic: str, payload: bytes) -> list[Publish]:
+        """React to one leader message; what to publish (refusals in :attr:`refusals`).
+
+        Parameters
+        ----------
+        topic : str
+        payload : bytes
+        """
+        try:
+            s, e, rest = PrioTopics.parse(self.prefix, topic)
+            if rest != ["to", self.vid]:
+                return []
+            h, blobs = unpack(payload, "leader message")
+            if h.get("t") == "closed":
+                self.closed.setdefault((s, e), str(h.get("outcome")))
+                return []
+            if h.get("t") != "invite":
+                raise MessageError(f"unknown message {h.get('t')!r}")
+            k = int_field(h, "phase", "invite", 1)
+            if (s, e, k) in self._answers:          # an invite repeated: the same answer again
+                return list(self._answers[(s, e, k)])
+            out = self._answer((s, e), k, h, blobs)
+            self._answers[(s, e, k)] = out
+            return out
+        except (MessageError, ParameterError) as err:
+            self.refusals.append(f"{topic}: {err}")
+            return []
+
+    def _input(self, key: tuple[int, int]) -> np.ndarray:
+        z = self.inputs.get(key, self.inputs.get(key[0]))
+        if z is None:
+            raise MessageError(f"invited to session {key} of a segment it has no measurement of")
+        u = np.asarray(z, float).ravel()
+        if u.size != self.params.wide.length or not np.all(np.isfinite(u)):
+            raise ParameterError(f"the input of {key} must hold {self.params.wide.length} finite values")
+        return u
+
+    def _answer(self, key: tuple[int, int], k: int, h: dict, blobs: list[bytes]) -> list[Publish]:
+        topics, session = PrioTopics(self.prefix, *key), session_id(*key)
+        if len(blobs) != 2:
+            raise MessageError("invite: expected the helper's key advert and the previous result")
+        cert, helper_pub = open_advert(blobs[0], self.trust, self.prefix, self.params.helper_id)
+        pid = int_field(h, "id", "invite", 1)
+        enc = self.params.encoding(k)
+        try:
+            if k == 1:
+                u, roster = self._input(key), ids_field(h, "roster", "invite")
+                if key not in self.inputs:   # a measurement of the segment: one session in any epoch
+                    self.ledger.record_contribution(segment_key(key[0]), roster)
+                self.ledger.record_contribution(session, roster)
+                self._u[key], _ = self.params.wide.clip(u)
+                x = self._u[key]
+            else:
+                if key not in self._u:
+                    raise MessageError(f"phase {k} of session {key} without its phase 1 here")
+                rh, rb = unpack(blobs[1], "previous result")
+                acc = ids_field(rh, "accepted", "previous result")
+                if int_field(rh, "phase", "previous result", 1) != k - 1 or len(rb) != 2 or pid not in acc:
+                    raise MessageError(f"phase {k}: the previous result is not phase {k - 1}'s over this vehicle")
+                verify_signature(cert.public_key, result_bytes(session, k - 1, acc, rb[0]), rb[1],
+                                 "the helper's result")
+                m = np.frombuffer(rb[0], dtype="<f8")
+                if m.shape != self._u[key].shape or not np.all(np.isfinite(m)):
+                    raise MessageError(f"phase {k}: the previous result has the wrong length or is not finite")
+                self.ledger.record_view(session, acc)
+                d, c = enc.onto_ball(self._u[key] - m)
+                self.clipped += c
+                x = np.clip(d, -enc.bounds, enc.bounds)
+        except AggregationRefused as err:
+            raise MessageError(f"sends nothing in phase {k}: {err}") from None
+        sub = submit(enc, x, phase_session(session, k), pid, self.rng, identity=self.identity)
+        f = enc.field
+        sealed = seal_to(helper_pub, topics.sealed_part(pid, k), sub.helper.seed + sub.helper.blind + sub.helper.peer_part)
+        body = pack({"t": "upload", "phase": k, "id": pid}, f.to_bytes(sub.leader.x), f.to_bytes(sub.leader.proof.elements),
+                    sub.leader.blind, sub.leader.peer_part, sealed, sub.signature)
+        topic = topics.up(self.vid)
+        return [Publish(topic, seal(self.identity, topic, body))]
+
+
+def run_prio_session(leader: PrioLeader, helper: PrioHelperService, agents: dict, roster: list[str], *,
+                     offline=(), timeouts: int = 3, limit: int = 1000) -> MemoryBroker:
+    """One session over a fresh :class:`~roadcollab.network.transport.MemoryBroker`, to its end.
+
+    Parameters
+    ----------
+    leader : PrioLeader
+    helper : PrioHelperService
+    agents : dict of str to PrioAgent
+        Vehicles that answer (others of ``roster`` never do).
+    roster : list of str
+    offline : iterable of str
+        Vehicles gone: they receive nothing.
+    timeouts : int
+        Leader timeouts at most (each closes the current phase with what was decided).
+    limit : int
+        Delivery passes at most per timeout.
+
+    Returns
+    -------
+    MemoryBroker
+        Its ``bytes_published``.
+    """
+    broker = MemoryBroker()
+    a, b = broker.client(), broker.client()
+    a.subscribe(f"{leader.topics.base}/up/+")
+    a.subscribe(leader.topics.helper)
+    b.subscribe(helper.subscription)
+    clients = {v: broker.client() for v in agents}
+    for v, c in clients.items():
+        c.subscribe(agents[v].subscription)
+    parties = [(a, leader.handle), (b, helper.handle)] + [
+        (c, (lambda t, p: []) if v in set(offline) else agents[v].on_message) for v, c in clients.items()]
+    for p in leader.open(list(roster)):
+        a.publish(p.topic, p.payload)
+    for _ in range(timeouts + 1):
+        for _ in range(limit):
+            moved = 0
+            for client, fn in parties:
+                while (m := client.receive(0.0)) is not None:
+                    moved += 1
+                    for p in fn(*m):
+                        client.publish(p.topic, p.payload, p.retain)
+            if not moved:
+                break
+        else:
+            raise ParameterError(f"the session did not settle within {limit} passes")
+        if leader.done:
+            break
+        for p in leader.advance():
+            a.publish(p.topic, p.payload)
+    return broker

@@ -1,0 +1,198 @@
+"""The wire of validated, phased sessions between parties (:mod:`.prioround`): topics, framing, keys.
+
+Topics of the session on measurement ``(segment, epoch)``, under ``{prefix}/prio/{segment}/{epoch}``:
+
+- ``.../to/{vid}``: leader -> vehicle, unsigned framing (what it carries is signed by the helper):
+  ``invite`` (phase, protocol id, roster; the helper's key advert; from phase 2 the helper-signed result
+  of the previous phase) and ``closed``;
+- ``.../up/{vid}``: vehicle -> leader, an envelope signed by the vehicle for that topic: its leader share
+  of the input and of the proof, its joint-randomness material, the helper's part sealed to the helper's
+  X25519 key (the leader relays it unread) and the submission signature the helper checks;
+- ``.../leader``: leader -> helper and ``.../helper``: helper -> leader, envelopes signed by each
+  aggregator's certified identity: ``open`` (roster), ``fwd`` (a vehicle's sealed part), ``vshare``
+  (verifier shares), ``reject``, ``accept`` (the accepted set and the leader's sum share), ``result``
+  (the helper's sum share and its signed result), ``refuse``, ``closed``.
+
+Each aggregator advertises its X25519 key signed by its identity on ``{prefix}/prio/key/{id}``
+(:func:`open_advert`); the query randomness of the proofs is keyed by their X25519 agreement
+(:func:`verify_key`), which no vehicle can compute. A framed message is a 4-byte header length, a JSON
+header (at most :data:`MAX_HEADER` bytes) naming the lengths of the binary parts, then the parts.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import struct
+
+import numpy as np
+
+from ..errors import MessageError
+from ..privacy.secagg_flp import Field
+from ..privacy.secagg_store import view_digest
+from ..wire.certificate import Certificate
+from ..wire.envelope import open_envelope
+from ..wire.identity import FleetTrust, VehicleIdentity
+from .messages import seal
+from .relaykey import RelayKey
+
+__all__ = ["MAX_HEADER", "PrioTopics", "AggregatorKeys", "pack", "unpack", "key_topic", "open_advert", "verify_key",
+           "result_bytes", "elements", "ids_field", "int_field"]
+
+MAX_HEADER = 64 * 1024
+_VERIFY_INFO = b"roadcollab/prio/verify/v1|"
+_RESULT = b"roadcollab/prio/result/v1|"
+
+
+def pack(header: dict, *blobs: bytes) -> bytes:
+    """A framed message: ``header`` (JSON) and the binary ``blobs``."""
+    h = json.dumps(dict(header, blobs=[len(b) for b in blobs]), sort_keys=True, separators=(",", ":")).encode()
+    return struct.pack("<I", len(h)) + h + b"".join(bytes(b) for b in blobs)
+
+
+def unpack(data: bytes, what: str) -> tuple[dict, list[bytes]]:
+    """``(header, blobs)`` of an untrusted framed message.
+
+    Raises
+    ------
+    MessageError
+        Truncated, a header that is not a JSON object or too long, or parts that do not add up.
+    """
+    data = bytes(data)
+    if len(data) < 4:
+        raise MessageError(f"{what}: truncated")
+    (n,) = struct.unpack_from("<I", data)
+    if n > MAX_HEADER or 4 + n > len(data):
+        raise MessageError(f"{what}: header of {n} bytes (at most {MAX_HEADER}, within the message)")
+    try:
+        h = json.loads(data[4:4 + n].decode())
+    except (UnicodeDecodeError, ValueError) as err:
+        raise MessageError(f"{what}: header is not JSON ({err})") from None
+    sizes = h.get("blobs") if isinstance(h, dict) else None
+    if not isinstance(sizes, list) or not all(isinstance(k, int) and not isinstance(k, bool) and k >= 0
+                                              for k in sizes):
+        raise MessageError(f"{what}: expected a JSON object with the list of part sizes")
+    if 4 + n + sum(sizes) != len(data):
+        raise MessageError(f"{what}: the parts' sizes do not add up to the message's length")
+    blobs, off = [], 4 + n
+    for k in sizes:
+        blobs.append(data[off:off + k])
+        off += k
+    return h, blobs
+
+
+def int_field(h: dict, key: str, what: str, low: int = 0) -> int:
+    """An integer ``>= low`` of a header (MessageError otherwise)."""
+    v = h.get(key)
+    if isinstance(v, bool) or not isinstance(v, int) or v < low:
+        raise MessageError(f"{what}: {key!r} must be an integer >= {low}, got {v!r}")
+    return v
+
+
+def ids_field(h: dict, key: str, what: str) -> tuple[int, ...]:
+    """A sorted tuple of distinct positive protocol ids of a header."""
+    v = h.get(key)
+    if not isinstance(v, list) or not all(isinstance(i, int) and not isinstance(i, bool) and i > 0 for i in v) \
+            or len(set(v)) != len(v):
+        raise MessageError(f"{what}: {key!r} must be a list of distinct positive protocol ids")
+    return tuple(sorted(v))
+
+
+def elements(f: Field, blob: bytes, what: str, n: int | None = None) -> np.ndarray:
+    """Field elements of an untrusted part (``n`` of them, or as many as it holds)."""
+    if n is None:
+        if len(blob) % f.nbytes:
+            raise MessageError(f"{what}: not a whole number of field elements")
+        n = len(blob) // f.nbytes
+    return f.from_bytes(blob, n, what)
+
+
+class PrioTopics:
+    """Topic names of the session on measurement ``(segment, epoch)`` (module docstring).
+
+    Parameters
+    ----------
+    prefix : str
+        ``rc/{fleet_id}`` on the network.
+    segment, epoch : int
+    """
+
+    def __init__(self, prefix: str, segment: int, epoch: int) -> None:
+        self.prefix, self.segment, self.epoch = prefix, int(segment), int(epoch)
+        self.base = f"{prefix}/prio/{self.segment}/{self.epoch}"
+        self.leader = f"{self.base}/leader"
+        self.helper = f"{self.base}/helper"
+
+    def to(self, vid: str) -> str:
+        return f"{self.base}/to/{vid}"
+
+    def up(self, vid: str) -> str:
+        return f"{self.base}/up/{vid}"
+
+    def sealed_part(self, pid: int, phase: int) -> str:
+        """The associated data of a vehicle's part sealed to the helper (not a topic anything is sent on)."""
+        return f"{self.base}/part/{int(pid)}/{int(phase)}"
+
+    @staticmethod
+    def parse(prefix: str, topic: str) -> tuple[int, int, list[str]]:
+        """``(segment, epoch, rest)`` of a session topic (MessageError for another topic)."""
+        head = f"{prefix}/prio/"
+        parts = topic[len(head):].split("/") if topic.startswith(head) else []
+        if len(parts) < 3 or not parts[0].isdigit() or not parts[1].isdigit():
+            raise MessageError(f"{topic}: not a validated-session topic under {head}")
+        return int(parts[0]), int(parts[1]), parts[2:]
+
+
+def key_topic(prefix: str, party: str) -> str:
+    """Where aggregator ``party`` advertises its X25519 key."""
+    return f"{prefix}/prio/key/{party}"
+
+
+class AggregatorKeys:
+    """An aggregator's certified identity (signs) and X25519 key (opens sealed parts, agrees the verify key).
+
+    Parameters
+    ----------
+    identity : VehicleIdentity
+        Its certificate's id is the aggregator's role id (:class:`~.prioround.PrioParams`).
+    key : RelayKey
+    """
+
+    def __init__(self, identity: VehicleIdentity, key: RelayKey) -> None:
+        self.identity, self.key = identity, key
+
+    @property
+    def party(self) -> str:
+        return self.identity.vehicle_id
+
+    def advert(self, prefix: str) -> bytes:
+        """The X25519 public key signed for :func:`key_topic`."""
+        return seal(self.identity, key_topic(prefix, self.party), self.key.public)
+
+
+def open_advert(data: bytes, trust: FleetTrust, prefix: str, party: str) -> tuple[Certificate, bytes]:
+    """``(certificate, X25519 public key)`` of aggregator ``party``'s advert.
+
+    Raises
+    ------
+    MessageError
+        Not signed by a certificate of ``party`` the fleet trusts (a key substituted by the other aggregator
+        or anyone else), or not a 32-byte key.
+    """
+    cert, pub = open_envelope(bytes(data), trust, context=key_topic(prefix, party).encode())
+    if cert.vehicle_id != party:
+        raise MessageError(f"key advert of {party!r} signed by {cert.vehicle_id!r}")
+    if len(pub) != 32:
+        raise MessageError(f"key advert of {party!r}: expected a 32-byte X25519 key")
+    return cert, pub
+
+
+def verify_key(own: RelayKey, peer_public: bytes, session: bytes) -> bytes:
+    """The aggregators' shared key of the proofs' query randomness for ``session`` (no vehicle knows it)."""
+    return own.agree(peer_public, _VERIFY_INFO + bytes(session))
+
+
+def result_bytes(session: bytes, phase: int, accepted, m: bytes) -> bytes:
+    """What the helper signs of a phase's result: session, phase, accepted set and the result's float64 bytes."""
+    return _RESULT + bytes(session) + struct.pack("<I", int(phase)) + view_digest(accepted) + \
+        hashlib.sha256(bytes(m)).digest()
