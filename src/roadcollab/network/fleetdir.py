@@ -37,7 +37,7 @@ from .relaykey import RelayKey
 from .tls import CA_FILE, write_fleet_tls
 
 __all__ = ["Login", "enroll", "load_plan", "load_aggregation", "load_login", "load_trust", "acl_rules",
-           "SERVICE_USER"]
+           "write_broker", "SERVICE_USER"]
 
 SERVICE_USER = "service"
 
@@ -73,7 +73,7 @@ def _argon2_hash(password: str) -> str:
     return Argon2Hasher(time_cost=1, memory_cost=8192, parallelism=1).hash(password)
 
 
-def acl_rules(fleet_id: str, vehicles: list[str]) -> dict:
+def acl_rules(fleet_id: str, vehicles: list[str], helper: str | None = None, leader: str = "aggregator-a") -> dict:
     """``{"publish": {user: [filters]}, "subscribe": {user: [filters]}}`` of the fleet (module docstring).
 
     Parameters
@@ -81,6 +81,12 @@ def acl_rules(fleet_id: str, vehicles: list[str]) -> dict:
     fleet_id : str
     vehicles : list of str
         Vehicle ids.
+    helper : str, optional
+        The user of a second aggregator (validated sessions, :mod:`roadcollab.network.prioround`): it
+        publishes its messages and key advert and reads the leader's and the key adverts; the service
+        and the vehicles get the session topics of their roles. Its user name is its certificate id.
+    leader : str
+        The certificate id of the service as the leading aggregator (where it advertises its key).
     """
     root = f"rc/{fleet_id}"
     pub = {SERVICE_USER: [f"{root}/ack/#", f"{root}/seg/#", f"{root}/secagg/+/+/to/+"]}
@@ -88,7 +94,40 @@ def acl_rules(fleet_id: str, vehicles: list[str]) -> dict:
     for v in vehicles:
         pub[v] = [f"{root}/v/{v}/#", f"{root}/secagg/+/+/+/{v}"]
         sub[v] = [f"{root}/ack/{v}", f"{root}/seg/+/waiting", f"{root}/secagg/+/+/to/{v}"]
+    if helper is not None:
+        prio = f"{root}/prio"
+        pub[SERVICE_USER] += [f"{prio}/+/+/to/+", f"{prio}/+/+/leader", f"{prio}/key/{leader}"]
+        pub[helper] = [f"{prio}/+/+/helper", f"{prio}/key/{helper}"]
+        sub[helper] = [f"{prio}/+/+/leader", f"{prio}/key/+"]
+        for v in vehicles:
+            pub[v].append(f"{prio}/+/+/up/{v}")
+            sub[v] += [f"{prio}/+/+/to/{v}", f"{prio}/key/+"]
     return {"publish": pub, "subscribe": sub}
+
+
+def write_broker(folder: Path, logins: dict[str, str], rules: dict) -> Path:
+    """Write a broker folder: password files for the embedded broker and Mosquitto, the ACL (both forms).
+
+    Parameters
+    ----------
+    folder : Path
+        Created; must not exist (nothing is replaced).
+    logins : dict
+        User to password.
+    rules : dict
+        From :func:`acl_rules`.
+
+    Returns
+    -------
+    Path
+    """
+    folder = Path(folder)
+    folder.mkdir()
+    _write_secret(folder / "amqtt_passwd", "".join(f"{u}:{_argon2_hash(p)}\n" for u, p in logins.items()))
+    _write_secret(folder / "mosquitto_passwd", "".join(f"{u}:{_mosquitto_hash(p)}\n" for u, p in logins.items()))
+    (folder / "acl.json").write_text(json.dumps(rules, indent=1))
+    (folder / "mosquitto_acl").write_text(_mosquitto_acl(rules))
+    return folder
 
 
 def _mosquitto_acl(rules: dict) -> str:
@@ -162,16 +201,10 @@ def enroll(folder, n_vehicles: int, plan: RoadPlan, aggregation: AggregationPoli
         d = folder / ("service" if user == SERVICE_USER else f"vehicles/{user}")
         ca = f'ca_file = "{CA_FILE}"\n' if tls_hosts is not None else ""
         _write_secret(d / "broker.toml", f'username = "{user}"\npassword = "{pw}"\n{ca}')
-    b = folder / "broker"
-    b.mkdir()
-    _write_secret(b / "amqtt_passwd", "".join(f"{u}:{_argon2_hash(p)}\n" for u, p in logins.items()))
-    _write_secret(b / "mosquitto_passwd", "".join(f"{u}:{_mosquitto_hash(p)}\n" for u, p in logins.items()))
+    write_broker(folder / "broker", logins, acl_rules(plan.fleet_id, ids))
     if tls_hosts is not None:
         write_fleet_tls(folder, plan.fleet_id, [folder / "service"] + [folder / "vehicles" / v for v in ids],
                         tls_hosts)
-    rules = acl_rules(plan.fleet_id, ids)
-    (b / "acl.json").write_text(json.dumps(rules, indent=1))
-    (b / "mosquitto_acl").write_text(_mosquitto_acl(rules))
     return ids
 
 
