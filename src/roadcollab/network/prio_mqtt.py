@@ -60,7 +60,14 @@ def params_to_dict(params: PrioParams, prefix: str) -> dict:
 
 
 def params_from_dict(d: dict, where: str) -> tuple[PrioParams, str]:
-    """``(PrioParams, prefix)`` of :func:`params_to_dict`'s form; ParameterError naming ``where``."""
+    """``(PrioParams, prefix)`` of :func:`params_to_dict`'s form; ParameterError naming ``where``.
+
+    Parameters
+    ----------
+    d : dict
+    where : str
+        The file it was read from.
+    """
     try:
         enc = [ValidityEncoding(np.asarray(e["bounds"], float), float(e["resolution"]), norm=float(e.get("norm", 0.0)))
                for e in [d["wide"], *d["tight"]]]
@@ -159,7 +166,12 @@ def _run(args: argparse.Namespace) -> int:
 
 
 def main(argv: list[str] | None = None) -> int:
-    """The process entry (module docstring); 0 when the session closed, 2 on bad input, 3 on timeout."""
+    """The process entry (module docstring); 0 when the session closed, 2 on bad input, 3 on timeout.
+
+    Parameters
+    ----------
+    argv : list of str, optional
+    """
     p = argparse.ArgumentParser(prog="python -m roadcollab.network.prio_mqtt")
     p.add_argument("role", choices=("leader", "helper", "vehicle"))
     p.add_argument("--folder", required=True)

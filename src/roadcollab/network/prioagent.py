@@ -38,6 +38,10 @@ def segment_key(segment: int) -> bytes:
 
     A vehicle whose input is keyed by segment records this key too, so an aggregator that opens a second
     session on the segment under another epoch gets nothing (differencing), also after a restart.
+
+    Parameters
+    ----------
+    segment : int
     """
     return hashlib.sha256(b"roadcollab/prio/segment|" + str(int(segment)).encode()).digest()[:16]
 

@@ -223,7 +223,13 @@ class PrioHelperService:
         return f"{self.prefix}/prio/+/+/leader"
 
     def handle(self, topic: str, payload: bytes) -> list[Publish]:
-        """Route one message to its session's helper (created on first sight; it refuses all but ``open``)."""
+        """Route one message to its session's helper (created on first sight; it refuses all but ``open``).
+
+        Parameters
+        ----------
+        topic : str
+        payload : bytes
+        """
         try:
             s, e, rest = PrioTopics.parse(self.prefix, topic)
         except MessageError:

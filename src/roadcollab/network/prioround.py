@@ -47,11 +47,24 @@ __all__ = ["PrioParams", "PrioLeader", "b64", "unb64"]
 
 
 def b64(data: bytes) -> str:
+    """``data`` as base64 text (a header field).
+
+    Parameters
+    ----------
+    data : bytes
+    """
     return base64.b64encode(bytes(data)).decode()
 
 
 def unb64(text, what: str) -> bytes:
-    """Bytes of a base64 header field (MessageError otherwise)."""
+    """Bytes of a base64 header field (MessageError otherwise).
+
+    Parameters
+    ----------
+    text : str
+    what : str
+        Named in the error.
+    """
     try:
         return base64.b64decode(str(text), validate=True)
     except (ValueError, TypeError):
@@ -94,7 +107,13 @@ class PrioParams:
         return 1 + len(self.tight)
 
     def encoding(self, phase: int) -> ValidityEncoding:
-        """The encoding of ``phase`` (1-based)."""
+        """The encoding of ``phase`` (MessageError outside ``1..K``).
+
+        Parameters
+        ----------
+        phase : int
+            1-based.
+        """
         if not 1 <= phase <= self.phases:
             raise MessageError(f"phase {phase} is not in 1..{self.phases}")
         return self.wide if phase == 1 else self.tight[phase - 2]

@@ -45,13 +45,28 @@ _RESULT = b"roadcollab/prio/result/v1|"
 
 
 def pack(header: dict, *blobs: bytes) -> bytes:
-    """A framed message: ``header`` (JSON) and the binary ``blobs``."""
+    """A framed message: ``header`` (JSON) and the binary ``blobs``.
+
+    Parameters
+    ----------
+    header : dict
+        JSON-ready values (its ``blobs`` key is set to the parts' sizes).
+    *blobs : bytes
+        Binary parts, in order.
+    """
     h = json.dumps(dict(header, blobs=[len(b) for b in blobs]), sort_keys=True, separators=(",", ":")).encode()
     return struct.pack("<I", len(h)) + h + b"".join(bytes(b) for b in blobs)
 
 
 def unpack(data: bytes, what: str) -> tuple[dict, list[bytes]]:
     """``(header, blobs)`` of an untrusted framed message.
+
+    Parameters
+    ----------
+    data : bytes
+        Untrusted.
+    what : str
+        Named in the error.
 
     Raises
     ------
@@ -82,7 +97,17 @@ def unpack(data: bytes, what: str) -> tuple[dict, list[bytes]]:
 
 
 def int_field(h: dict, key: str, what: str, low: int = 0) -> int:
-    """An integer ``>= low`` of a header (MessageError otherwise)."""
+    """An integer ``>= low`` of a header (MessageError otherwise).
+
+    Parameters
+    ----------
+    h : dict
+        Header.
+    key : str
+    what : str
+        Named in the error.
+    low : int
+    """
     v = h.get(key)
     if isinstance(v, bool) or not isinstance(v, int) or v < low:
         raise MessageError(f"{what}: {key!r} must be an integer >= {low}, got {v!r}")
@@ -90,7 +115,16 @@ def int_field(h: dict, key: str, what: str, low: int = 0) -> int:
 
 
 def ids_field(h: dict, key: str, what: str) -> tuple[int, ...]:
-    """A sorted tuple of distinct positive protocol ids of a header."""
+    """A sorted tuple of distinct positive protocol ids of a header (MessageError otherwise).
+
+    Parameters
+    ----------
+    h : dict
+        Header.
+    key : str
+    what : str
+        Named in the error.
+    """
     v = h.get(key)
     if not isinstance(v, list) or not all(isinstance(i, int) and not isinstance(i, bool) and i > 0 for i in v) \
             or len(set(v)) != len(v):
@@ -99,7 +133,16 @@ def ids_field(h: dict, key: str, what: str) -> tuple[int, ...]:
 
 
 def elements(f: Field, blob: bytes, what: str, n: int | None = None) -> np.ndarray:
-    """Field elements of an untrusted part (``n`` of them, or as many as it holds)."""
+    """Field elements of an untrusted part (``n`` of them, or as many as it holds).
+
+    Parameters
+    ----------
+    f : Field
+    blob : bytes
+    what : str
+        Named in the error.
+    n : int, optional
+    """
     if n is None:
         if len(blob) % f.nbytes:
             raise MessageError(f"{what}: not a whole number of field elements")
@@ -130,12 +173,25 @@ class PrioTopics:
         return f"{self.base}/up/{vid}"
 
     def sealed_part(self, pid: int, phase: int) -> str:
-        """The associated data of a vehicle's part sealed to the helper (not a topic anything is sent on)."""
+        """The associated data of a vehicle's part sealed to the helper (not a topic anything is sent on).
+
+        Parameters
+        ----------
+        pid : int
+            Protocol id.
+        phase : int
+        """
         return f"{self.base}/part/{int(pid)}/{int(phase)}"
 
     @staticmethod
     def parse(prefix: str, topic: str) -> tuple[int, int, list[str]]:
-        """``(segment, epoch, rest)`` of a session topic (MessageError for another topic)."""
+        """``(segment, epoch, rest)`` of a session topic (MessageError for another topic).
+
+        Parameters
+        ----------
+        prefix : str
+        topic : str
+        """
         head = f"{prefix}/prio/"
         parts = topic[len(head):].split("/") if topic.startswith(head) else []
         if len(parts) < 3 or not parts[0].isdigit() or not parts[1].isdigit():
@@ -144,7 +200,14 @@ class PrioTopics:
 
 
 def key_topic(prefix: str, party: str) -> str:
-    """Where aggregator ``party`` advertises its X25519 key."""
+    """Where aggregator ``party`` advertises its X25519 key.
+
+    Parameters
+    ----------
+    prefix : str
+    party : str
+        The aggregator's certificate id.
+    """
     return f"{prefix}/prio/key/{party}"
 
 
@@ -166,12 +229,26 @@ class AggregatorKeys:
         return self.identity.vehicle_id
 
     def advert(self, prefix: str) -> bytes:
-        """The X25519 public key signed for :func:`key_topic`."""
+        """The X25519 public key signed for :func:`key_topic`.
+
+        Parameters
+        ----------
+        prefix : str
+        """
         return seal(self.identity, key_topic(prefix, self.party), self.key.public)
 
 
 def open_advert(data: bytes, trust: FleetTrust, prefix: str, party: str) -> tuple[Certificate, bytes]:
     """``(certificate, X25519 public key)`` of aggregator ``party``'s advert.
+
+    Parameters
+    ----------
+    data : bytes
+        The advert (untrusted).
+    trust : FleetTrust
+    prefix : str
+    party : str
+        The aggregator id it must be signed by.
 
     Raises
     ------
@@ -188,11 +265,29 @@ def open_advert(data: bytes, trust: FleetTrust, prefix: str, party: str) -> tupl
 
 
 def verify_key(own: RelayKey, peer_public: bytes, session: bytes) -> bytes:
-    """The aggregators' shared key of the proofs' query randomness for ``session`` (no vehicle knows it)."""
+    """The aggregators' shared key of the proofs' query randomness for ``session`` (no vehicle knows it).
+
+    Parameters
+    ----------
+    own : RelayKey
+        This aggregator's X25519 key.
+    peer_public : bytes
+        The other aggregator's (from its checked advert).
+    session : bytes
+    """
     return own.agree(peer_public, _VERIFY_INFO + bytes(session))
 
 
 def result_bytes(session: bytes, phase: int, accepted, m: bytes) -> bytes:
-    """What the helper signs of a phase's result: session, phase, accepted set and the result's float64 bytes."""
+    """What the helper signs of a phase's result: session, phase, accepted set and the result's float64 bytes.
+
+    Parameters
+    ----------
+    session : bytes
+    phase : int
+    accepted : iterable of int
+    m : bytes
+        ``m_k`` as little-endian float64.
+    """
     return _RESULT + bytes(session) + struct.pack("<I", int(phase)) + view_digest(accepted) + \
         hashlib.sha256(bytes(m)).digest()

@@ -131,6 +131,13 @@ def check_encodings(wide: ValidityEncoding, tight: ValidityEncoding | Sequence[V
                     phases: int) -> list[ValidityEncoding]:
     """The encodings of phases ``2..K``: ``tight`` repeated or one per phase, each with a norm bound and ``wide``'s length.
 
+    Parameters
+    ----------
+    wide : ValidityEncoding
+    tight : ValidityEncoding or sequence of them
+    phases : int
+        ``K``.
+
     Raises
     ------
     ParameterError
