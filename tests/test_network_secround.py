@@ -120,6 +120,32 @@ def test_restarted_vehicle_refuses_a_second_input(tmp_path):
     assert all(any("already" in r for r in a.refusals) for a in again.values())
 
 
+def test_restarted_vehicles_refuse_an_earlier_epoch_of_a_spent_segment(tmp_path):
+    """Differencing across a restart: the round of (3, 4) with every vehicle, then (3, 1) without the victim v1.
+
+    The vehicles' inputs are their measurements of segment 3 (any epoch); once a masked input went to a round
+    of the segment, a restarted vehicle must refuse every other epoch, earlier ones included.
+    """
+    rng = np.random.default_rng(6)
+    paths = {f"v{i + 1}": tmp_path / f"v{i + 1}.ledger" for i in range(6)}
+    auth = FleetAuthority.generate("f")
+    ids = [VehicleIdentity.enroll(auth, v) for v in paths]
+    zs = {idn.vehicle_id: rng.normal(0.0, 0.5, (40, 2)) for idn in ids}
+
+    def fleet():
+        return {i.vehicle_id: RoundAgent(i, auth.trust(), SPEC, SessionLedger(paths[i.vehicle_id]), "f",
+                                         {3: zs[i.vehicle_id]}) for i in ids}
+    first = RoundCoordinator("f", 3, 4, SPEC, auth.trust())
+    co, _, _ = _run(auth, fleet(), coordinator=first)
+    assert co.phase == "finished"
+    again = fleet()                              # every vehicle restarted on its ledger
+    second = RoundCoordinator("f", 3, 1, SPEC, auth.trust())
+    co2, _, _ = _run(auth, {v: a for v, a in again.items() if v != "v1"}, coordinator=second,
+                     roster=[v for v in again if v != "v1"])
+    assert co2.phase == "aborted" and co2.average is None
+    assert all(any("segment 3" in r for r in a.refusals) for v, a in again.items() if v != "v1")
+
+
 class _Substitute(RoundCoordinator):
     """Puts its own advert (of vehicle v2's id under v1's id) in the roster sent to the victim v1."""
 

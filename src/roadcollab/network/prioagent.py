@@ -11,14 +11,12 @@ runs one session over a :class:`~roadcollab.network.transport.MemoryBroker`.
 
 from __future__ import annotations
 
-import hashlib
-
 import numpy as np
 
 from ..errors import MessageError, ParameterError
 from ..privacy.secagg_messages import AggregationRefused, session_id
 from ..privacy.secagg_phased import phase_session
-from ..privacy.secagg_store import SessionLedger
+from ..privacy.secagg_store import SessionLedger, segment_key
 from ..privacy.secagg_validity import submit
 from ..wire.certificate import verify_signature
 from ..wire.identity import FleetTrust, VehicleIdentity
@@ -30,20 +28,7 @@ from .relaykey import seal_to
 from .service import Publish
 from .transport import MemoryBroker
 
-__all__ = ["PrioAgent", "run_prio_session", "segment_key"]
-
-
-def segment_key(segment: int) -> bytes:
-    """The ledger key of a vehicle's measurement of ``segment`` given to a session of any epoch (16 bytes).
-
-    A vehicle whose input is keyed by segment records this key too, so an aggregator that opens a second
-    session on the segment under another epoch gets nothing (differencing), also after a restart.
-
-    Parameters
-    ----------
-    segment : int
-    """
-    return hashlib.sha256(b"roadcollab/prio/segment|" + str(int(segment)).encode()).digest()[:16]
+__all__ = ["PrioAgent", "run_prio_session"]
 
 
 class PrioAgent:

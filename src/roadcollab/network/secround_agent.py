@@ -15,8 +15,8 @@ import numpy as np
 
 from ..errors import MessageError, ParameterError
 from ..privacy.secagg_active import SecAggVehicle
-from ..privacy.secagg_messages import SecAggSpec, session_id
-from ..privacy.secagg_store import SessionLedger
+from ..privacy.secagg_messages import AggregationRefused, SecAggSpec, session_id
+from ..privacy.secagg_store import SessionLedger, segment_key
 from ..wire.identity import FleetTrust, VehicleIdentity
 from ..wire.protocol import encode
 from .messages import seal
@@ -43,7 +43,8 @@ class RoundAgent:
         ``{(segment, epoch): z}`` or ``{segment: z}`` (any epoch) with ``z`` of shape (L, 2), m/s: what
         this vehicle measured. A measurement of a segment is given to at most one round: once its masked
         input was sent in round ``(segment, e)``, invites to ``(segment, e')`` are refused (differencing two
-        rounds would otherwise isolate it), also after a restart (the ledger's record of ``e``).
+        rounds would otherwise isolate it), also after a restart: the ledger records the segment itself
+        (:func:`~roadcollab.privacy.secagg_store.segment_key`), so every other epoch, earlier or later, is refused.
     root : callable, optional
         ``root(segment, epoch) -> 32 bytes`` of session secrets (tests); default :func:`os.urandom`.
 
@@ -81,6 +82,9 @@ class RoundAgent:
         for e2 in range(min(e, 10000)):
             if self.ledger.contributed(session_id(s, e2)):
                 raise MessageError(f"invited to round {key}: its measurement of segment {s} went to epoch {e2}")
+        if self.ledger.contributed(segment_key(s)) and not self.ledger.contributed(session_id(s, e)):
+            # any other epoch, earlier ones included, also after a restart (the loop above sees earlier ones only)
+            raise MessageError(f"invited to round {key}: its measurement of segment {s} went to another round")
         return self.inputs[s]
 
     def finished(self, segment: int) -> bool:
@@ -96,8 +100,9 @@ class RoundAgent:
             return True
         if segment not in self._spent_checked:
             self._spent_checked.add(segment)
-            if not any(k[0] == segment for k in self.rounds) and \
-                    any(self.ledger.contributed(session_id(segment, e)) for e in range(64)):
+            if not any(k[0] == segment for k in self.rounds) and (self.ledger.contributed(segment_key(segment)) or
+                                                                   any(self.ledger.contributed(session_id(segment, e))
+                                                                       for e in range(64))):
                 self._spent.add(segment)
         return segment in self._spent
     @property
@@ -171,7 +176,13 @@ class RoundAgent:
                 raise MessageError(f"dealt shares of round {key} again (ignored)")
             self.dealt[key] = (_int_map(msg.get("sealed"), "dealt.sealed"),
                                _int_map(msg.get("commitments"), "dealt.commitments"))
-            return self._send(key, "masked", encode(v.mask_input(self._input(key), key)))
+            z = self._input(key)
+            if key not in self.inputs:        # a measurement of the segment: spent for every epoch once sent
+                try:
+                    self.ledger.record_contribution(segment_key(key[0]), [v.vehicle])
+                except AggregationRefused as err:
+                    raise MessageError(f"round {key}: {err}") from None
+            return self._send(key, "masked", encode(v.mask_input(z, key)))
         if kind == "survivors":
             ids = msg.get("ids")
             if not isinstance(ids, list) or not all(isinstance(i, int) for i in ids):

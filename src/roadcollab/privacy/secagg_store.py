@@ -24,13 +24,28 @@ from .._validation import StrPath
 from ..errors import FileFormatError
 from .secagg_messages import AggregationRefused
 
-__all__ = ["SessionLedger", "ReleaseLog", "view_digest"]
+__all__ = ["SessionLedger", "ReleaseLog", "view_digest", "segment_key"]
 
 _SCHEMA = ("CREATE TABLE IF NOT EXISTS secagg_sessions (session BLOB PRIMARY KEY, roster BLOB NOT NULL, "
            "view BLOB)")
 _MAGIC_TABLE = "secagg_sessions"
 _RELEASE_SCHEMA = ("CREATE TABLE IF NOT EXISTS prio_releases (session BLOB NOT NULL, phase INTEGER NOT NULL, "
                    "accepted TEXT NOT NULL, PRIMARY KEY (session, phase))")
+
+
+def segment_key(segment: int) -> bytes:
+    """The ledger key of a vehicle's measurement of ``segment`` given to a session of any epoch (16 bytes).
+
+    A vehicle whose input is its measurement of a segment (not of one (segment, epoch)) records this key
+    beside the session's, before the input leaves, and refuses a session of the segment once it is
+    recorded: an aggregator that opens another session on the segment under any other epoch, earlier or
+    later, also after a restart of the vehicle, gets nothing to difference.
+
+    Parameters
+    ----------
+    segment : int
+    """
+    return hashlib.sha256(b"roadcollab/secagg/segment|" + str(int(segment)).encode()).digest()[:16]
 
 
 def _check_existing(path: Path, table: str, what: str) -> None:
