@@ -206,3 +206,23 @@ def test_no_message_raises_out_of_any_party():
         assert w["helper"].handle(f"{base}/leader", payload) == []
         assert w["agents"]["v1"].on_message(f"{base}/to/v1", payload) == []
     assert len(leader.events) == 2 * len(junk)
+
+
+def test_parameters_file_round_trip_and_bad_input_lines(tmp_path, capsys):
+    import json
+
+    from roadcollab.network.prio_mqtt import main, params_from_dict, params_to_dict
+    w = _world()
+    back, prefix = params_from_dict(json.loads(json.dumps(params_to_dict(w["params"], PREFIX))), "p.json")
+    assert prefix == PREFIX and back.phases == 3 and back.min_inputs == 3
+    assert np.array_equal(back.wide.bounds, w["wide"].bounds) and back.tight[0].norm == w["tight"].norm
+    bad = tmp_path / "p.json"
+    bad.write_text(json.dumps({"prefix": PREFIX, "wide": {"bounds": [1.0]}}))
+    args = ["helper", "--folder", str(tmp_path), "--broker", "mqtt://127.0.0.1:1", "--params", str(bad), "--segment", "0"]
+    assert main(args) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "p.json" in err[0] and "not validated-session parameters" in err[0]
+    (tmp_path / "result.json").write_text("{}")
+    assert main(["leader", *args[1:]]) == 2
+    assert "result.json exists" in capsys.readouterr().err
+    assert (tmp_path / "result.json").read_text() == "{}"
