@@ -53,14 +53,6 @@ class RawAgent(PrioAgent):
         return super()._answer(key, k, h, blobs)
 
 
-def _zf(run, m, n_inputs):
-    box, _ = run.validity
-    agg = run.grid.irfft(box.from_vector(m))
-    est = run.pipe.estimators[0]
-    Z, _ = run.receiver_guard().substitute(run.message(agg, n_inputs), run.Ys[0], est.invert(run.Ys[0], posterior=True))
-    return run.grid.irfft(Z)
-
-
 def networked(run, first, raw, phases, grow, attacker=None):
     box, wide = run.validity
     radii = radius_schedule(run.radius, phases, grow)
@@ -109,7 +101,8 @@ def main(strategy: str = "scale_10", r: int = 0, seed: int = 0, malicious: int =
             print(f"{name}: session {leader.state}: {leader.events[-1:]}")
             return
         diff = float(np.max(np.abs(leader.result - m_ideal)))
-        scores[name] = (fp._score(run, _zf(run, m_ideal, len(first))), fp._score(run, _zf(run, leader.result, len(first))))
+        scores[name] = (fp._score(run, fp.through_guard(run, m_ideal, len(first))),
+                        fp._score(run, fp.through_guard(run, leader.result, len(first))))
         print(f"{name}: {leader.state}, accepted {len(leader.accepted)}, max |m_net - m_study| = {diff:.3g} "
               f"(max |m| {float(np.max(np.abs(m_ideal))):.3g}), {wall:.0f} s, {broker.bytes_published / 1e6:.1f} MB",
               flush=True)

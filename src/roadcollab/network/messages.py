@@ -24,19 +24,21 @@ nor the vehicle's own estimates (those stay in the vehicle)::
 
 from __future__ import annotations
 
+import base64
 import json
 import struct
 
 import numpy as np
 
 from ..errors import MessageError
+from ..wire.certificate import Certificate
 from ..wire.envelope import open_envelope, seal_envelope
 from ..wire.identity import FleetTrust, VehicleIdentity, check_id
 from .engine import ESTIMATES, Contribution
 from .plan import RoadPlan
 
-__all__ = ["Topics", "encode_contribution", "decode_contribution", "seal", "open_from", "encode_waiting",
-           "decode_waiting", "MAX_JSON", "encode_sealed_relay", "sealed_segment", "open_sealed_relay"]
+__all__ = ["Topics", "encode_contribution", "decode_contribution", "seal", "open_signed", "open_from", "b64", "unb64",
+           "encode_waiting", "decode_waiting", "MAX_JSON", "encode_sealed_relay", "sealed_segment", "open_sealed_relay"]
 
 CONTRIB_MAGIC = b"RCSEG1\x00"
 SEALED_MAGIC = b"RCSEAL1\x00"
@@ -242,6 +244,30 @@ def seal(identity: VehicleIdentity, topic: str, payload: bytes) -> bytes:
     return seal_envelope(identity, payload, context=topic.encode())
 
 
+def open_signed(data: bytes, trust: FleetTrust, topic: str, vid: str) -> tuple[Certificate, bytes]:
+    """``(certificate, payload)`` of an envelope published on ``topic`` by party ``vid`` (see :func:`open_from`).
+
+    Parameters
+    ----------
+    data : bytes
+        The envelope.
+    trust : FleetTrust
+    topic : str
+        Where it was published (bound into the signature).
+    vid : str
+        The certificate id it must be signed by.
+
+    Raises
+    ------
+    MessageError
+        As :func:`open_from`.
+    """
+    cert, payload = open_envelope(bytes(data), trust, context=topic.encode())
+    if cert.vehicle_id != vid:
+        raise MessageError(f"topic {topic!r}: signed by {cert.vehicle_id}, not by {vid}")
+    return cert, payload
+
+
 def open_from(data: bytes, trust: FleetTrust, topic: str, vid: str) -> bytes:
     """The payload of an envelope published on ``topic`` by vehicle ``vid``.
 
@@ -262,10 +288,7 @@ def open_from(data: bytes, trust: FleetTrust, topic: str, vid: str) -> bytes:
         Not an envelope, a bad signature (e.g. replayed from another topic), a certificate the fleet
         does not trust, or a certificate of another vehicle than the topic's.
     """
-    cert, payload = open_envelope(bytes(data), trust, context=topic.encode())
-    if cert.vehicle_id != vid:
-        raise MessageError(f"topic {topic!r}: signed by {cert.vehicle_id}, not by {vid}")
-    return payload
+    return open_signed(data, trust, topic, vid)[1]
 
 
 def encode_waiting(vid: str, envelope: bytes) -> bytes:
@@ -301,6 +324,38 @@ def decode_waiting(data: bytes) -> tuple[str, bytes]:
     except (UnicodeDecodeError, ValueError) as err:
         raise MessageError(f"waiting message: bad vehicle id ({err})") from None
     return vid, data[1 + data[0]:]
+
+
+def b64(data: bytes) -> str:
+    """``data`` as base64 text (a JSON field).
+
+    Parameters
+    ----------
+    data : bytes
+    """
+    return base64.b64encode(bytes(data)).decode()
+
+
+def unb64(text, what: str) -> bytes:
+    """The bytes of an untrusted base64 field (at most 4 MiB of text).
+
+    Parameters
+    ----------
+    text : str
+    what : str
+        Named in the error.
+
+    Raises
+    ------
+    MessageError
+        Not a string, too long, or not base64.
+    """
+    if not isinstance(text, str) or len(text) > 4 * 2 ** 20:
+        raise MessageError(f"{what}: expected a base64 string")
+    try:
+        return base64.b64decode(text.encode(), validate=True)
+    except ValueError:
+        raise MessageError(f"{what}: not base64") from None
 
 
 def encode_json(obj: dict) -> bytes:

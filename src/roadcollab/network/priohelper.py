@@ -18,23 +18,22 @@ import numpy as np
 
 from ..errors import MessageError, ParameterError
 from ..privacy.secagg_flp import Proof
-from ..privacy.secagg_messages import AggregationRefused, session_id
+from ..privacy.secagg_messages import AggregationRefused
 from ..privacy.secagg_phased import phase_session
 from ..privacy.secagg_store import ReleaseLog
-from ..privacy.secagg_validity import HelperUpload, LeaderUpload, Submission, ValidityAggregator, VerifierShare
+from ..privacy.secagg_validity import HelperUpload, LeaderUpload, Submission
 from ..wire.certificate import Certificate
-from ..wire.envelope import open_envelope
 from ..wire.identity import FleetTrust
-from .messages import seal
-from .prioround import PrioParams, b64, unb64
-from .priowire import AggregatorKeys, PrioTopics, elements, ids_field, int_field, open_advert, pack, result_bytes, \
-    unpack, verify_key
+from .messages import open_signed, seal
+from .prioround import PrioAggregator, PrioParams
+from .priowire import AggregatorKeys, PrioTopics, elements, ids_field, int_field, open_advert, pack, read_vshare, \
+    result_bytes, unpack, vshare_message
 from .service import Publish
 
 __all__ = ["PrioHelper", "PrioHelperService"]
 
 
-class PrioHelper:
+class PrioHelper(PrioAggregator):
     """Aggregator ``B`` of one session (module docstring).
 
     Parameters
@@ -55,26 +54,13 @@ class PrioHelper:
         ``refused``, ``released``, ``closed``, ``excluded`` (a vehicle it accepted that the leader left out).
     """
 
+    LEADER = False
+
     def __init__(self, prefix: str, segment: int, epoch: int, params: PrioParams, trust: FleetTrust,
                  keys: AggregatorKeys, leader_advert: bytes, log: ReleaseLog) -> None:
-        if keys.party != params.helper_id:
-            raise ParameterError(f"the helper's identity is {keys.party!r}, expected {params.helper_id!r}")
-        self.params, self.trust, self.keys, self.log = params, trust, keys, log
-        self.topics = PrioTopics(prefix, segment, epoch)
-        self.session = session_id(segment, epoch)
-        _, leader_pub = open_advert(leader_advert, trust, prefix, params.leader_id)
-        self._vkey = verify_key(keys.key, leader_pub, self.session)
+        super().__init__(prefix, segment, epoch, params, trust, keys, leader_advert, log)
         self.roster: dict[int, str] = {}
-        self.phase, self.closed = 1, False
-        self.events: list[tuple[str, str]] = []
-        self._m: np.ndarray | None = None
-        self._new_phase()
-
-    def _new_phase(self) -> None:
-        self._agg = ValidityAggregator(self.params.encoding(self.phase), self._vkey, False)
-        self._own: dict[int, VerifierShare] = {}
-        self._peer: dict[int, VerifierShare] = {}
-        self._decided: dict[int, str] = {}
+        self.closed = False
 
     def _send(self, header: dict, *blobs: bytes) -> list[Publish]:
         head = dict(header, phase=self.phase)
@@ -91,9 +77,7 @@ class PrioHelper:
         if topic != self.topics.leader:
             return []
         try:
-            cert, body = open_envelope(bytes(payload), self.trust, context=topic.encode())
-            if cert.vehicle_id != self.params.leader_id:
-                raise MessageError(f"signed by {cert.vehicle_id}, not by the leader {self.params.leader_id}")
+            _, body = open_signed(payload, self.trust, topic, self.params.leader_id)
             h, blobs = unpack(body, "leader message")
             return self._apply(h, blobs)
         except (MessageError, ParameterError) as err:
@@ -117,12 +101,12 @@ class PrioHelper:
         if kind == "fwd":
             return self._forwarded(h, blobs)
         if kind == "vshare":
-            i = int_field(h, "id", "vshare", 1)
-            if i not in self.roster or i in self._peer:
-                raise MessageError(f"a verifier share of vehicle {i} that is not expected")
-            f = self.params.encoding(self.phase).field
-            self._peer[i] = VerifierShare(i, unb64(h.get("joint"), "joint"), elements(f, blobs[0], "verifier share"))
-            return self._decide(i)
+            share = read_vshare(h, blobs, self.params.encoding(self.phase).field)
+            if share.vehicle not in self.roster or share.vehicle in self._peer:
+                raise MessageError(f"a verifier share of vehicle {share.vehicle} that is not expected")
+            self._peer[share.vehicle] = share
+            self._decide_pair(share.vehicle)
+            return []
         if kind == "accept":
             return self._release(ids_field(h, "accepted", "accept"), blobs)
         raise MessageError(f"unknown leader message {kind!r}")
@@ -158,14 +142,8 @@ class PrioHelper:
             self._decided[i] = f"vehicle {i}: {err}"
             return self._send({"t": "reject", "id": i, "reason": str(err)[:300]})
         self._own[i] = vb
-        f = self.params.encoding(k).field
-        return self._send({"t": "vshare", "id": i, "joint": b64(vb.joint)}, f.to_bytes(vb.values)) + self._decide(i)
-
-    def _decide(self, i: int) -> list[Publish]:
-        if i in self._own and i in self._peer and i not in self._decided:
-            why = self._agg.check(self._own[i], self._peer[i])
-            self._decided[i] = f"vehicle {i}: {why}" if why else ""
-        return []
+        self._decide_pair(i)
+        return self._send(*vshare_message(vb, self.params.encoding(k).field))
 
     def _release(self, acc: tuple[int, ...], blobs: list[bytes]) -> list[Publish]:
         k, enc = self.phase, self.params.encoding(self.phase)
@@ -184,8 +162,7 @@ class PrioHelper:
             return self._send({"t": "refuse", "reason": str(err)[:300]})
         if mine - set(acc):
             self.events.append(("excluded", f"phase {k}: the leader left out accepted vehicles {sorted(mine - set(acc))}"))
-        avg = enc.decode_sum((share_a + share) % enc.field.p, len(acc)) / len(acc)
-        m = avg if k == 1 or self._m is None else self._m + avg
+        m = self._next_m((share_a + share) % enc.field.p, len(acc))
         mb = m.astype("<f8").tobytes()
         sig = self.keys.identity.sign(result_bytes(self.session, k, acc, mb))
         out = self._send({"t": "result", "accepted": list(acc)}, enc.field.to_bytes(share), mb, sig)

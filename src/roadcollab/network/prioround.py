@@ -23,7 +23,6 @@ party receives raises out of ``handle``: a refused message is recorded in ``even
 
 from __future__ import annotations
 
-import base64
 from dataclasses import dataclass
 
 import numpy as np
@@ -36,39 +35,13 @@ from ..privacy.secagg_phased import check_encodings, phase_session
 from ..privacy.secagg_store import ReleaseLog
 from ..privacy.secagg_validity import HelperUpload, LeaderUpload, Submission, ValidityAggregator, VerifierShare
 from ..wire.certificate import check_id, verify_signature
-from ..wire.envelope import open_envelope
 from ..wire.identity import FleetTrust
-from .messages import seal
-from .priowire import AggregatorKeys, PrioTopics, elements, ids_field, int_field, open_advert, pack, result_bytes, \
-    unpack, verify_key
+from .messages import open_signed, seal
+from .priowire import AggregatorKeys, PrioTopics, elements, ids_field, int_field, open_advert, pack, read_vshare, \
+    result_bytes, unpack, verify_key, vshare_message
 from .service import Publish
 
-__all__ = ["PrioParams", "PrioLeader", "b64", "unb64"]
-
-
-def b64(data: bytes) -> str:
-    """``data`` as base64 text (a header field).
-
-    Parameters
-    ----------
-    data : bytes
-    """
-    return base64.b64encode(bytes(data)).decode()
-
-
-def unb64(text, what: str) -> bytes:
-    """Bytes of a base64 header field (MessageError otherwise).
-
-    Parameters
-    ----------
-    text : str
-    what : str
-        Named in the error.
-    """
-    try:
-        return base64.b64decode(str(text), validate=True)
-    except (ValueError, TypeError):
-        raise MessageError(f"{what}: not base64") from None
+__all__ = ["PrioParams", "PrioAggregator", "PrioLeader"]
 
 
 @dataclass(frozen=True)
@@ -119,7 +92,63 @@ class PrioParams:
         return self.wide if phase == 1 else self.tight[phase - 2]
 
 
-class PrioLeader:
+class PrioAggregator:
+    """What both aggregators of one session share: identities, the verify key, one phase's proof checks.
+
+    Parameters
+    ----------
+    prefix : str
+        Topic prefix (``rc/{fleet_id}``).
+    segment, epoch : int
+        The measurement.
+    params : PrioParams
+    trust : FleetTrust
+    keys : AggregatorKeys
+        This aggregator's identity (id ``params.leader_id`` or ``params.helper_id``) and X25519 key.
+    peer_advert : bytes
+        The other aggregator's signed key advert.
+    log : ReleaseLog
+        This aggregator's persistent record of released sum shares.
+    """
+
+    #: True for ``A`` (the shares of ``x`` and the proof in full), False for ``B`` (expanded from a seed).
+    LEADER = True
+
+    def __init__(self, prefix: str, segment: int, epoch: int, params: PrioParams, trust: FleetTrust,
+                 keys: AggregatorKeys, peer_advert: bytes, log: ReleaseLog) -> None:
+        own, peer = (params.leader_id, params.helper_id) if self.LEADER else (params.helper_id, params.leader_id)
+        if keys.party != own:
+            role = "leader" if self.LEADER else "helper"
+            raise ParameterError(f"the {role}'s identity is {keys.party!r}, expected {own!r}")
+        self.params, self.trust, self.keys, self.log = params, trust, keys, log
+        self.topics = PrioTopics(prefix, segment, epoch)
+        self.session = session_id(segment, epoch)
+        self.peer_cert, peer_pub = open_advert(peer_advert, trust, prefix, peer)
+        self._vkey = verify_key(keys.key, peer_pub, self.session)
+        self.phase = 1
+        self.events: list[tuple[str, str]] = []
+        self._m: np.ndarray | None = None
+        self._new_phase()
+
+    def _new_phase(self) -> None:
+        self._agg = ValidityAggregator(self.params.encoding(self.phase), self._vkey, self.LEADER)
+        self._own: dict[int, VerifierShare] = {}
+        self._peer: dict[int, VerifierShare] = {}
+        self._decided: dict[int, str] = {}
+
+    def _decide_pair(self, i: int) -> None:
+        """Record vehicle ``i``'s decision once both verifier shares are in (``""``: accepted)."""
+        if i in self._own and i in self._peer and i not in self._decided:
+            why = self._agg.check(self._own[i], self._peer[i])
+            self._decided[i] = f"vehicle {i}: {why}" if why else ""
+
+    def _next_m(self, total: np.ndarray, n: int) -> np.ndarray:
+        """``m_k`` from the combined sum shares of this phase's ``n`` accepted vehicles."""
+        avg = self.params.encoding(self.phase).decode_sum(total, n) / n
+        return avg if self.phase == 1 or self._m is None else self._m + avg
+
+
+class PrioLeader(PrioAggregator):
     """Aggregator ``A`` of one session (module docstring).
 
     Parameters
@@ -155,29 +184,17 @@ class PrioLeader:
 
     def __init__(self, prefix: str, segment: int, epoch: int, params: PrioParams, trust: FleetTrust,
                  keys: AggregatorKeys, helper_advert: bytes, log: ReleaseLog) -> None:
-        if keys.party != params.leader_id:
-            raise ParameterError(f"the leader's identity is {keys.party!r}, expected {params.leader_id!r}")
-        self.params, self.trust, self.keys, self.log = params, trust, keys, log
-        self.topics = PrioTopics(prefix, segment, epoch)
-        self.session = session_id(segment, epoch)
         self.helper_advert = bytes(helper_advert)
-        self.helper_cert, helper_pub = open_advert(self.helper_advert, trust, prefix, params.helper_id)
-        self._vkey = verify_key(keys.key, helper_pub, self.session)
-        self.state, self.phase = "new", 1
+        self.state = "new"
         self.pid: dict[str, int] = {}
         self.accepted: tuple[int, ...] = ()
         self.refused: dict[int, str] = {}
-        self.events: list[tuple[str, str]] = []
         self.result: np.ndarray | None = None
-        self._m: np.ndarray | None = None
         self._signed = b""
-        self._new_phase()
+        super().__init__(prefix, segment, epoch, params, trust, keys, self.helper_advert, log)
 
     def _new_phase(self) -> None:
-        self._agg = ValidityAggregator(self.params.encoding(self.phase), self._vkey, True)
-        self._own: dict[int, VerifierShare] = {}
-        self._peer: dict[int, VerifierShare] = {}
-        self._decided: dict[int, str] = {}
+        super()._new_phase()
         self._uploaded: set[int] = set()
         self._pending: tuple[tuple[int, ...], np.ndarray] | None = None
 
@@ -238,9 +255,7 @@ class PrioLeader:
             raise MessageError(f"no upload is taken now (session {self.state}, phase {self.phase})")
         if vid not in self.pid:
             raise MessageError(f"{vid} is not in the roster")
-        cert, body = open_envelope(bytes(payload), self.trust, context=topic.encode())
-        if cert.vehicle_id != vid:
-            raise MessageError(f"signed by {cert.vehicle_id}, not by {vid}")
+        cert, body = open_signed(payload, self.trust, topic, vid)
         h, blobs = unpack(body, "upload")
         i, k = self.pid[vid], self.phase
         if h.get("t") != "upload" or h.get("phase") != k or h.get("id") != i or len(blobs) != 6:
@@ -262,14 +277,12 @@ class PrioLeader:
             self._decided[i] = f"vehicle {i}: {err}"
             return self._maybe_accept()
         self._own[i] = va
+        head, values = vshare_message(va, f)
         return [self._to_helper({"t": "fwd", "phase": k, "id": i}, blobs[4], blobs[5], cert.to_bytes()),
-                self._to_helper({"t": "vshare", "phase": k, "id": i, "joint": b64(va.joint)}, f.to_bytes(va.values))
-                ] + self._decide(i)
+                self._to_helper(dict(head, phase=k), values)] + self._decide(i)
 
     def _decide(self, i: int) -> list[Publish]:
-        if i in self._own and i in self._peer and i not in self._decided:
-            why = self._agg.check(self._own[i], self._peer[i])
-            self._decided[i] = f"vehicle {i}: {why}" if why else ""
+        self._decide_pair(i)
         return self._maybe_accept()
 
     def _maybe_accept(self) -> list[Publish]:
@@ -312,9 +325,7 @@ class PrioLeader:
         return [self._to_helper({"t": "accept", "phase": k, "accepted": list(acc)}, f.to_bytes(share))]
 
     def _from_helper(self, topic: str, payload: bytes) -> list[Publish]:
-        cert, body = open_envelope(bytes(payload), self.trust, context=topic.encode())
-        if cert.vehicle_id != self.params.helper_id:
-            raise MessageError(f"signed by {cert.vehicle_id}, not by the helper {self.params.helper_id}")
+        _, body = open_signed(payload, self.trust, topic, self.params.helper_id)
         h, blobs = unpack(body, "helper message")
         if self.state != "running":
             raise MessageError(f"session is {self.state}")
@@ -330,8 +341,7 @@ class PrioLeader:
             if kind == "reject":
                 self._decided.setdefault(i, f"vehicle {i}: the helper refused it: {str(h.get('reason'))[:300]}")
                 return self._maybe_accept()
-            f = self.params.encoding(self.phase).field
-            self._peer[i] = VerifierShare(i, unb64(h.get("joint"), "joint"), elements(f, blobs[0], "verifier share"))
+            self._peer[i] = read_vshare(h, blobs, self.params.encoding(self.phase).field)
             return self._decide(i)
         if kind == "result":
             return self._result(h, blobs)
@@ -344,11 +354,10 @@ class PrioLeader:
         k, enc = self.phase, self.params.encoding(self.phase)
         if ids_field(h, "accepted", "result") != acc:
             return self._abort(f"phase {k}: the helper's result is over another set")
-        verify_signature(self.helper_cert.public_key, result_bytes(self.session, k, acc, blobs[1]), blobs[2],
+        verify_signature(self.peer_cert.public_key, result_bytes(self.session, k, acc, blobs[1]), blobs[2],
                          "the helper's result")
-        total = (share + elements(enc.field, blobs[0], "helper sum share", enc.length)) % enc.field.p
-        avg = enc.decode_sum(total, len(acc)) / len(acc)
-        m = avg if k == 1 or self._m is None else self._m + avg
+        m = self._next_m((share + elements(enc.field, blobs[0], "helper sum share", enc.length)) % enc.field.p,
+                         len(acc))
         if m.astype("<f8").tobytes() != blobs[1]:
             return self._abort(f"phase {k}: the helper's signed result is not the sum of the two shares")
         self._m, self._signed = m, pack({"phase": k, "accepted": list(acc)}, blobs[1], blobs[2])

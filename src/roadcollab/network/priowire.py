@@ -30,14 +30,15 @@ import numpy as np
 from ..errors import MessageError
 from ..privacy.secagg_flp import Field
 from ..privacy.secagg_store import view_digest
+from ..privacy.secagg_validity import VerifierShare
 from ..wire.certificate import Certificate
 from ..wire.envelope import open_envelope
 from ..wire.identity import FleetTrust, VehicleIdentity
-from .messages import seal
+from .messages import b64, seal, unb64
 from .relaykey import RelayKey
 
 __all__ = ["MAX_HEADER", "PrioTopics", "AggregatorKeys", "pack", "unpack", "key_topic", "open_advert", "verify_key",
-           "result_bytes", "elements", "ids_field", "int_field"]
+           "result_bytes", "elements", "ids_field", "int_field", "vshare_message", "read_vshare"]
 
 MAX_HEADER = 64 * 1024
 _VERIFY_INFO = b"roadcollab/prio/verify/v1|"
@@ -148,6 +149,39 @@ def elements(f: Field, blob: bytes, what: str, n: int | None = None) -> np.ndarr
             raise MessageError(f"{what}: not a whole number of field elements")
         n = len(blob) // f.nbytes
     return f.from_bytes(blob, n, what)
+
+
+def vshare_message(share: VerifierShare, f: Field) -> tuple[dict, bytes]:
+    """``(header, part)`` of an aggregator's ``vshare`` message carrying ``share``.
+
+    Parameters
+    ----------
+    share : VerifierShare
+    f : Field
+    """
+    return {"t": "vshare", "id": share.vehicle, "joint": b64(share.joint)}, f.to_bytes(share.values)
+
+
+def read_vshare(h: dict, blobs: list[bytes], f: Field) -> VerifierShare:
+    """The peer's verifier share of an untrusted ``vshare`` message.
+
+    Parameters
+    ----------
+    h : dict
+        Header.
+    blobs : list of bytes
+        Its parts (one: the values).
+    f : Field
+
+    Raises
+    ------
+    MessageError
+        A malformed id, joint randomness or values, or not exactly one part.
+    """
+    if len(blobs) != 1:
+        raise MessageError("vshare: expected one part (the verifier share)")
+    return VerifierShare(int_field(h, "id", "vshare", 1), unb64(h.get("joint"), "vshare joint"),
+                         elements(f, blobs[0], "verifier share"))
 
 
 class PrioTopics:

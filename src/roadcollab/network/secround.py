@@ -42,7 +42,6 @@ round (:mod:`roadcollab.network.rounds`).
 
 from __future__ import annotations
 
-import base64
 import json
 
 import numpy as np
@@ -53,7 +52,7 @@ from ..privacy.secagg_messages import SecAggSpec, session_id
 from ..wire.identity import FleetTrust
 from ..wire.protocol import decode
 from ..wire.secagg import MaskedInput, Reveal
-from .messages import open_from
+from .messages import b64 as _b64, open_from, unb64 as _unb64
 from .service import Publish
 
 __all__ = ["RoundTopics", "RoundCoordinator", "PHASES"]
@@ -61,19 +60,6 @@ __all__ = ["RoundTopics", "RoundCoordinator", "PHASES"]
 PHASES = ("adverts", "shares", "masked", "consistency", "reveal", "finished", "aborted")
 _KIND_OF_PHASE = {"adverts": "advert", "shares": "shares", "masked": "masked", "consistency": "sign",
                   "reveal": "reveal"}
-
-
-def _b64(data: bytes) -> str:
-    return base64.b64encode(bytes(data)).decode()
-
-
-def _unb64(text, what: str) -> bytes:
-    if not isinstance(text, str) or len(text) > 4 * 2 ** 20:
-        raise MessageError(f"{what}: expected a base64 string")
-    try:
-        return base64.b64decode(text.encode(), validate=True)
-    except ValueError:
-        raise MessageError(f"{what}: not base64") from None
 
 
 def _json(data: bytes, what: str) -> dict:

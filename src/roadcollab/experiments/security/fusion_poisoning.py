@@ -63,7 +63,7 @@ from ..seeds import SeedPlan, run_stream
 from ...privacy.secagg_phased import public_schedule
 from .secagg_bounded import ADAPTIVE_STRATEGIES, BOUNDED_FINAL, ball_radius, bounded_inputs, centred_clipping
 
-__all__ = ["FUSION_STRATEGIES", "FUSION_TARGETS", "PoisoningSummary", "fusion_poisoning_rows"]
+__all__ = ["FUSION_STRATEGIES", "FUSION_TARGETS", "PoisoningSummary", "fusion_poisoning_rows", "through_guard"]
 
 FUSION_STRATEGIES = ("scale_10", "scale_1e3", "negate", "tone", "noise_3x", "extreme", "count", "fake_pothole",
                      "erase_potholes")
@@ -278,23 +278,41 @@ def _secagg_valid_node(run: _Run, msgs: list[InversionMessage]) -> tuple[np.ndar
         u, out = enc.clip(u)
         outside += out > 0
         us.append(enc.quantize(u))
-    agg = run.grid.irfft(box.from_vector(np.mean(us, axis=0)))
+    return through_guard(run, np.mean(us, axis=0), len(us)), int(outside)
+
+
+def through_guard(run: _Run, m: np.ndarray, n_inputs: int) -> np.ndarray:
+    """A validated aggregate ``m`` (the box's vector of ``n_inputs`` inputs) as vehicle 1 uses it: the
+    fused message through its receiver guard (refused bands replaced by its own posterior inversion), in time.
+
+    Parameters
+    ----------
+    run : _Run
+        With ``box`` set.
+    m : (L,) ndarray
+        The revealed average in the box's coordinates.
+    n_inputs : int
+        Inputs averaged (the message's ``count``).
+
+    Returns
+    -------
+    ndarray
+        The time signal of the guarded estimate.
+    """
+    box, _ = run.validity
     est = run.pipe.estimators[0]
-    Z, report = run.receiver_guard().substitute(run.message(agg, len(us)), run.Ys[0], est.invert(run.Ys[0], posterior=True))
-    return run.grid.irfft(Z), int(outside)
+    agg = run.grid.irfft(box.from_vector(m))
+    Z, _ = run.receiver_guard().substitute(run.message(agg, n_inputs), run.Ys[0], est.invert(run.Ys[0], posterior=True))
+    return run.grid.irfft(Z)
 
 
 def _secagg_bounded_node(run: _Run, msgs: list[InversionMessage],
                          adaptive: tuple[int, np.ndarray] | None = None) -> tuple[np.ndarray, int]:
     """The phased, centred-clipping secure aggregate (:mod:`.secagg_bounded`), then vehicle 1's guard."""
-    box, _ = run.validity
     first, raw = bounded_inputs(run, msgs)
     phases, grow = run.schedule
     m, clipped = centred_clipping(first, raw, run.radius, phases, adaptive=adaptive, grow=grow)
-    agg = run.grid.irfft(box.from_vector(m))
-    est = run.pipe.estimators[0]
-    Z, _ = run.receiver_guard().substitute(run.message(agg, len(first)), run.Ys[0], est.invert(run.Ys[0], posterior=True))
-    return run.grid.irfft(Z), clipped
+    return through_guard(run, m, len(first)), clipped
 
 
 def _adaptive(strategy: str, run: _Run, j: int) -> tuple[np.ndarray, np.ndarray]:
