@@ -26,6 +26,7 @@ NOT_NUMERIC = {"--out", "--roads", "--map", "--kernels", "--fleet-id", "--drive"
 #: Options whose type checks a set that is not an interval (tested on their own below).
 SPECIAL = {"--paillier-bits"}
 NOT_NUMERIC |= {"--road-id"}   # enroll: a road of --network
+NOT_NUMERIC |= {"--folder"}    # helper: the helper folder enroll writes
 NOT_NUMERIC |= {"--guard-road"}   # estimate, vehicle: a choice of road prior
 NOT_NUMERIC |= {"--reference-vehicle"}   # map: a vehicle_id (its pattern is checked by its type)
 

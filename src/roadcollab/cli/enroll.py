@@ -12,6 +12,9 @@ _ROUND = count("vehicles per round", 2, 1000)
 _CLIP = ranged("clip", 1e-6, 1e3, "m")
 _COLLUDERS = count("colluders", 0, 999)
 _MIN_SPEED = ranged("slowest speed", 0.5, 60, "m/s")
+_DEVIATION = ranged("deviation", 1e-6, 1e3, "m")
+_PHASES = count("phases", 0, 32)
+_RESOLUTION = ranged("resolution", 1e-9, 1.0, "m")
 
 __all__ = ["NAME", "add_parser", "run"]
 
@@ -35,7 +38,9 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
              "vehicles/v1..vN with its broker.toml (MQTT username and password), the service's login, and the "
              "broker's password files and topic ACL for the embedded broker and for Mosquitto. Never replaces "
              "an existing fleet.",
-        writes="--fleet DIR: fleet.toml, authority/, vehicles/vK/, service/broker.toml, broker/.",
+        writes="--fleet DIR: fleet.toml, authority/, vehicles/vK/, service/broker.toml, broker/; with --aggregation "
+               "validated also the service's aggregator identity and key in service/ and the second aggregator's "
+               "folder helper/ (hand it to its operator: 'roadcollab helper --folder DIR/helper').",
         example="roadcollab enroll --fleet fleet --vehicles 4 --min-speed 12")
     p.add_argument("--fleet", required=True, metavar="DIR", help="the fleet folder (created)")
     p.add_argument("--vehicles", required=True, type=_VEHICLES, metavar="N", help=f"number of vehicles ({help_range(_VEHICLES)})")
@@ -55,10 +60,13 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
                    help="with --tls: a host name or address the broker is reached by, besides 127.0.0.1 and "
                         "localhost (repeat)")
     g = p.add_argument_group("fusion (fixed for the fleet: the service does not choose it)")
-    g.add_argument("--aggregation", choices=("clear", "secure"), default="clear",
+    g.add_argument("--aggregation", choices=("clear", "secure", "validated"), default="clear",
                    help="clear: the service sums the inversions it receives; secure: vehicles send the next "
                         "vehicle's message sealed to the fleet and fuse each segment by secure aggregation, so "
-                        "the service learns only sums (default clear)")
+                        "the service learns only sums; validated: as secure, but each segment's sum comes from "
+                        "phased validated sessions with a second aggregator ('roadcollab helper'), in which every "
+                        "input is proven inside --clip and its deviations inside --deviation, so no vehicle can "
+                        "move the result far (default clear)")
     g.add_argument("--round-size", type=_ROUND, default=None, metavar="N",
                    help=f"secure: vehicles invited to a round (default K; at most 2T-C-1; {help_range(_ROUND)})")
     g.add_argument("--min-inputs", type=_ROUND, default=5, metavar="K",
@@ -69,6 +77,13 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
                    help=f"secure: vehicles that may collude with the service, C < T (default 0; {help_range(_COLLUDERS)})")
     g.add_argument("--clip", type=_CLIP, default=1.0, metavar="M",
                    help=f"secure: public bound on every elevation in a round, m (default 1; {help_range(_CLIP)})")
+    g.add_argument("--deviation", type=_DEVIATION, default=0.01, metavar="M",
+                   help="validated: public bound on an honest vehicle's rms deviation from a segment's mean, m; the "
+                        f"later phases' l2 ball is M sqrt(2 points) (default 0.01; {help_range(_DEVIATION)})")
+    g.add_argument("--phases", type=_PHASES, default=0, metavar="K",
+                   help=f"validated: phases per session (default 0: from --clip and --deviation; {help_range(_PHASES)})")
+    g.add_argument("--resolution", type=_RESOLUTION, default=2.0 ** -12, metavar="M",
+                   help=f"validated: fixed-point step of the proofs, m (default 2^-12; {help_range(_RESOLUTION)})")
     return p
 
 
@@ -146,15 +161,22 @@ def run(args: argparse.Namespace, command_line: str) -> int:
     t = k if args.threshold is None else args.threshold
     try:
         policy = AggregationPolicy(mode=args.aggregation, round_size=k if args.round_size is None else args.round_size,
-                                   min_inputs=k, threshold=t, max_colluders=args.max_colluders, clip_m=args.clip)
+                                   min_inputs=k, threshold=t, max_colluders=args.max_colluders, clip_m=args.clip,
+                                   deviation_m=args.deviation, phases=args.phases, resolution_m=args.resolution)
     except ParameterError as err:
-        raise ParameterError(f"--round-size/--min-inputs/--threshold/--max-colluders: {err}") from None
+        raise ParameterError(f"--round-size/--min-inputs/--threshold/--max-colluders/--clip/--deviation/--phases/"
+                             f"--resolution: {err}") from None
     if args.tls_host and not args.tls:
         raise ParameterError("--tls-host: needs --tls")
     ids = enroll(args.fleet, args.vehicles, plan, policy, tls_hosts=args.tls_host if args.tls else None)
     on = _write_road(args, plan, network)
     how = (f"; secure aggregation, rounds of {policy.round_size} (k={k}, t={t}, c={policy.max_colluders})"
            if policy.secure else "")
+    if policy.validated:
+        from ..network.aggregation import validated_params
+
+        how = (f"; validated aggregation, sessions of {policy.round_size} (k={k}, "
+               f"{validated_params(plan, policy).phases} phases); the helper's folder is {args.fleet}/helper")
     tls = "; the broker listens with TLS (clients use mqtts://)" if args.tls else ""
     print(f"enrolled fleet {plan.fleet_id!r} with {len(ids)} vehicles ({ids[0]}..{ids[-1]}) in {args.fleet}{on}{how}"
           f"{tls}")

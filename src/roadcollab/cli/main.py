@@ -16,8 +16,8 @@ import sys
 from pathlib import Path
 
 from .. import __version__
-from . import anomalies, attack, bench, calibrate, enroll, estimate, export, fleet, iri, message, reproduce, serve, \
-    simulate_drives, status, sweep, vehicle
+from . import anomalies, attack, bench, calibrate, enroll, estimate, export, fleet, helper, iri, message, reproduce, \
+    serve, simulate_drives, status, sweep, vehicle
 from . import map as map_cmd
 from ._arguments import CommandParser
 from ._common import command_line
@@ -26,7 +26,7 @@ __all__ = ["main", "build_parser"]
 
 # In the order of ``roadcollab --help``.
 COMMANDS = (reproduce, attack, anomalies, calibrate, sweep, bench, simulate_drives, estimate, map_cmd, iri, message,
-            enroll, serve, vehicle, fleet, export, status)
+            enroll, serve, helper, vehicle, fleet, export, status)
 _RUN = {module.NAME: module.run for module in COMMANDS}
 _DESCRIPTION = """Privacy-preserving collaborative road estimation by networked vehicles (Gao, Li and Wang).
 

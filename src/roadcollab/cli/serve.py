@@ -113,6 +113,28 @@ def _road_outputs(args, store, command_line: str, log, map_at):
     return sync, live, on_fused
 
 
+def _validated_rounds(args, store, trust, policy, plan, log):
+    """The service as the leading aggregator of a validated fleet (``FLEET/service``: its identity, X25519 key
+    and release log)."""
+    from ..errors import ParameterError
+    from ..network.priowire import AggregatorKeys
+    from ..network.relaykey import RelayKey
+    from ..network.validated_rounds import ValidatedRounds
+    from ..privacy.secagg_store import ReleaseLog
+    from ..wire.identity import VehicleIdentity
+
+    if args.shared:
+        raise ParameterError("--shared: a validated fleet's sessions do not move between services (the leader's "
+                             "shares are in memory), so one service serves it")
+    folder = Path(args.fleet) / "service"
+    if not (folder / "x25519.key").is_file():
+        raise ParameterError(f"--fleet {args.fleet}: no service/x25519.key (enroll --aggregation validated writes it)")
+    keys = AggregatorKeys(VehicleIdentity.load(folder), RelayKey.load(folder / "x25519.key"))
+    return ValidatedRounds(store, trust, policy, f"rc/{plan.fleet_id}", keys=keys,
+                           release_log=ReleaseLog(folder / "releases.sqlite"), log=log,
+                           phase_timeout_s=args.round_timeout, round_wait_s=args.round_wait)
+
+
 def _service(args, store, trust, policy, plan, command_line: str, map_at, status):
     """The service with its event log, road outputs and (secure aggregation) rounds."""
     from ..network.service import Service
@@ -124,6 +146,9 @@ def _service(args, store, trust, policy, plan, command_line: str, map_at, status
 
     sync, live, on_fused = _road_outputs(args, store, command_line, log, map_at)
     rounds = None
+    if policy.validated:
+        return Service(store, trust, log=log, on_fused=on_fused, rounds=_validated_rounds(args, store, trust, policy, plan,
+                                                                                       log)), sync, live
     if policy.secure:
         from ..network.rounds import SecureRounds
 
@@ -192,6 +217,9 @@ def run(args: argparse.Namespace, command_line: str) -> int:
         st = store.status()
         how = (f"; secure aggregation, rounds of {policy.round_size} (k={policy.min_inputs}, t={policy.threshold})"
                if policy.secure else "")
+        if policy.validated:
+            how = (f"; validated aggregation with the helper, sessions of {policy.round_size} (k={policy.min_inputs}, "
+                   f"{service.rounds.params.phases} phases)")
         print(f"serving fleet {plan.fleet_id!r} on {url}: store {args.store} holds {st['contributions']} "
               f"contributions from {st['vehicles']} vehicles{how}", flush=True)
         handled = run_service(service, client, stop, republish)

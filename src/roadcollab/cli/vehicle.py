@@ -78,6 +78,13 @@ def _secure_side(folder, identity, trust, plan, policy):
     from ..privacy.secagg_store import SessionLedger
 
     relay = RelayKey.load(folder / "relay.key")
+    if policy.validated:
+        from ..network.aggregation import validated_params
+        from ..network.prioagent import PrioAgent
+
+        # One measurement per segment across restarts, as in the secure rounds.
+        return PrioAgent(identity, trust, validated_params(plan, policy), SessionLedger(folder / "secagg_ledger.sqlite"),
+                         f"rc/{plan.fleet_id}", {}), relay
     # One input per (segment, epoch) across restarts: the ledger lives with the vehicle's identity.
     rounds = RoundAgent(identity, trust, policy.spec, SessionLedger(folder / "secagg_ledger.sqlite"),
                         f"rc/{plan.fleet_id}", {})
@@ -130,8 +137,15 @@ def run(args: argparse.Namespace, command_line: str) -> int:
     # on the fleet's road, on every road of its network, or on the drive's own axis (network/fleetlanes.py)
     engine, road_fields, realign = placed_engine(drive, plan, load_road(args.fleet, plan), index,
                                                  guard=receiver_guard(args))
+    kw = {}
+    if policy.validated:      # it takes part in the sessions of the segments it covered whole
+        from ..network.aggregation import validated_input
+        from ..network.validated_rounds import validated_segments
+
+        road_fields = {**(road_fields or {}), "validated": validated_segments(engine)}
+        kw["round_input"] = validated_input
     agent = VehicleAgent(engine, identity, trust, hello_extra=road_fields, realign=realign, rounds=rounds,
-                         relay_key=relay)
+                         relay_key=relay, **kw)
 
     def contributed() -> None:
         if policy.secure:     # 'roadcollab fleet' starts the next vehicle on this line

@@ -50,14 +50,20 @@ class VehicleAgent:
         Its side of the secure-aggregation rounds (module docstring); default: in the clear.
     relay_key : RelayKey, optional
         The fleet's relay key; required with ``rounds`` (the waiting messages are sealed to it).
+    round_input : callable, optional
+        ``round_input(plan, contribution) -> array or None``: the vehicle's input to a segment's round (None:
+        it takes no part there). Default :func:`~roadcollab.network.aggregation.segment_input`; a
+        validated fleet's is :func:`~roadcollab.network.aggregation.validated_input` with a
+        :class:`~roadcollab.network.prioagent.PrioAgent` as ``rounds``.
     """
 
     def __init__(self, engine: VehicleEngine, identity: VehicleIdentity, trust: FleetTrust, *,
-                 hello_extra: dict | None = None, realign=None, rounds=None, relay_key=None) -> None:
+                 hello_extra: dict | None = None, realign=None, rounds=None, relay_key=None,
+                 round_input=segment_input) -> None:
         if rounds is not None and relay_key is None:
             raise ParameterError("secure aggregation needs the fleet's relay key (relay.key in the vehicle folder)")
         self.engine, self.identity, self.trust, self.rounds = engine, identity, trust, rounds
-        self.relay_key = relay_key
+        self.relay_key, self.round_input = relay_key, round_input
         self.hello_extra = dict(hello_extra or {})
         self.realign = realign
         self.vid = identity.vehicle_id
@@ -150,7 +156,9 @@ class VehicleAgent:
         out = []
         for c in self.engine.contributions(checked):
             if self.rounds is not None and c.segment not in self.rounds.inputs:
-                self.rounds.inputs[c.segment] = segment_input(self.engine.plan, c)
+                u = self.round_input(self.engine.plan, c)
+                if u is not None:
+                    self.rounds.inputs[c.segment] = u
             if c.segment in self.outcomes:
                 continue
             t = self.topics.segment(self.vid, c.segment)

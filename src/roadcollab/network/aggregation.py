@@ -16,6 +16,15 @@ segment's ``m`` grid points with the coverage beside it, one ``(2m, 2)`` array
 so the revealed sum gives at once the total and the count of :class:`~roadcollab.network.engine.SegmentSums`
 (:func:`sums_from_total`): the fused estimate of a segment is the same average of inversions as in the
 clear, to the fixed-point resolution ``2^-frac_bits`` m.
+
+Under ``mode = "validated"`` a segment's sum comes from a phased validated session with two aggregators,
+the service and a second operator (:mod:`~roadcollab.network.prioround`, :mod:`~roadcollab.network.validated_rounds`):
+every input is proven inside the public box ``[-clip_m, clip_m]`` and then, phase after phase, its deviation
+from the previous result inside an l2 ball (centred clipping), so no vehicle moves the result by more than
+about ``R / (n - 1)`` (``R = deviation_m * sqrt(2 m)``). Clipping deviations would cut a coverage row, so
+the input is the inversion alone, ``(m, 2)`` flattened (:func:`validated_input`), from vehicles that covered
+every grid point of the segment; the count of every point is the number of inputs accepted
+(:func:`sums_from_mean`).
 """
 
 from __future__ import annotations
@@ -24,15 +33,23 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
+import math
+
 from .._validation import check_int, check_real
 from ..errors import ParameterError
+from ..privacy.secagg_flp import ValidityEncoding
 from ..privacy.secagg_messages import SecAggSpec
+from ..privacy.secagg_phased import public_schedule, radius_schedule
 from .engine import Contribution
 from .plan import RoadPlan
+from .prioround import PrioParams
 
-__all__ = ["AggregationPolicy", "segment_input", "sums_from_total", "MODES"]
+__all__ = ["AggregationPolicy", "segment_input", "sums_from_total", "validated_input", "validated_params",
+           "sums_from_mean", "MODES"]
 
-MODES = ("clear", "secure")
+MODES = ("clear", "secure", "validated")
+#: Policy fields read as numbers (the others are integers).
+_FLOATS = ("clip_m", "deviation_m", "resolution_m")
 
 
 @dataclass(frozen=True)
@@ -57,6 +74,16 @@ class AggregationPolicy:
         source: the fused estimate then differs from the clear one).
     frac_bits : int
         Fixed-point resolution ``2^-frac_bits`` m.
+    deviation_m : float
+        ``validated``: public bound on the rms deviation of an honest vehicle's inversion from the segment's
+        mean, m; the later phases' l2 ball is ``R = deviation_m * sqrt(2 m)``. An honest input farther out is
+        scaled onto it (the result then differs from the clear mean).
+    phases : int
+        ``validated``: ``K`` (0: enough to work off the largest phase-1 offset,
+        :func:`~roadcollab.privacy.secagg_phased.public_schedule`, then 2 phases at ``R``; given, the balls
+        halve from ``R 2^(K-3)`` at most, and the last two are ``R``).
+    resolution_m : float
+        ``validated``: fixed-point step of the proofs, m.
     """
 
     mode: str = "clear"
@@ -66,6 +93,9 @@ class AggregationPolicy:
     max_colluders: int = 0
     clip_m: float = 1.0
     frac_bits: int = 40
+    deviation_m: float = 0.01
+    phases: int = 0
+    resolution_m: float = 2.0 ** -12
 
     def __post_init__(self) -> None:
         if self.mode not in MODES:
@@ -73,10 +103,19 @@ class AggregationPolicy:
         spec = self.spec                                    # checks k, t, c, clip, frac_bits
         check_int("round_size", self.round_size, low=spec.min_inputs, high=spec.max_roster)
         check_real("clip_m", self.clip_m, low=0.0, low_open=True, high=1e3)
+        check_real("deviation_m", self.deviation_m, low=0.0, low_open=True, high=self.clip_m)
+        check_int("phases", self.phases, low=0, high=32)
+        check_real("resolution_m", self.resolution_m, low=1e-9, high=self.clip_m / 4)
 
     @property
     def secure(self) -> bool:
-        return self.mode == "secure"
+        """The service sees no inversion: the sums come from rounds (``secure`` or ``validated``)."""
+        return self.mode in ("secure", "validated")
+
+    @property
+    def validated(self) -> bool:
+        """Phased validated sessions with two aggregators (module docstring)."""
+        return self.mode == "validated"
 
     @property
     def spec(self) -> SecAggSpec:
@@ -106,9 +145,9 @@ class AggregationPolicy:
         for k, v in data.items():
             if k == "mode":
                 kw[k] = v
-            elif k == "clip_m":
+            elif k in _FLOATS:
                 if isinstance(v, bool) or not isinstance(v, (int, float)):
-                    raise ParameterError(f"{where}: aggregation.clip_m must be a number, got {v!r}")
+                    raise ParameterError(f"{where}: aggregation.{k} must be a number, got {v!r}")
                 kw[k] = float(v)
             else:
                 if isinstance(v, bool) or not isinstance(v, int):
@@ -172,3 +211,71 @@ def sums_from_total(plan: RoadPlan, total: np.ndarray) -> tuple[np.ndarray, np.n
     if np.max(np.abs(cov - count[:, None]), initial=0.0) > 1e-6 or np.any(count < 0):
         raise ParameterError("round sum: the coverage rows are not whole counts (an input was not 0/1 there)")
     return total[:m].copy(), count.astype(np.int64)
+
+
+def validated_input(plan: RoadPlan, c: Contribution) -> np.ndarray | None:
+    """A vehicle's input to the validated session of ``c.segment``: its inversion there, flattened, or None
+    when it did not cover every grid point of the segment (module docstring).
+
+    Parameters
+    ----------
+    plan : RoadPlan
+    c : Contribution
+
+    Returns
+    -------
+    (2 m,) ndarray or None
+        Point by point, both tracks (``inversion.ravel()``), m.
+    """
+    m = plan.points_per_segment
+    if c.n != m or c.i0 != plan.segment_range(c.segment)[0] or not np.all(np.isfinite(c.inversion)):
+        return None
+    return np.asarray(c.inversion, float).reshape(-1).copy()
+
+
+def validated_params(plan: RoadPlan, policy: AggregationPolicy) -> PrioParams:
+    """The public parameters of every validated session of the fleet (module docstring).
+
+    Parameters
+    ----------
+    plan : RoadPlan
+    policy : AggregationPolicy
+
+    Returns
+    -------
+    PrioParams
+        Phase 1's box ``clip_m`` per value; phases ``2..K`` on balls from ``R * grow`` halving to ``R``.
+    """
+    L = 2 * plan.points_per_segment
+    R = policy.deviation_m * math.sqrt(L)
+    offset = 2.0 * policy.clip_m * math.sqrt(L) / policy.round_size   # one vehicle's largest shift of m_1
+    phases, grow = public_schedule(offset, R)
+    if policy.phases:            # fewer phases: a shorter descent, still ending with 2 phases at R
+        phases, grow = policy.phases, min(grow, 2.0 ** max(0, policy.phases - 3))
+    wide = ValidityEncoding(np.full(L, policy.clip_m), policy.resolution_m)
+    tight = tuple(ValidityEncoding(np.full(L, r), policy.resolution_m, norm=r)
+                  for r in radius_schedule(R, phases, grow))
+    return PrioParams(wide, tight, min_inputs=policy.min_inputs)
+
+
+def sums_from_mean(plan: RoadPlan, mean: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """``(total, count)`` of a segment from a validated session's result over ``n`` inputs.
+
+    Parameters
+    ----------
+    plan : RoadPlan
+    mean : (2 m,) array_like
+        The session's result ``m_K``.
+    n : int
+        Inputs accepted (each covered every grid point).
+
+    Returns
+    -------
+    total : (m, 2) ndarray
+    count : (m,) ndarray of int64
+    """
+    m = plan.points_per_segment
+    mean = np.asarray(mean, float)
+    if mean.shape != (2 * m,) or not np.all(np.isfinite(mean)) or n < 1:
+        raise ParameterError(f"validated result: expected {2 * m} finite values over at least one input")
+    return mean.reshape(m, 2) * n, np.full(m, int(n), dtype=np.int64)

@@ -7,6 +7,10 @@ Layout written by :func:`enroll` (``roadcollab enroll``)::
     DIR/vehicles/vK/                  identity.key (0600), certificate.bin, trust.toml, broker.toml,
                                       relay.key (0600, the fleet's relay key: secure aggregation)
     DIR/service/broker.toml           the service's broker login
+    DIR/service/identity.key, certificate.bin, x25519.key
+                                      validated aggregation: the service as the leading aggregator ``aggregator-a``
+    DIR/helper/                       validated aggregation: the second aggregator ``aggregator-b`` (identity,
+                                      x25519.key, trust.toml, broker.toml, fleet.toml), to hand to its operator
     DIR/broker/amqtt_passwd           user:argon2 hash (the embedded broker)
     DIR/broker/mosquitto_passwd       user:$7$ PBKDF2-SHA512 hash (Mosquitto's own format)
     DIR/broker/mosquitto_acl          Mosquitto ACL
@@ -33,6 +37,7 @@ from ..errors import FileFormatError, ParameterError
 from ..wire.identity import FleetAuthority, FleetTrust, VehicleIdentity, _read_toml, check_id
 from .aggregation import AggregationPolicy
 from .plan import RoadPlan
+from .prioround import PrioParams
 from .relaykey import RelayKey
 from .tls import CA_FILE, write_fleet_tls
 
@@ -201,11 +206,30 @@ def enroll(folder, n_vehicles: int, plan: RoadPlan, aggregation: AggregationPoli
         d = folder / ("service" if user == SERVICE_USER else f"vehicles/{user}")
         ca = f'ca_file = "{CA_FILE}"\n' if tls_hosts is not None else ""
         _write_secret(d / "broker.toml", f'username = "{user}"\npassword = "{pw}"\n{ca}')
-    write_broker(folder / "broker", logins, acl_rules(plan.fleet_id, ids))
+    helper = _write_aggregators(folder, auth) if aggregation.validated else None
+    if helper is not None:
+        logins[helper] = secrets.token_urlsafe(24)
+        ca = f'ca_file = "{CA_FILE}"\n' if tls_hosts is not None else ""
+        _write_secret(folder / "helper" / "broker.toml", f'username = "{helper}"\npassword = "{logins[helper]}"\n{ca}')
+    write_broker(folder / "broker", logins, acl_rules(plan.fleet_id, ids, helper=helper))
     if tls_hosts is not None:
-        write_fleet_tls(folder, plan.fleet_id, [folder / "service"] + [folder / "vehicles" / v for v in ids],
-                        tls_hosts)
+        parties = [folder / "service"] + [folder / "vehicles" / v for v in ids] + ([folder / "helper"] if helper else [])
+        write_fleet_tls(folder, plan.fleet_id, parties, tls_hosts)
     return ids
+
+
+def _write_aggregators(folder: Path, auth: FleetAuthority) -> str:
+    """The two aggregators of validated aggregation: the service's identity and X25519 key in ``service/``,
+    the helper's folder ``helper/`` (with a copy of ``fleet.toml``); the helper's user name."""
+    leader, helper = PrioParams.leader_id, PrioParams.helper_id       # the parameters' default ids
+    VehicleIdentity.enroll(auth, leader).save(folder / "service")
+    RelayKey.generate().save(folder / "service" / "x25519.key")
+    d = folder / "helper"
+    VehicleIdentity.enroll(auth, helper).save(d)
+    RelayKey.generate().save(d / "x25519.key")
+    auth.trust().save(d / "trust.toml")
+    (d / "fleet.toml").write_text((folder / "fleet.toml").read_text())
+    return str(helper)
 
 
 def _fleet_toml(folder) -> tuple[Path, dict]:

@@ -18,11 +18,14 @@ from ..experiments.config import ExperimentConfig
 from ..experiments.drives.distance_maps import distance_grid
 from ..experiments.drives.fleet_estimation import GUARD_ROAD_DEFAULT, FleetEstimates
 from ..wire.identity import FleetAuthority, VehicleIdentity
-from ..privacy.secagg_store import SessionLedger
+from ..privacy.secagg_store import ReleaseLog, SessionLedger
 from .agent import VehicleAgent
-from .aggregation import AggregationPolicy
+from .aggregation import AggregationPolicy, segment_input, validated_input, validated_params
 from .fleetlanes import placed_engine
 from .plan import RoadPlan
+from .prioagent import PrioAgent
+from .priohelper import PrioHelperService
+from .priowire import AggregatorKeys
 from .relaykey import RelayKey
 from .results import results_from_store
 from .rounds import SecureRounds
@@ -30,8 +33,16 @@ from .secround_agent import RoundAgent
 from .service import Service
 from .store import ServiceStore
 from .transport import MemoryBroker
+from .validated_rounds import ValidatedRounds, validated_segments
 
 __all__ = ["run_in_memory", "estimate_fleet_in_memory"]
+
+
+class _Handler:
+    """A party on the transport that only answers messages (the helper)."""
+
+    def __init__(self, on_message) -> None:
+        self.on_message = on_message
 
 
 def _pump_all(service: Service, svc, cars: dict, agents: dict, offline, limit: int) -> None:
@@ -96,8 +107,10 @@ def run_in_memory(drives, plan: RoadPlan, *, store: ServiceStore | None = None, 
     store = ServiceStore(":memory:", plan) if store is None else store
     authority = FleetAuthority.generate(plan.fleet_id) if authority is None else authority
     trust = authority.trust()
-    rounds = None
-    if aggregation is not None and aggregation.secure:
+    rounds, helper = None, None
+    if aggregation is not None and aggregation.validated:
+        rounds, helper = _validated_parties(store, authority, aggregation)
+    elif aggregation is not None and aggregation.secure:
         rounds = SecureRounds(store, trust, aggregation, f"rc/{plan.fleet_id}", phase_timeout_s=0.0,
                               round_wait_s=float("inf"))
     service = Service(store, trust, on_fused=on_fused, rounds=rounds)
@@ -107,7 +120,7 @@ def run_in_memory(drives, plan: RoadPlan, *, store: ServiceStore | None = None, 
         svc.subscribe(f)
     if rounds is not None:
         return _run_secure(drives, plan, store, authority, service, broker, svc, aggregation, set(offline), timeouts,
-                           road, guard)
+                           road, guard, helper)
     for j, d in enumerate(drives):
         engine, extra, realign = placed_engine(d, plan, road, j, guard=guard)
         agent = VehicleAgent(engine, VehicleIdentity.enroll(authority, f"v{j + 1}"),
@@ -123,31 +136,58 @@ def run_in_memory(drives, plan: RoadPlan, *, store: ServiceStore | None = None, 
     return store, broker
 
 
+def _validated_parties(store: ServiceStore, authority: FleetAuthority, policy: AggregationPolicy):
+    """The service's :class:`ValidatedRounds` and the helper (a second operator, here in the same process)."""
+    prefix, trust = f"rc/{store.plan.fleet_id}", authority.trust()
+    params = validated_params(store.plan, policy)
+    ka = AggregatorKeys(VehicleIdentity.enroll(authority, params.leader_id), RelayKey.generate())
+    kb = AggregatorKeys(VehicleIdentity.enroll(authority, params.helper_id), RelayKey.generate())
+    rounds = ValidatedRounds(store, trust, policy, prefix, keys=ka, release_log=ReleaseLog(),
+                             helper_advert=kb.advert(prefix), phase_timeout_s=0.0, round_wait_s=float("inf"))
+    return rounds, PrioHelperService(prefix, params, trust, kb, ka.advert(prefix), ReleaseLog())
+
+
+def _round_agent(ident: VehicleIdentity, trust, policy: AggregationPolicy, prefix: str, plan: RoadPlan):
+    """``(rounds, round_input)`` of a vehicle: its side of the fleet's rounds and its input to them."""
+    if policy.validated:
+        return (PrioAgent(ident, trust, validated_params(plan, policy), SessionLedger(), prefix, {}),
+                validated_input)
+    return RoundAgent(ident, trust, policy.spec, SessionLedger(), prefix, {}), segment_input
+
+
 def _run_secure(drives, plan, store, authority, service, broker, svc, policy, offline, timeouts, road=None,
-                guard=GUARD_ROAD_DEFAULT):
+                guard=GUARD_ROAD_DEFAULT, helper=None):
     trust = authority.trust()
     relay = RelayKey.generate()
     agents, cars = {}, {}
+    parties: dict = {}
+    if helper is not None:       # the second aggregator: one more party on the transport
+        hc = broker.client()
+        hc.subscribe(helper.subscription)
+        cars[helper.keys.party], parties[helper.keys.party] = hc, _Handler(helper.handle)
     for j, d in enumerate(drives):
         ident = VehicleIdentity.enroll(authority, f"v{j + 1}")
-        rounds = RoundAgent(ident, trust, policy.spec, SessionLedger(), f"rc/{plan.fleet_id}", {})
+        rounds, round_input = _round_agent(ident, trust, policy, f"rc/{plan.fleet_id}", plan)
         engine, extra, realign = placed_engine(d, plan, road, j, guard=guard)
+        if policy.validated:
+            extra = {**(extra or {}), "validated": validated_segments(engine)}
         agent = VehicleAgent(engine, ident, trust, rounds=rounds, relay_key=relay, hello_extra=extra,
-                             realign=realign)
+                             realign=realign, round_input=round_input)
         car = broker.client()
         for f in agent.subscriptions:
             car.subscribe(f)
         agents[agent.vid], cars[agent.vid] = agent, car
+        parties[agent.vid] = agent
         for p in agent.start():
             car.publish(p.topic, p.payload, p.retain)
-        _pump_all(service, svc, cars, agents, set(), limit=1000)
+        _pump_all(service, svc, cars, parties, set(), limit=1000)
         if not agent.contributed:
             raise ParameterError(f"vehicle {agent.vid}: segments left unacknowledged {sorted(agent.pending)}")
     # Every vehicle has driven: a segment with fewer than round_size free vehicles opens with those left
     # (at least k) at the next timeout, as a service whose round_wait_s has passed.
     service.rounds.round_wait_s = 0.0
     for _ in range(timeouts):   # rounds: each pass delivers everything, then one service timeout
-        _pump_all(service, svc, cars, agents, offline, limit=1000)
+        _pump_all(service, svc, cars, parties, offline, limit=1000)
         if all(a.done for v, a in agents.items() if v not in offline) and not service.rounds.active:
             break
         for p in service.tick():

@@ -10,15 +10,26 @@ from __future__ import annotations
 
 import threading
 import time
-from typing import Callable
+from typing import Callable, Protocol
 
 from .agent import VehicleAgent
-from .service import Service
+from .service import Publish
 
-__all__ = ["run_service", "run_vehicle"]
+__all__ = ["run_service", "run_vehicle", "Party"]
 
 
-def run_service(service: Service, client, stop: threading.Event, republish: threading.Event, *,
+class Party(Protocol):
+    """What :func:`run_service` runs: the :class:`~roadcollab.network.service.Service`, or the helper
+    (:class:`~roadcollab.network.priohelper.HelperParty`)."""
+
+    def on_connect(self) -> list[Publish]: ...
+
+    def tick(self) -> list[Publish]: ...
+
+    def handle(self, topic: str, payload: bytes) -> list[Publish]: ...
+
+
+def run_service(service: Party, client, stop: threading.Event, republish: threading.Event, *,
                 log: Callable[[str], None] | None = None, idle_s: float = 0.2) -> int:
     """Serve until ``stop`` is set; the number of messages handled.
 
@@ -28,7 +39,7 @@ def run_service(service: Service, client, stop: threading.Event, republish: thre
         One line per event.
     idle_s : float
         Receive timeout, s (how often ``stop`` is checked).
-    service : Service
+    service : Service or HelperParty
     client : Transport
         Already subscribed to the vehicle topics.
     stop, republish : threading.Event

@@ -71,6 +71,19 @@ class PrioAgent:
     def subscription(self) -> str:
         return f"{self.prefix}/prio/+/+/to/{self.vid}"
 
+    def finished(self, segment: int) -> bool:
+        """True when a session that took this vehicle's phase-1 upload on ``segment`` has closed (finished or
+        aborted: the measurement is spent either way), or when its ledger says an earlier run of this vehicle
+        spent it (a restart).
+
+        Parameters
+        ----------
+        segment : int
+        """
+        if any(k[0] == segment and k in self._u for k in self.closed):
+            return True
+        return not any(k[0] == segment for k in self._u) and self.ledger.contributed(segment_key(segment))
+
     def on_message(self, topic: str, payload: bytes) -> list[Publish]:
         """React to one leader message; what to publish (refusals in :attr:`refusals`).
 

@@ -26,11 +26,11 @@ from ..wire.certificate import Certificate
 from ..wire.identity import FleetTrust
 from .messages import open_signed, seal
 from .prioround import PrioAggregator, PrioParams
-from .priowire import AggregatorKeys, PrioTopics, elements, ids_field, int_field, open_advert, pack, read_vshare, \
-    result_bytes, unpack, vshare_message
+from .priowire import AggregatorKeys, PrioTopics, elements, ids_field, int_field, key_topic, open_advert, pack, \
+    read_vshare, result_bytes, unpack, vshare_message
 from .service import Publish
 
-__all__ = ["PrioHelper", "PrioHelperService"]
+__all__ = ["PrioHelper", "PrioHelperService", "HelperParty"]
 
 
 class PrioHelper(PrioAggregator):
@@ -217,3 +217,67 @@ class PrioHelperService:
             self.sessions[(s, e)] = PrioHelper(self.prefix, s, e, self.params, self.trust, self.keys,
                                                self.leader_advert, self.log)
         return self.sessions[(s, e)].handle(topic, payload)
+
+
+class HelperParty:
+    """The helper as a long-running party of a fleet (``roadcollab helper``): it advertises its key, waits for
+    the leader's signed advert (retained on its topic), then answers every session through a
+    :class:`PrioHelperService`. Has the service's loop interface (``on_connect``, ``tick``, ``handle``,
+    :func:`~roadcollab.network.mqtt_run.run_service`).
+
+    Parameters
+    ----------
+    prefix : str
+    params : PrioParams
+    trust : FleetTrust
+    keys : AggregatorKeys
+        ``B``'s identity and X25519 key.
+    log : ReleaseLog
+    on_event : callable, optional
+        One line per event (the leader's advert, a session closed, a refusal).
+    """
+
+    def __init__(self, prefix: str, params: PrioParams, trust: FleetTrust, keys: AggregatorKeys, log: ReleaseLog,
+                 on_event=None) -> None:
+        self.prefix, self.params, self.trust, self.keys, self.log = prefix, params, trust, keys, log
+        self.service: PrioHelperService | None = None
+        self._event = on_event or (lambda line: None)
+        self._closed: set[tuple[int, int]] = set()
+
+    @property
+    def subscriptions(self) -> list[str]:
+        return [key_topic(self.prefix, self.params.leader_id), f"{self.prefix}/prio/+/+/leader"]
+
+    def on_connect(self) -> list[Publish]:
+        """Its key advert, retained (again after every connection)."""
+        return [Publish(key_topic(self.prefix, self.keys.party), self.keys.advert(self.prefix), retain=True)]
+
+    def tick(self) -> list[Publish]:
+        return []
+
+    def handle(self, topic: str, payload: bytes) -> list[Publish]:
+        """The leader's advert, or a leader message of a session; what to publish (nothing raises).
+
+        Parameters
+        ----------
+        topic : str
+        payload : bytes
+        """
+        if topic == key_topic(self.prefix, self.params.leader_id):
+            try:
+                svc = PrioHelperService(self.prefix, self.params, self.trust, self.keys, bytes(payload), self.log)
+            except (MessageError, ParameterError) as err:
+                self._event(f"refused the leader's key advert: {err}")
+                return []
+            if self.service is None or svc.leader_advert != self.service.leader_advert:
+                self.service = svc       # a new leader key: sessions from now on are checked against it
+                self._event("the leader's key advert arrived")
+            return []
+        if self.service is None:
+            return []
+        out = self.service.handle(topic, payload)
+        for key, h in self.service.sessions.items():
+            if h.closed and key not in self._closed:
+                self._closed.add(key)
+                self._event(f"session {key[0]}/{key[1]}: closed")
+        return out

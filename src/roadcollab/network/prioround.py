@@ -180,11 +180,15 @@ class PrioLeader(PrioAggregator):
         Protocol id to why it was not counted.
     events : list of (str, str)
         ``(kind, reason)``: ``refused``, ``duplicate``, ``aborted``, ``finished``.
+    answered : set of int
+        Protocol ids whose phase-1 upload arrived signed: those vehicles have spent the measurement
+        (their ledgers recorded it before they sent it), accepted or not.
     """
 
     def __init__(self, prefix: str, segment: int, epoch: int, params: PrioParams, trust: FleetTrust,
                  keys: AggregatorKeys, helper_advert: bytes, log: ReleaseLog) -> None:
         self.helper_advert = bytes(helper_advert)
+        self.answered: set[int] = set()
         self.state = "new"
         self.pid: dict[str, int] = {}
         self.accepted: tuple[int, ...] = ()
@@ -266,6 +270,8 @@ class PrioLeader(PrioAggregator):
             self.events.append(("duplicate", f"{topic}: upload of phase {k} again (applied once)"))
             return []
         self._uploaded.add(i)
+        if k == 1:
+            self.answered.add(i)
         enc = self.params.encoding(k)
         f = enc.field
         try:

@@ -1,0 +1,217 @@
+"""The service's validated sessions: each segment's sum from a phased session with a second aggregator.
+
+Under ``[aggregation] mode = "validated"`` (:class:`~roadcollab.network.aggregation.AggregationPolicy`) the
+service is the leader ``A`` of :mod:`~roadcollab.network.prioround` and a second operator runs the helper
+``B`` (``roadcollab helper``): every vehicle proves its input inside the public box, then its deviations
+from the previous results inside an l2 ball (centred clipping), so no vehicle of a session moves its result
+by more than about ``R / (n - 1)``; neither aggregator alone learns an input.
+
+The rounds keep :class:`~roadcollab.network.rounds.SecureRounds`' rules and store: one open session per
+segment, claimed in the store; a vehicle gives one measurement of a segment to one session (its
+:class:`~roadcollab.privacy.secagg_store.SessionLedger` refuses a second); epochs count the sessions. Two
+rules differ:
+
+- **Roster.** Only vehicles that covered every grid point of the segment are invited (the input is the
+  inversion alone, :func:`~roadcollab.network.aggregation.validated_input`); a vehicle says which segments
+  it covered so in its hello (``"validated"``, :func:`validated_segments`).
+- **Restart.** The leader holds its shares of a running session in memory only, so a session this service
+  held when it stopped is closed as aborted when it restarts (or another service adopts it); its vehicles
+  have spent that measurement (privacy before liveness). Sessions therefore do not move between services:
+  ``serve --shared`` is refused with validated aggregation.
+
+The helper's key advert (retained on ``{prefix}/prio/key/{helper_id}``, signed by its certified identity)
+must have arrived before a session opens; the service's own advert is published (retained) on connect.
+"""
+
+from __future__ import annotations
+
+import time
+from typing import Callable
+
+import numpy as np
+
+from ..errors import MessageError, ParameterError
+from ..experiments.drives.distance_maps import covered
+from ..privacy.secagg_store import ReleaseLog
+from ..wire.identity import FleetTrust
+from .aggregation import AggregationPolicy, sums_from_mean, validated_params
+from .prioround import PrioLeader
+from .priowire import AggregatorKeys, PrioTopics, key_topic, open_advert
+from .rounds import SecureRounds
+from .service import Publish
+from .store import ServiceStore
+
+__all__ = ["ValidatedRounds", "validated_segments"]
+
+
+def validated_segments(engine) -> list[int]:
+    """The segments a vehicle's engine covers at every grid point (its inversion and observer finite):
+    those it can give to a validated session.
+
+    Parameters
+    ----------
+    engine : VehicleEngine
+
+    Returns
+    -------
+    list of int
+    """
+    plan, ok = engine.plan, covered(engine.inversion) & covered(engine.single)
+    out = []
+    for s in engine.segments:
+        a, b = plan.segment_range(s)
+        if a >= engine.i_first and b - 1 <= engine.i_last and bool(np.all(ok[a - engine.i_first:b - engine.i_first])):
+            out.append(s)
+    return out
+
+
+class ValidatedRounds(SecureRounds):
+    """Validated sessions of every segment on one service store (module docstring).
+
+    Parameters
+    ----------
+    store : ServiceStore
+    trust : FleetTrust
+    policy : AggregationPolicy
+        ``mode`` must be ``validated``.
+    prefix : str
+        ``rc/{fleet_id}``.
+    keys : AggregatorKeys
+        The service's identity as the leader (certificate id ``aggregator-a``) and its X25519 key.
+    release_log : ReleaseLog
+        The leader's persistent record of released sum shares.
+    helper_advert : bytes, optional
+        The helper's signed key advert, if known; otherwise it is read from its retained topic.
+    log, on_fused, phase_timeout_s, round_wait_s, clock, owner, lease_s
+        As :class:`~roadcollab.network.rounds.SecureRounds`.
+    """
+
+    def __init__(self, store: ServiceStore, trust: FleetTrust, policy: AggregationPolicy, prefix: str, *,
+                 keys: AggregatorKeys, release_log: ReleaseLog, helper_advert: bytes | None = None,
+                 log: Callable[[str], None] | None = None, on_fused=None, phase_timeout_s: float = 20.0,
+                 round_wait_s: float = 60.0, clock: Callable[[], float] = time.time, owner: str = "serve",
+                 lease_s: float = 10.0) -> None:
+        if not isinstance(policy, AggregationPolicy) or not policy.validated:
+            raise ParameterError("ValidatedRounds needs an AggregationPolicy with mode 'validated'")
+        self.params = validated_params(store.plan, policy)
+        if keys.party != self.params.leader_id:
+            raise ParameterError(f"the service leads as {self.params.leader_id!r}, got the keys of {keys.party!r}")
+        self.keys, self.release_log = keys, release_log
+        self.helper_advert: bytes | None = None
+        self._trust_for_adverts = trust
+        if helper_advert is not None:
+            self._set_helper(helper_advert, prefix)
+        super().__init__(store, trust, policy, prefix, log=log, on_fused=on_fused, phase_timeout_s=phase_timeout_s,
+                         round_wait_s=round_wait_s, clock=clock, owner=owner, lease_s=lease_s)
+        self.resend.insert(0, Publish(key_topic(prefix, keys.party), keys.advert(prefix), retain=True))
+
+    def _set_helper(self, advert: bytes, prefix: str) -> None:
+        open_advert(advert, self._trust_for_adverts, prefix, self.params.helper_id)   # MessageError if not B's
+        self.helper_advert = bytes(advert)
+
+    def _adopt(self) -> list[Publish]:
+        """Sessions this service held before a restart (or another's whose lease ran out) are closed as
+        aborted: their shares are gone (module docstring)."""
+        out: list[Publish] = []
+        now = self.clock()
+        for key in self.store.adopt_rounds(self.owner, now, now + self.lease_s):
+            if key in self.active:
+                continue
+            row = next(r for r in self.store.rounds(key[0]) if r["epoch"] == key[1])
+            out += self._closed(key, "aborted", list(row["roster"]), [], "the leader restarted during the session",
+                                "aborted (the leader restarted during the session; its vehicles' measurement is spent)")
+        return out
+
+    @property
+    def subscription(self) -> str:
+        return f"{self.prefix}/prio/#"
+
+    def owns(self, topic: str) -> bool:
+        return topic.startswith(f"{self.prefix}/prio/")
+
+    def free(self, segment: int) -> list[tuple[str, float]]:
+        """As :meth:`SecureRounds.free`, of the vehicles whose hello lists ``segment`` as covered whole.
+
+        Parameters
+        ----------
+        segment : int
+        """
+        out = []
+        for v, t in super().free(segment):
+            hello = self.store.vehicle(v) or {}
+            if segment in (hello.get("validated") or []):
+                out.append((v, t))
+        return out
+
+    def open_round(self, key: tuple[int, int], roster: list[str]) -> list[Publish]:
+        """Open session ``key`` with ``roster`` once the helper's advert is known.
+
+        Parameters
+        ----------
+        key : (int, int)
+        roster : list of str
+        """
+        if self.helper_advert is None:
+            return []
+        co = PrioLeader(self.prefix, *key, self.params, self.trust, self.keys, self.helper_advert, self.release_log)
+        out = co.open(roster)
+        if not self.store.open_round(*key, roster, owner=self.owner, lease_s=self.clock() + self.lease_s):
+            return []
+        self.active[key] = co      # type: ignore[assignment]  # a PrioLeader: the round interface SecureRounds drives
+        self.phase_since[key] = self.clock()
+        self._log(f"session {key[0]}/{key[1]}: opened with {len(roster)} vehicles {roster}, "
+                  f"{self.params.phases} phases")
+        return out
+
+    def handle(self, topic: str, payload: bytes) -> list[Publish]:
+        """Apply one session message (a vehicle's upload, the helper's message or key advert).
+
+        Parameters
+        ----------
+        topic : str
+        payload : bytes
+        """
+        if topic == key_topic(self.prefix, self.params.helper_id):
+            try:
+                self._set_helper(bytes(payload), self.prefix)
+            except MessageError as err:
+                self.store.log("refused", f"{topic}: {err}", topic=topic)
+                return []
+            self._log("the helper's key advert arrived")
+            return [p for s in self._waiting_segments() for p in self.maybe_open(s)]
+        if topic.startswith(f"{self.prefix}/prio/key/"):
+            return []
+        try:
+            s, e, rest = PrioTopics.parse(self.prefix, topic)
+        except MessageError as err:
+            self.store.log("refused", str(err), topic=topic)
+            return []
+        if rest[:1] == ["to"] or rest == ["leader"]:
+            return []                                 # the service's own messages
+        co = self.active.get((s, e))
+        if co is None:
+            self.store.log("refused", f"{topic}: no session {s}/{e} is open here", topic=topic)
+            return []
+        return self._step((s, e), co, co.handle(topic, bytes(payload)))
+
+    def _step(self, key, co, out: list[Publish]) -> list[Publish]:
+        for kind, reason in co.events:
+            if kind in ("refused", "duplicate"):
+                self.store.log(kind, reason, topic=f"{self.prefix}/prio/{key[0]}/{key[1]}")
+        co.events[:] = [ev for ev in co.events if ev[0] not in ("refused", "duplicate")]
+        if out:
+            self.phase_since[key] = self.clock()      # progress: the phase's timeout starts again
+        if co.done:
+            out = out + self._close(key, co)
+        return out
+
+    def _close(self, key, co) -> list[Publish]:
+        self.phase_since.pop(key, None)
+        vids = {i: v for v, i in co.pid.items()}
+        used = [vids[i] for i in sorted(co.answered)]
+        silent = [v for v in co.pid if co.pid[v] not in co.answered]
+        reason = next((r for k, r in reversed(co.events) if k in ("finished", "aborted")), co.state)
+        if co.state == "finished" and co.result is not None:
+            total, count = sums_from_mean(self.store.plan, co.result, len(co.accepted))
+            return self._closed(key, "finished", used, silent, reason, f"finished, {reason}", total, count)
+        return self._closed(key, "aborted", used, silent, reason, f"aborted ({reason})")

@@ -1,0 +1,146 @@
+"""Validated aggregation as a fleet mode, over the in-memory transport (issue 20, section 2 in the fleet).
+
+Oracles: the clear in-memory run of the same drives (the plain mean of the inversions) on the segments every
+vehicle covered whole, to the proofs' fixed point; the public schedule of
+:func:`~roadcollab.privacy.secagg_phased.public_schedule` (the last two balls are ``R``); a vehicle that lies
+inside the public box moves a segment's result by about ``R / (n - 1)`` in l2, not by its lie over ``n`` as in the
+plain sum; a service restarted mid-session closes it as aborted, with its vehicles' measurement spent.
+"""
+
+import math
+
+import numpy as np
+import pytest
+
+from roadcollab import ParameterError
+from roadcollab.network import memory
+from roadcollab.network.aggregation import AggregationPolicy, sums_from_mean, validated_input, validated_params
+from roadcollab.network.engine import Contribution
+from roadcollab.network.memory import run_in_memory
+from roadcollab.network.plan import RoadPlan
+from roadcollab.network.results import results_from_store
+
+POLICY = AggregationPolicy(mode="validated", round_size=4, min_inputs=3, threshold=3, clip_m=0.2, phases=3)
+
+
+@pytest.fixture(scope="module")
+def plan(mixed_drives):
+    # A 0.25 m grid: 400 points per 100 m segment, so each proof holds 800 values (the CLI test uses 0.1 m).
+    return RoadPlan(fleet_id="t", spacing=0.25, min_speed=min(float(d.speeds().min()) for d in mixed_drives))
+
+
+@pytest.fixture(scope="module")
+def clear(mixed_drives, plan):
+    return results_from_store(run_in_memory(list(mixed_drives), plan)[0])
+
+
+@pytest.fixture(scope="module")
+def validated(mixed_drives, plan):
+    return run_in_memory(list(mixed_drives), plan, aggregation=POLICY)
+
+
+def _on(clear, res):
+    """``res``'s fused values and ``clear``'s at the same positions."""
+    idx = np.searchsorted(clear.position, res.position)
+    assert np.allclose(clear.position[idx], res.position)
+    return res.fused, clear.fused[idx], clear.coverage[idx]
+
+
+def test_policy_schedule_and_table_round_trip(plan):
+    p = validated_params(plan, POLICY)
+    L = 2 * plan.points_per_segment
+    R = POLICY.deviation_m * math.sqrt(L)
+    assert p.phases == 3 and p.wide.length == L and np.all(p.wide.bounds == 0.2)
+    assert [e.norm for e in p.tight] == pytest.approx([R, R])
+    free = validated_params(plan, AggregationPolicy(mode="validated", round_size=4, min_inputs=3, threshold=3))
+    # offset 2 * 1 m * sqrt(L) / 4 against R: ceil(log2(50)) = 6 halvings, then 2 phases at R
+    assert free.phases == 9 and free.tight[0].norm == pytest.approx(64 * R) and free.tight[-1].norm == pytest.approx(R)
+    assert AggregationPolicy.from_dict(POLICY.to_dict(), "f.toml") == POLICY
+    with pytest.raises(ParameterError, match="f.toml: aggregation.deviation_m must be a number"):
+        AggregationPolicy.from_dict({**POLICY.to_dict(), "deviation_m": "x"}, "f.toml")
+    with pytest.raises(ParameterError, match="deviation_m"):
+        AggregationPolicy(mode="validated", clip_m=0.2, deviation_m=0.5)
+    assert POLICY.secure and POLICY.validated and not AggregationPolicy(mode="secure").validated
+
+
+def test_only_a_segment_covered_whole_gives_an_input(plan):
+    m = plan.points_per_segment
+    a = plan.segment_range(2)[0]
+    z = np.arange(2.0 * m).reshape(m, 2)
+    whole = Contribution(2, a, z, z, z)
+    assert np.array_equal(validated_input(plan, whole), z.ravel())
+    assert validated_input(plan, Contribution(2, a + 1, z[1:], z[1:], z[1:])) is None
+    bad = z.copy()
+    bad[3, 0] = np.nan
+    assert validated_input(plan, Contribution(2, a, bad, bad, bad)) is None
+    total, count = sums_from_mean(plan, z.ravel(), 4)
+    assert np.array_equal(total, 4 * z) and np.all(count == 4)
+    with pytest.raises(ParameterError, match="validated result"):
+        sums_from_mean(plan, z.ravel()[:-1], 4)
+
+
+def test_validated_fleet_equals_the_clear_mean_on_segments_covered_whole(clear, validated, plan):
+    store, broker = validated
+    res = results_from_store(store)
+    got, ref, cov = _on(clear, res)
+    finite = np.isfinite(got[:, 0])
+    assert finite.sum() >= 3 * plan.points_per_segment          # segments 1..4 of the 5.8 the drives cover
+    assert np.all(res.coverage[finite] == 4) and np.all(cov[finite] == 4)
+    assert np.max(np.abs(got[finite] - ref[finite])) < 4 * POLICY.resolution_m
+    rounds = store.rounds()
+    assert rounds and all(r["phase"] == "finished" and sorted(r["used"]) == ["v1", "v2", "v3", "v4"] for r in rounds)
+    # segments 0 and 5 (the drives start at 5-11 m and end at 539 m) are covered whole by nobody: no session
+    assert {r["segment"] for r in rounds} == {1, 2, 3, 4}
+    assert all(d.startswith(b"RCSEAL1\x00") for _, _, d, _ in store.contributions())
+    assert broker.bytes_published > 0
+
+
+@pytest.mark.slow
+def test_a_vehicle_lying_inside_the_box_moves_the_result_by_about_R_over_n(mixed_drives, plan, clear, monkeypatch):
+    lie = 0.15                      # inside the 0.2 m box: phase 1 takes it; the later balls clip it
+    orig = memory._round_agent
+
+    def liar(ident, trust, policy, prefix, plan_):
+        rounds, inp = orig(ident, trust, policy, prefix, plan_)
+        if ident.vehicle_id != "v1":
+            return rounds, inp
+        return rounds, lambda pl, c: None if (u := inp(pl, c)) is None else u + lie
+
+    monkeypatch.setattr(memory, "_round_agent", liar)
+    policy = AggregationPolicy(**{**POLICY.to_dict(), "phases": 0})   # the public schedule: 7 phases here
+    assert validated_params(plan, policy).phases == 7
+    store, _ = run_in_memory(list(mixed_drives), plan, aggregation=policy)
+    got, ref, _ = _on(clear, results_from_store(store))
+    finite = np.isfinite(got[:, 0])
+    shift = np.sqrt(np.mean((got[finite] - ref[finite]) ** 2))
+    # the plain sum (secure mode) moves every point by lie / n = 37.5 mm; centred clipping leaves about
+    # R / (n - 1) in l2 over the segment's 2 m values
+    # measured 3.7 mm: about R / (n - 1) in l2, deviation_m / 3 = 3.3 mm rms per value
+    assert shift < 1.5 * POLICY.deviation_m / 3, shift
+
+
+def test_a_restarted_service_aborts_its_running_session_and_spends_nothing_twice(mixed_drives, plan):
+    from roadcollab.network.priowire import AggregatorKeys
+    from roadcollab.network.relaykey import RelayKey
+    from roadcollab.network.store import ServiceStore
+    from roadcollab.network.validated_rounds import ValidatedRounds
+    from roadcollab.privacy.secagg_store import ReleaseLog
+    from roadcollab.wire.identity import FleetAuthority, VehicleIdentity
+
+    auth = FleetAuthority.generate("t")
+    params = validated_params(plan, POLICY)
+    ka = AggregatorKeys(VehicleIdentity.enroll(auth, params.leader_id), RelayKey.generate())
+    kb = AggregatorKeys(VehicleIdentity.enroll(auth, params.helper_id), RelayKey.generate())
+    store = ServiceStore(":memory:", plan)
+    for v in ("v1", "v2", "v3"):
+        store.add_vehicle(v, {"segments": [2], "validated": [2]})
+        store.add_sealed(v, 2, b"RCSEAL1\x00" + v.encode(), b"env-" + v.encode())
+    rounds = ValidatedRounds(store, auth.trust(), POLICY, "rc/t", keys=ka, release_log=ReleaseLog(),
+                             helper_advert=kb.advert("rc/t"), round_wait_s=0.0)
+    out = rounds.maybe_open(2)
+    assert any(p.topic == "rc/t/prio/2/0/to/v1" for p in out) and (2, 0) in rounds.active
+    again = ValidatedRounds(store, auth.trust(), POLICY, "rc/t", keys=ka, release_log=ReleaseLog(),
+                            helper_advert=kb.advert("rc/t"), round_wait_s=0.0)
+    (r,) = store.rounds(2)
+    assert r["phase"] == "aborted" and sorted(r["used"]) == ["v1", "v2", "v3"] and "restarted" in r["reason"]
+    assert again.free(2) == [] and again.maybe_open(2) == []     # their measurement of segment 2 is spent
