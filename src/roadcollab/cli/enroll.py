@@ -173,10 +173,14 @@ def run(args: argparse.Namespace, command_line: str) -> int:
     how = (f"; secure aggregation, rounds of {policy.round_size} (k={k}, t={t}, c={policy.max_colluders})"
            if policy.secure else "")
     if policy.validated:
-        from ..network.aggregation import validated_params
+        from ..network.aggregation import validated_params, validated_schedule
 
         how = (f"; validated aggregation, sessions of {policy.round_size} (k={k}, "
                f"{validated_params(plan, policy).phases} phases); the helper's folder is {args.fleet}/helper")
+        need = validated_schedule(plan, policy)[0]
+        if policy.phases and policy.phases < need:
+            how += (f"; note: --phases {policy.phases} is below the {need} that work off one vehicle's phase-1 shift "
+                    "(a lying vehicle keeps part of it)")
     tls = "; the broker listens with TLS (clients use mqtts://)" if args.tls else ""
     print(f"enrolled fleet {plan.fleet_id!r} with {len(ids)} vehicles ({ids[0]}..{ids[-1]}) in {args.fleet}{on}{how}"
           f"{tls}")

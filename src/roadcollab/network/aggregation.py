@@ -45,7 +45,7 @@ from .plan import RoadPlan
 from .prioround import PrioParams
 
 __all__ = ["AggregationPolicy", "segment_input", "sums_from_total", "validated_input", "validated_params",
-           "sums_from_mean", "MODES"]
+           "validated_schedule", "sums_from_mean", "MODES"]
 
 MODES = ("clear", "secure", "validated")
 #: Policy fields read as numbers (the others are integers).
@@ -233,6 +233,21 @@ def validated_input(plan: RoadPlan, c: Contribution) -> np.ndarray | None:
     return np.asarray(c.inversion, float).reshape(-1).copy()
 
 
+def validated_schedule(plan: RoadPlan, policy: AggregationPolicy) -> tuple[int, float]:
+    """``(K, grow)`` of :func:`~roadcollab.privacy.secagg_phased.public_schedule` for the fleet: the phases that
+    work off the largest shift one vehicle can give ``m_1`` (``2 clip_m sqrt(2 m) / round_size``) down to ``R``.
+    With fewer phases (``policy.phases``) a vehicle keeps part of that shift (the bound ``R / (n - 1)`` is lost).
+
+    Parameters
+    ----------
+    plan : RoadPlan
+    policy : AggregationPolicy
+    """
+    L = 2 * plan.points_per_segment
+    offset = 2.0 * policy.clip_m * math.sqrt(L) / policy.round_size   # one vehicle's largest shift of m_1
+    return public_schedule(offset, policy.deviation_m * math.sqrt(L))
+
+
 def validated_params(plan: RoadPlan, policy: AggregationPolicy) -> PrioParams:
     """The public parameters of every validated session of the fleet (module docstring).
 
@@ -248,8 +263,7 @@ def validated_params(plan: RoadPlan, policy: AggregationPolicy) -> PrioParams:
     """
     L = 2 * plan.points_per_segment
     R = policy.deviation_m * math.sqrt(L)
-    offset = 2.0 * policy.clip_m * math.sqrt(L) / policy.round_size   # one vehicle's largest shift of m_1
-    phases, grow = public_schedule(offset, R)
+    phases, grow = validated_schedule(plan, policy)
     if policy.phases:            # fewer phases: a shorter descent, still ending with 2 phases at R
         phases, grow = policy.phases, min(grow, 2.0 ** max(0, policy.phases - 3))
     wide = ValidityEncoding(np.full(L, policy.clip_m), policy.resolution_m)
