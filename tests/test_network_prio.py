@@ -192,6 +192,24 @@ def test_a_leader_cannot_substitute_the_helpers_key_or_show_vehicles_another_set
     assert "does not verify" in fresh.refusals[-1] or "signature" in fresh.refusals[-1]
 
 
+def test_the_helper_refuses_a_roster_with_an_aggregator_as_a_vehicle():
+    """The leader's own certificate in the roster is a Sybil whose input it knows: with k = 2 the session's
+    mean would give the victim's input away. Found by attacking the fleet mode, where the service holds
+    ``aggregator-a``'s identity."""
+    w = _world(n=1)
+    params = PrioParams(w["wide"], (w["tight"],) * 2, min_inputs=2)
+    helper = PrioHelperService(PREFIX, params, w["trust"], w["kb"], w["ka"].advert(PREFIX), ReleaseLog())
+    sybil = PrioAgent(w["ka"].identity, w["trust"], params, SessionLedger(), PREFIX, {7: np.zeros(L)},
+                      rng=np.random.default_rng(9))
+    victim = PrioAgent(w["agents"]["v1"].identity, w["trust"], params, SessionLedger(), PREFIX, {7: w["inputs"]["v1"]},
+                       rng=np.random.default_rng(8))
+    leader = PrioLeader(PREFIX, 7, 0, params, w["trust"], w["ka"], w["kb"].advert(PREFIX), ReleaseLog())
+    run_prio_session(leader, helper, {"v1": victim, "aggregator-a": sybil}, ["v1", "aggregator-a"])
+    assert leader.result is None and leader.state == "aborted"
+    assert any("aggregator id 'aggregator-a'" in r for k, r in helper.sessions[(7, 0)].events if k == "refused")
+    assert helper.log.released(session_id(7, 0), 1) is None
+
+
 def test_no_message_raises_out_of_any_party():
     w = _world()
     leader = _leader(w)

@@ -119,6 +119,9 @@ class PrioHelper(PrioAggregator):
         for vid, i in roster.items():
             if isinstance(i, bool) or not isinstance(i, int) or i < 1 or i in ids:
                 raise MessageError("open: protocol ids must be distinct positive integers")
+            if str(vid) in (self.params.leader_id, self.params.helper_id):
+                # An aggregator's certificate as a "vehicle": a Sybil whose input the leader knows.
+                raise MessageError(f"open: the roster holds the aggregator id {vid!r}")
             ids[i] = str(vid)
         self.roster = ids
         return []
