@@ -182,35 +182,41 @@ def axis_ratios(num: np.ndarray, den: np.ndarray, n: int, powers: np.ndarray) ->
         for e in range(4):
             tgt[k, e] = sgn * num[e, n - k]
         tgt[k, 4] = sgn * den[n - k].real
+    # The bins in the inner loops, each sum over k in the same order as per bin before (the same values,
+    # bit for bit), with no branch in them: LLVM vectorises them (the per-bin loop with its running maxima
+    # did not). The maxima of the same values, so the same decisions.
+    acc = np.zeros((10, K))
+    for k in range(n + 1):
+        for j in range(5):
+            a, b = cre[k, j], cim[k, j]
+            ra, ia = acc[j], acc[5 + j]
+            for q in range(K):
+                wk = powers[k, q]
+                ra[q] += a * wk
+                ia[q] += b * wk
+    r0, r1, r2, r3, rd = acc[0], acc[1], acc[2], acc[3], acc[4]
+    i0, i1, i2, i3, idd = acc[5], acc[6], acc[7], acc[8], acc[9]
+    rc = np.empty(K)
+    rg = np.empty(K)
+    bad = 0
     for q in range(K):
-        r0 = r1 = r2 = r3 = rd = 0.0
-        i0 = i1 = i2 = i3 = idd = 0.0
-        for k in range(n + 1):
-            wk = powers[k, q]
-            r0 += cre[k, 0] * wk
-            r1 += cre[k, 1] * wk
-            r2 += cre[k, 2] * wk
-            r3 += cre[k, 3] * wk
-            rd += cre[k, 4] * wk
-            i0 += cim[k, 0] * wk
-            i1 += cim[k, 1] * wk
-            i2 += cim[k, 2] * wk
-            i3 += cim[k, 3] * wk
-            idd += cim[k, 4] * wk
-        fro2 = r0 * r0 + i0 * i0 + r1 * r1 + i1 * i1 + r2 * r2 + i2 * i2 + r3 * r3 + i3 * i3
-        det_re = r0 * r3 - i0 * i3 - (r1 * r2 - i1 * i2)
-        det_im = r0 * i3 + i0 * r3 - (r1 * i2 + i1 * r2)
+        fro2 = r0[q] * r0[q] + i0[q] * i0[q] + r1[q] * r1[q] + i1[q] * i1[q] + r2[q] * r2[q] + i2[q] * i2[q] \
+            + r3[q] * r3[q] + i3[q] * i3[q]
+        det_re = r0[q] * r3[q] - i0[q] * i3[q] - (r1[q] * r2[q] - i1[q] * i2[q])
+        det_im = r0[q] * i3[q] + i0[q] * r3[q] - (r1[q] * i2[q] + i1[q] * r2[q])
         det2 = det_re * det_re + det_im * det_im
         adet = np.sqrt(det2)
-        if not adet > 0.0:
-            return np.inf, np.inf
-        rc = fro2 / adet / 2
-        if rc > r_cond:
-            r_cond = rc
+        bad += 0 if adet > 0.0 else 1
+        rc[q] = fro2 / adet / 2
         smax = np.sqrt((fro2 + np.sqrt(max(fro2 * fro2 - 4 * det2, 0.0))) / 2)
-        rg = np.sqrt(rd * rd + idd * idd) * smax / adet
-        if rg > r_gain:
-            r_gain = rg
+        rg[q] = np.sqrt(rd[q] * rd[q] + idd[q] * idd[q]) * smax / adet
+    if bad:
+        return np.inf, np.inf
+    for q in range(K):
+        if rc[q] > r_cond:
+            r_cond = rc[q]
+        if rg[q] > r_gain:
+            r_gain = rg[q]
     return r_cond, r_gain
 
 def loop(rng: Any, lo: int, hi: int, plf0: float, plf1: float, pd0: float, pd1: float, zlf0: float,
