@@ -202,18 +202,21 @@ def _build() -> dict[str, Any]:   # Long: the kernels are defined here so that n
                 for k in range(L):
                     ar[c, k] = Dr[c]
                     ai[c, k] = Di[c]
+            zrt, zit = zr[t0:t0 + L], zi[t0:t0 + L]      # 1-D views in the bin loops (as in block)
             for i in range(n):
+                lri, lii = lr[i], li[i]
                 for k in range(L):
-                    dr = zr[t0 + k] - lr[i]
-                    di = zi[t0 + k] - li[i]
+                    dr = zrt[k] - lri
+                    di = zit[k] - lii
                     s = 1.0 / (dr * dr + di * di)
                     gr[k] = dr * s
                     gi[k] = -di * s
                 for c in range(pm):
                     rr, ri = Rr[i, c], Ri[i, c]
+                    arc, aic = ar[c], ai[c]
                     for k in range(L):
-                        ar[c, k] += rr * gr[k] - ri * gi[k]
-                        ai[c, k] += rr * gi[k] + ri * gr[k]
+                        arc[k] += rr * gr[k] - ri * gi[k]
+                        aic[k] += rr * gi[k] + ri * gr[k]
             for k in range(L):
                 for c in range(pm):
                     out[t0 + k, c] = complex(ar[c, k], ai[c, k])
