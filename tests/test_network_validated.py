@@ -144,3 +144,76 @@ def test_a_restarted_service_aborts_its_running_session_and_spends_nothing_twice
     (r,) = store.rounds(2)
     assert r["phase"] == "aborted" and sorted(r["used"]) == ["v1", "v2", "v3"] and "restarted" in r["reason"]
     assert again.free(2) == [] and again.maybe_open(2) == []     # their measurement of segment 2 is spent
+
+
+def test_no_message_raises_out_of_the_validated_parties(plan):
+    """Found by attacking the fleet mode: a hello whose 'validated' field is not a list of its segments, and
+    topics with digits ``int`` refuses (``'²'.isdigit()`` is True), raised out of ``handle`` and stopped
+    ``serve``."""
+    from roadcollab.network.messages import Topics, encode_json, seal
+    from roadcollab.network.prioagent import PrioAgent
+    from roadcollab.network.secround import RoundTopics
+    from roadcollab.network.service import Service
+    from roadcollab.network.store import ServiceStore
+    from roadcollab.privacy.secagg_store import SessionLedger
+    from roadcollab.wire.identity import FleetAuthority, VehicleIdentity
+    from roadcollab import MessageError
+
+    auth = FleetAuthority.generate("t")
+    store = ServiceStore(":memory:", plan)
+    rounds, helper = memory._validated_parties(store, auth, POLICY)
+    svc = Service(store, auth.trust(), rounds=rounds)
+    car, T = VehicleIdentity.enroll(auth, "v1"), Topics("t")
+    for bad in (5, [0, 1], ["0"], [True], list(range(10))):
+        assert svc.handle(T.hello("v1"), seal(car, T.hello("v1"), encode_json({"segments": [0], "validated": bad}))) == []
+    assert store.vehicle("v1") is None
+    assert any("'validated' must be a list" in reason for _, _, _, reason in store.events())
+    for topic in ("rc/t/prio/\u00b2/0/up/v1", "rc/t/v/v1/seg/\u00b2", "rc/t/prio/7/\u0663/up/v1", "rc/t/secagg/\u00b2/0/x/v1"):
+        assert svc.handle(topic, b"x") == []
+    assert helper.handle("rc/t/prio/\u00b2/0/leader", b"x") == []
+    agent = PrioAgent(car, auth.trust(), validated_params(plan, POLICY), SessionLedger(), "rc/t", {})
+    assert agent.on_message("rc/t/prio/\u00b2/0/to/v1", b"x") == [] and agent.refusals
+    with pytest.raises(MessageError):
+        RoundTopics.parse_round("rc/t", "rc/t/secagg/\u00b2/0/x/v1")
+
+
+def test_the_service_loop_survives_a_message_that_raises(capsys):
+    import threading
+
+    from roadcollab.network.mqtt_run import run_service
+    from roadcollab.network.service import Publish
+
+    stop = threading.Event()
+
+    class Party:
+        seen: list = []
+
+        def on_connect(self):
+            return []
+
+        def tick(self):
+            return []
+
+        def handle(self, topic, payload):
+            self.seen.append(topic)
+            if topic == "boom":
+                raise RuntimeError("a defect")
+            return [Publish("out/" + topic, b"")]
+
+    class Client:
+        queue = [("boom", b""), ("fine", b"")]
+        published: list = []
+
+        def receive(self, timeout):
+            if not self.queue:
+                stop.set()
+                return None
+            return self.queue.pop(0)
+
+        def publish(self, topic, payload, retain=False):
+            self.published.append(topic)
+
+    client = Client()
+    assert run_service(Party(), client, stop, threading.Event()) == 2
+    assert client.published == ["out/fine"]
+    assert "raised RuntimeError: a defect (dropped; the service goes on)" in capsys.readouterr().err

@@ -34,7 +34,7 @@ def _count_seeds(text: str) -> int:
     n = 0
     for part in (t.strip() for t in text.split(",")):
         lo, sep, hi = part.partition("-")
-        if not (lo.isdigit() and (not sep or hi.isdigit())) or len(part) > 40:
+        if not (part.isascii() and lo.isdigit() and (not sep or hi.isdigit())) or len(part) > 40:
             raise argparse.ArgumentTypeError(f"expected seeds such as 1000 or 1000-1004, got {part[:40]!r}")
         a, b = int(lo), int(hi if sep else lo)
         if b > SEED_MAX:

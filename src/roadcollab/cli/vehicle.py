@@ -129,7 +129,7 @@ def run(args: argparse.Namespace, command_line: str) -> int:
         print(f"{args.id}: {cleaning.n_spikes} isolated spikes repaired", flush=True)
     policy = load_aggregation(args.fleet)
     rounds, relay = _secure_side(folder, identity, trust, plan, policy)
-    index = int(args.id[1:]) - 1 if args.id[1:].isdigit() else 0
+    index = int(args.id[1:]) - 1 if args.id[1:].isascii() and args.id[1:].isdigit() else 0
     if args.unguarded_receive:
         print(f"{args.id}: --unguarded-receive: waiting messages are applied without the receiver guard", flush=True)
     from ..network.fleetlanes import load_road, placed_engine

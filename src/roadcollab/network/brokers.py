@@ -37,7 +37,7 @@ def parse_listen(text: str, option: str = "--listen") -> tuple[str, int]:
         The option named in the message.
     """
     host, _, port = str(text).rpartition(":")
-    if not host or not port.isdigit() or not 0 < int(port) < 65536:
+    if not host or not (port.isascii() and port.isdigit()) or not 0 < int(port) < 65536:
         raise ParameterError(f"{option} {text}: expected HOST:PORT with a port in 1..65535 (e.g. 127.0.0.1:1883)")
     return host, int(port)
 

@@ -100,7 +100,7 @@ class Topics:
         vid = parts[3]
         if len(parts) == 5 and parts[4] == "hello":
             return vid, "hello", None
-        if len(parts) == 6 and parts[4] == "seg" and parts[5].isdigit() and len(parts[5]) <= 9:
+        if len(parts) == 6 and parts[4] == "seg" and parts[5].isascii() and parts[5].isdigit() and len(parts[5]) <= 9:
             return vid, "seg", int(parts[5])
         raise MessageError(f"topic {topic!r}: expected .../v/<vid>/hello or .../v/<vid>/seg/<n>")
 

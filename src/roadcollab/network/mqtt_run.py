@@ -8,6 +8,8 @@ lost with a killed service or broker is sent again; the service applies each onc
 
 from __future__ import annotations
 
+import functools
+import sys
 import threading
 import time
 from typing import Callable, Protocol
@@ -55,15 +57,27 @@ def run_service(service: Party, client, stop: threading.Event, republish: thread
                 client.publish(p.topic, p.payload, p.retain)
         if time.monotonic() >= next_tick:       # timeouts of secure-aggregation rounds
             next_tick = time.monotonic() + 1.0
-            for p in service.tick():
+            for p in _guarded(service.tick, "a timer tick", log):
                 client.publish(p.topic, p.payload, p.retain)
         m = client.receive(idle_s)
         if m is None:
             continue
         handled += 1
-        for p in service.handle(*m):
+        topic, payload = m
+        for p in _guarded(functools.partial(service.handle, topic, payload), f"a message on {topic[:200]!r}", log):
             client.publish(p.topic, p.payload, p.retain)
     return handled
+
+
+def _guarded(step: Callable[[], list[Publish]], what: str, log: Callable[[str], None] | None) -> list[Publish]:
+    """``step()``; an exception that escapes it (a defect: every refusal is recorded inside) is one line on
+    stderr (or ``log``) and the message is dropped, so that one message cannot stop the service."""
+    try:
+        return step()
+    except Exception as err:     # noqa: BLE001 - the service's last line of defence, reported
+        line = f"error: {what} raised {type(err).__name__}: {str(err)[:300]} (dropped; the service goes on)"
+        (log or (lambda s: print(s, file=sys.stderr, flush=True)))(line)
+        return []
 
 
 def run_vehicle(agent: VehicleAgent, client, *, timeout: float, resend_s: float = 15.0,

@@ -228,7 +228,8 @@ class PrioTopics:
         """
         head = f"{prefix}/prio/"
         parts = topic[len(head):].split("/") if topic.startswith(head) else []
-        if len(parts) < 3 or not parts[0].isdigit() or not parts[1].isdigit():
+        # ASCII digits only: str.isdigit() also holds for digits int() refuses (superscripts).
+        if len(parts) < 3 or not all(p.isascii() and p.isdigit() and len(p) <= 9 for p in parts[:2]):
             raise MessageError(f"{topic}: not a validated-session topic under {head}")
         return int(parts[0]), int(parts[1]), parts[2:]
 

@@ -108,7 +108,7 @@ class RoundTopics:
         """
         head = f"{prefix}/secagg/"
         parts = topic[len(head):].split("/") if topic.startswith(head) else []
-        if len(parts) < 3 or not all(p.isdigit() and len(p) <= 9 for p in parts[:2]):
+        if len(parts) < 3 or not all(p.isascii() and p.isdigit() and len(p) <= 9 for p in parts[:2]):
             raise MessageError(f"topic {topic!r} is not a round topic under {head}")
         return int(parts[0]), int(parts[1]), parts[2:]
 

@@ -166,6 +166,10 @@ class Service:
         if not isinstance(segs, list) or not all(isinstance(s, int) and 0 <= s < 10 ** 9 for s in segs) \
                 or len(segs) > 100000:
             raise MessageError("hello: 'segments' must be a list of segment numbers")
+        val, announced = hello.get("validated", []), set(segs)
+        if not isinstance(val, list) or len(val) > len(announced) or not all(
+                isinstance(s, int) and not isinstance(s, bool) and s in announced for s in val):
+            raise MessageError("hello: 'validated' must be a list of the announced segment numbers")
         check_hello(self.plan, hello)                 # a fleet on a road: the hello is on it
         order = self.store.add_vehicle(vid, hello)
         waiting = {}

@@ -138,8 +138,8 @@ class ValidatedRounds(SecureRounds):
         """
         out = []
         for v, t in super().free(segment):
-            hello = self.store.vehicle(v) or {}
-            if segment in (hello.get("validated") or []):
+            val = (self.store.vehicle(v) or {}).get("validated")
+            if isinstance(val, list) and segment in val:
                 out.append((v, t))
         return out
 

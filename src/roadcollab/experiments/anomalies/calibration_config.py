@@ -164,7 +164,7 @@ def parse_seeds(items: Sequence[str] | str) -> tuple[int, ...]:
     out: list[int] = []
     for text in (t.strip() for t in parts):
         lo, sep, hi = text.partition("-")
-        if not (lo.isdigit() and (not sep or hi.isdigit())):
+        if not (text.isascii() and lo.isdigit() and (not sep or hi.isdigit())):
             raise ParameterError(f"seeds must be integers >= 0 or ranges 'a-b', got {text!r}")
         if sep and int(hi) < int(lo):
             raise ParameterError(f"seeds range must be ascending, got {text!r}")
