@@ -53,8 +53,13 @@ def test_policy_schedule_and_table_round_trip(plan):
     assert p.phases == 3 and p.wide.length == L and np.all(p.wide.bounds == 0.2)
     assert [e.norm for e in p.tight] == pytest.approx([R, R])
     free = validated_params(plan, AggregationPolicy(mode="validated", round_size=4, min_inputs=3, threshold=3))
-    # offset 2 * 1 m * sqrt(L) / 4 against R: ceil(log2(50)) = 6 halvings, then 2 phases at R
-    assert free.phases == 9 and free.tight[0].norm == pytest.approx(64 * R) and free.tight[-1].norm == pytest.approx(R)
+    # one liar among k = 3: phase 1's shift 2 * 1 m * sqrt(L) / 3 = (200 / 3) R, multiplied by 2 c / n = 2 / 3 per
+    # phase while above R: 11 balls, then 2 at R
+    O = 2 * math.sqrt(L) / 3
+    assert free.phases == 14 and free.tight[0].norm == pytest.approx(O) and free.tight[1].norm == pytest.approx(O * 2 / 3)
+    assert free.tight[-3].norm > R and free.tight[-2].norm == free.tight[-1].norm == pytest.approx(R)
+    with pytest.raises(ParameterError, match="needs min_inputs above 2"):
+        AggregationPolicy(mode="validated", round_size=2, min_inputs=2, threshold=2)
     assert AggregationPolicy.from_dict(POLICY.to_dict(), "f.toml") == POLICY
     with pytest.raises(ParameterError, match="f.toml: aggregation.deviation_m must be a number"):
         AggregationPolicy.from_dict({**POLICY.to_dict(), "deviation_m": "x"}, "f.toml")
@@ -217,3 +222,68 @@ def test_the_service_loop_survives_a_message_that_raises(capsys):
     assert run_service(Party(), client, stop, threading.Event()) == 2
     assert client.published == ["out/fine"]
     assert "raised RuntimeError: a defect (dropped; the service goes on)" in capsys.readouterr().err
+
+
+class _Liar:
+    """Phase 1 at the box edge away from the road; in phases 2..K its whole ball, the same way (a PrioAgent whose
+    later-phase input is the previous result moved far along ``direction``)."""
+
+    @staticmethod
+    def make(direction):
+        from roadcollab.network.prioagent import PrioAgent
+        from roadcollab.network.priowire import unpack
+
+        class Liar(PrioAgent):
+            def _answer(self, key, k, h, blobs):
+                if k > 1:
+                    rh, rb = unpack(blobs[1], "previous result")
+                    self._u[key] = np.frombuffer(rb[0], dtype="<f8") + 1e3 * direction
+                return super()._answer(key, k, h, blobs)
+        return Liar
+
+
+@pytest.mark.parametrize("round_size, answer, liars, k, c", [
+    (5, 3, 1, 3, 0),      # 2 of 5 invited never answer: a session of n = k = 3
+    (3, 3, 1, 3, 0),      # round_size = k = 3
+    (5, 5, 2, 5, 2),      # two colluders of five, a schedule built for c = 2
+])
+def test_lying_vehicles_move_a_session_by_about_c_R_over_n_minus_c(round_size, answer, liars, k, c):
+    """Found by attacking the fleet mode: a schedule built for ``round_size`` vehicles and one liar let one liar
+    keep 2.5 R of its shift when two invited vehicles stayed silent, and two colluders 5.7 R. The schedule is
+    now built for ``c = max(1, max_colluders)`` liars among ``n = min_inputs``."""
+    from roadcollab.network.prioagent import PrioAgent, run_prio_session
+    from roadcollab.network.priohelper import PrioHelperService
+    from roadcollab.network.prioround import PrioLeader
+    from roadcollab.network.priowire import AggregatorKeys
+    from roadcollab.network.relaykey import RelayKey
+    from roadcollab.privacy.secagg_store import ReleaseLog, SessionLedger
+    from roadcollab.wire.identity import FleetAuthority, VehicleIdentity
+
+    L = 64
+    plan = RoadPlan(fleet_id="t", spacing=1.0, segment_length=L / 2)
+    pol = AggregationPolicy(mode="validated", round_size=round_size, min_inputs=k, threshold=k, clip_m=0.2,
+                            max_colluders=c)
+    params, R = validated_params(plan, pol), pol.deviation_m * math.sqrt(L)
+    auth = FleetAuthority.generate("t")
+    ka = AggregatorKeys(VehicleIdentity.enroll(auth, params.leader_id), RelayKey.generate())
+    kb = AggregatorKeys(VehicleIdentity.enroll(auth, params.helper_id), RelayKey.generate())
+    g = np.random.default_rng(0)
+    road = np.clip(g.normal(0, 0.03, L), -0.15, 0.15)
+    away = np.where(road > 0, -1.0, 1.0)
+    Liar = _Liar.make(away / np.linalg.norm(away))
+    vids = [f"v{i}" for i in range(1, round_size + 1)]
+    agents, honest = {}, []
+    for j, v in enumerate(vids):
+        u = 0.2 * away if j < liars else np.clip(road + g.normal(0, 0.5 * pol.deviation_m, L), -0.2, 0.2)
+        if j >= liars and j < answer:
+            honest.append(u)
+        agents[v] = (Liar if j < liars else PrioAgent)(VehicleIdentity.enroll(auth, v), auth.trust(), params,
+                                                        SessionLedger(), "rc/t", {7: u}, rng=np.random.default_rng(j))
+    leader = PrioLeader("rc/t", 7, 0, params, auth.trust(), ka, kb.advert("rc/t"), ReleaseLog())
+    helper = PrioHelperService("rc/t", params, auth.trust(), kb, ka.advert("rc/t"), ReleaseLog())
+    run_prio_session(leader, helper, agents, vids, offline=vids[answer:])
+    assert leader.state == "finished", leader.events
+    n = len(leader.accepted)
+    shift = np.linalg.norm(leader.result - np.mean(honest, axis=0)) / R
+    # measured 0.53 R (n = 3, one liar), 0.78 R (two of five): about c R / (n - c) (0.5 R, 0.67 R)
+    assert n == answer and shift < 1.25 * liars / (n - liars), shift

@@ -74,7 +74,8 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
     g.add_argument("--threshold", type=_ROUND, default=None, metavar="T",
                    help=f"secure: Shamir threshold, T <= K (default K; {help_range(_ROUND)})")
     g.add_argument("--max-colluders", type=_COLLUDERS, default=0, metavar="C",
-                   help=f"secure: vehicles that may collude with the service, C < T (default 0; {help_range(_COLLUDERS)})")
+                   help=f"secure: vehicles that may collude with the service, C < T; validated: lying vehicles the phase "
+                        f"schedule is built for (at least 1; K > 2C) (default 0; {help_range(_COLLUDERS)})")
     g.add_argument("--clip", type=_CLIP, default=1.0, metavar="M",
                    help=f"secure: public bound on every elevation in a round, m (default 1; {help_range(_CLIP)})")
     g.add_argument("--deviation", type=_DEVIATION, default=0.01, metavar="M",
@@ -177,7 +178,7 @@ def run(args: argparse.Namespace, command_line: str) -> int:
 
         how = (f"; validated aggregation, sessions of {policy.round_size} (k={k}, "
                f"{validated_params(plan, policy).phases} phases); the helper's folder is {args.fleet}/helper")
-        need = validated_schedule(plan, policy)[0]
+        need = validated_schedule(plan, policy)
         if policy.phases and policy.phases < need:
             how += (f"; note: --phases {policy.phases} is below the {need} that work off one vehicle's phase-1 shift "
                     "(a lying vehicle keeps part of it)")

@@ -39,13 +39,13 @@ from .._validation import check_int, check_real
 from ..errors import ParameterError
 from ..privacy.secagg_flp import ValidityEncoding
 from ..privacy.secagg_messages import SecAggSpec
-from ..privacy.secagg_phased import public_schedule, radius_schedule
+from ..privacy.secagg_phased import colluder_schedule
 from .engine import Contribution
 from .plan import RoadPlan
 from .prioround import PrioParams
 
 __all__ = ["AggregationPolicy", "segment_input", "sums_from_total", "validated_input", "validated_params",
-           "validated_schedule", "sums_from_mean", "MODES"]
+           "validated_schedule", "validated_radii", "sums_from_mean", "MODES"]
 
 MODES = ("clear", "secure", "validated")
 #: Policy fields read as numbers (the others are integers).
@@ -79,9 +79,9 @@ class AggregationPolicy:
         mean, m; the later phases' l2 ball is ``R = deviation_m * sqrt(2 m)``. An honest input farther out is
         scaled onto it (the result then differs from the clear mean).
     phases : int
-        ``validated``: ``K`` (0: enough to work off the largest phase-1 offset,
-        :func:`~roadcollab.privacy.secagg_phased.public_schedule`, then 2 phases at ``R``; given, the balls
-        halve from ``R 2^(K-3)`` at most, and the last two are ``R``).
+        ``validated``: ``K`` (0: the public schedule of :func:`validated_radii`, which works off the largest
+        phase-1 shift of ``max(1, max_colluders)`` lying vehicles among ``min_inputs``; given, the last
+        ``K - 1`` balls of that schedule).
     resolution_m : float
         ``validated``: fixed-point step of the proofs, m.
     """
@@ -106,11 +106,19 @@ class AggregationPolicy:
         check_real("deviation_m", self.deviation_m, low=0.0, low_open=True, high=self.clip_m)
         check_int("phases", self.phases, low=0, high=32)
         check_real("resolution_m", self.resolution_m, low=1e-9, high=self.clip_m / 4)
+        if self.validated and self.min_inputs <= 2 * self.liars:
+            raise ParameterError(f"validated aggregation against {self.liars} lying vehicles (max_colluders, at least 1) "
+                                 f"needs min_inputs above {2 * self.liars}, got {self.min_inputs}")
 
     @property
     def secure(self) -> bool:
         """The service sees no inversion: the sums come from rounds (``secure`` or ``validated``)."""
         return self.mode in ("secure", "validated")
+
+    @property
+    def liars(self) -> int:
+        """``validated``: lying vehicles the phase schedule is built for, ``max(1, max_colluders)``."""
+        return max(1, self.max_colluders)
 
     @property
     def validated(self) -> bool:
@@ -233,19 +241,33 @@ def validated_input(plan: RoadPlan, c: Contribution) -> np.ndarray | None:
     return np.asarray(c.inversion, float).reshape(-1).copy()
 
 
-def validated_schedule(plan: RoadPlan, policy: AggregationPolicy) -> tuple[int, float]:
-    """``(K, grow)`` of :func:`~roadcollab.privacy.secagg_phased.public_schedule` for the fleet: the phases that
-    work off the largest shift one vehicle can give ``m_1`` (``2 clip_m sqrt(2 m) / round_size``) down to ``R``.
-    With fewer phases (``policy.phases``) a vehicle keeps part of that shift (the bound ``R / (n - 1)`` is lost).
+def validated_radii(plan: RoadPlan, policy: AggregationPolicy) -> list[float]:
+    """The balls of phases ``2..K`` of the public schedule
+    (:func:`~roadcollab.privacy.secagg_phased.colluder_schedule`): built for ``c = max(1, max_colluders)``
+    lying vehicles among ``n = min_inputs`` (the fewest a session accepts; fewer honest vehicles pull back
+    less), from the liars' largest shift of ``m_1``, ``c 2 clip_m sqrt(2 m) / n``, down to
+    ``R = deviation_m sqrt(2 m)``, then 2 phases at ``R``.
 
     Parameters
     ----------
     plan : RoadPlan
     policy : AggregationPolicy
     """
-    L = 2 * plan.points_per_segment
-    offset = 2.0 * policy.clip_m * math.sqrt(L) / policy.round_size   # one vehicle's largest shift of m_1
-    return public_schedule(offset, policy.deviation_m * math.sqrt(L))
+    L, n, c = 2 * plan.points_per_segment, policy.min_inputs, policy.liars
+    R = policy.deviation_m * math.sqrt(L)
+    return colluder_schedule(c * 2.0 * policy.clip_m * math.sqrt(L) / n, R, n, c)
+
+
+def validated_schedule(plan: RoadPlan, policy: AggregationPolicy) -> int:
+    """``K`` of the public schedule (:func:`validated_radii`); with fewer phases (``policy.phases``) the liars
+    keep part of their phase-1 shift.
+
+    Parameters
+    ----------
+    plan : RoadPlan
+    policy : AggregationPolicy
+    """
+    return 1 + len(validated_radii(plan, policy))
 
 
 def validated_params(plan: RoadPlan, policy: AggregationPolicy) -> PrioParams:
@@ -259,16 +281,16 @@ def validated_params(plan: RoadPlan, policy: AggregationPolicy) -> PrioParams:
     Returns
     -------
     PrioParams
-        Phase 1's box ``clip_m`` per value; phases ``2..K`` on balls from ``R * grow`` halving to ``R``.
+        Phase 1's box ``clip_m`` per value; phases ``2..K`` on the balls of :func:`validated_radii` (given
+        ``policy.phases``, its last ``K - 1``, or more phases at ``R``).
     """
     L = 2 * plan.points_per_segment
-    R = policy.deviation_m * math.sqrt(L)
-    phases, grow = validated_schedule(plan, policy)
-    if policy.phases:            # fewer phases: a shorter descent, still ending with 2 phases at R
-        phases, grow = policy.phases, min(grow, 2.0 ** max(0, policy.phases - 3))
+    radii = validated_radii(plan, policy)
+    if policy.phases:
+        want = policy.phases - 1
+        radii = [] if want == 0 else radii[-want:] if want <= len(radii) else radii + [radii[-1]] * (want - len(radii))
     wide = ValidityEncoding(np.full(L, policy.clip_m), policy.resolution_m)
-    tight = tuple(ValidityEncoding(np.full(L, r), policy.resolution_m, norm=r)
-                  for r in radius_schedule(R, phases, grow))
+    tight = tuple(ValidityEncoding(np.full(L, r), policy.resolution_m, norm=r) for r in radii)
     return PrioParams(wide, tight, min_inputs=policy.min_inputs)
 
 

@@ -41,7 +41,8 @@ from .secagg_flp import ValidityEncoding
 from .secagg_messages import AggregationRefused
 from .secagg_validity import Submission, ValidatedAggregate, run_validated_aggregation, submit
 
-__all__ = ["PhasedResult", "check_encodings", "phase_session", "public_schedule", "radius_schedule", "run_phased_session"]
+__all__ = ["PhasedResult", "check_encodings", "phase_session", "public_schedule", "radius_schedule", "colluder_schedule",
+           "run_phased_session"]
 
 #: ``tamper(phase, vehicle, submission) -> submission``: a malicious vehicle's change to what it sends.
 Tamper = Callable[[int, int, Submission], Submission]
@@ -125,6 +126,43 @@ def public_schedule(offset: float, radius: float, final: int = 2) -> tuple[int, 
     """
     steps = max(0, math.ceil(math.log2(max(1.0, offset / radius))))
     return 1 + steps + check_int("final", final, low=1), float(2 ** steps)
+
+
+def colluder_schedule(offset: float, radius: float, n: int, c: int = 1, final: int = 2) -> list[float]:
+    """The balls of phases ``2..K`` that work off the shift ``c`` lying vehicles among ``n`` give ``m_1``.
+
+    The worst case, with the honest inputs close together: a distance ``s`` of ``m_{k-1}`` from the honest mean,
+    a ball of radius ``r = s`` (no honest deviation clipped) and the liars' whole balls pointing away give
+    ``s_k = c (s + r) / n = (2 c / n) s``. So ``r_k = s_{k-1}`` from ``s_1 = offset`` until ``s <= R``, then
+    ``final`` phases at ``R``, where ``s`` settles near ``c R / (n - c)``. For ``c = 1``, ``n = 4`` the radii
+    halve, as in :func:`public_schedule`.
+
+    Parameters
+    ----------
+    offset : float
+        The largest shift of ``m_1`` the liars can cause, public: ``c 2 ||B||_2 / n``.
+    radius : float
+        ``R``.
+    n : int
+        The fewest inputs a session accepts (``k``): fewer honest vehicles pull back less.
+    c : int
+        Lying vehicles the schedule is built for; ``n > 2 c``.
+    final : int
+        Phases at ``R``.
+
+    Returns
+    -------
+    list of float
+        ``K - 1`` radii.
+    """
+    n, c = check_int("n", n, low=1), check_int("c", c, low=1)
+    if n <= 2 * c:
+        raise ParameterError(f"a schedule against {c} lying vehicles needs more than {2 * c} inputs, got {n}")
+    s, q, out = float(offset), 2.0 * c / n, []
+    while s > radius and len(out) < 64:
+        out.append(s)
+        s *= q
+    return out + [float(radius)] * check_int("final", final, low=1)
 
 
 def check_encodings(wide: ValidityEncoding, tight: ValidityEncoding | Sequence[ValidityEncoding],
