@@ -112,15 +112,17 @@ def test_a_vehicle_lying_inside_the_box_moves_the_result_by_about_R_over_n(mixed
         return rounds, lambda pl, c: None if (u := inp(pl, c)) is None else u + lie
 
     monkeypatch.setattr(memory, "_round_agent", liar)
-    policy = AggregationPolicy(**{**POLICY.to_dict(), "phases": 0})   # the public schedule: 7 phases here
-    assert validated_params(plan, policy).phases == 7
+    policy = AggregationPolicy(**{**POLICY.to_dict(), "phases": 0})   # the public schedule: 10 phases here
+    assert validated_params(plan, policy).phases == 10
     store, _ = run_in_memory(list(mixed_drives), plan, aggregation=policy)
     got, ref, _ = _on(clear, results_from_store(store))
     finite = np.isfinite(got[:, 0])
     shift = np.sqrt(np.mean((got[finite] - ref[finite]) ** 2))
     # the plain sum (secure mode) moves every point by lie / n = 37.5 mm; centred clipping leaves about
     # R / (n - 1) in l2 over the segment's 2 m values
-    # measured 3.7 mm: about R / (n - 1) in l2, deviation_m / 3 = 3.3 mm rms per value
+    print(f"rms shift {shift * 1e3:.2f} mm")
+    # measured 3.7 mm (7 phases, before the schedule was built for n = min_inputs) and 3.4 mm (10 phases):
+    # about R / (n - 1) in l2, deviation_m / 3 = 3.3 mm rms per value
     assert shift < 1.5 * POLICY.deviation_m / 3, shift
 
 
