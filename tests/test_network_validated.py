@@ -150,6 +150,9 @@ def test_a_restarted_service_aborts_its_running_session_and_spends_nothing_twice
                             helper_advert=kb.advert("rc/t"), round_wait_s=0.0)
     (r,) = store.rounds(2)
     assert r["phase"] == "aborted" and sorted(r["used"]) == ["v1", "v2", "v3"] and "restarted" in r["reason"]
+    # nobody waits for it: the helper and every vehicle of the roster are told it closed
+    assert sorted(p.topic for p in again.resend if "/prio/2/0/" in p.topic) == [
+        "rc/t/prio/2/0/leader", "rc/t/prio/2/0/to/v1", "rc/t/prio/2/0/to/v2", "rc/t/prio/2/0/to/v3"]
     assert again.free(2) == [] and again.maybe_open(2) == []     # their measurement of segment 2 is spent
 
 

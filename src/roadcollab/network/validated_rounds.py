@@ -36,7 +36,8 @@ from ..privacy.secagg_store import ReleaseLog
 from ..wire.identity import FleetTrust
 from .aggregation import AggregationPolicy, sums_from_mean, validated_params
 from .prioround import PrioLeader
-from .priowire import AggregatorKeys, PrioTopics, key_topic, open_advert
+from .messages import seal
+from .priowire import AggregatorKeys, PrioTopics, key_topic, open_advert, pack
 from .rounds import SecureRounds
 from .service import Publish
 from .store import ServiceStore
@@ -118,9 +119,19 @@ class ValidatedRounds(SecureRounds):
             if key in self.active:
                 continue
             row = next(r for r in self.store.rounds(key[0]) if r["epoch"] == key[1])
-            out += self._closed(key, "aborted", list(row["roster"]), [], "the leader restarted during the session",
+            reason = "the leader restarted during the session"
+            out += self._notices(key, list(row["roster"]), reason)
+            out += self._closed(key, "aborted", list(row["roster"]), [], reason,
                                 "aborted (the leader restarted during the session; its vehicles' measurement is spent)")
         return out
+
+    def _notices(self, key: tuple[int, int], roster: list[str], reason: str) -> list[Publish]:
+        """The ``closed`` notices of an aborted session the leader no longer holds, to the helper and the
+        roster (as :meth:`PrioLeader._closed` sends them), so that nobody waits for it."""
+        topics = PrioTopics(self.prefix, *key)
+        head = {"t": "closed", "outcome": "aborted", "reason": reason, "accepted": []}
+        return [Publish(topics.leader, seal(self.keys.identity, topics.leader, pack(head)))] + \
+            [Publish(topics.to(v), pack(head)) for v in roster]
 
     @property
     def subscription(self) -> str:
