@@ -158,7 +158,8 @@ def colluder_schedule(offset: float, radius: float, n: int, c: int = 1, final: i
     n, c = check_int("n", n, low=1), check_int("c", c, low=1)
     if n <= 2 * c:
         raise ParameterError(f"a schedule against {c} lying vehicles needs more than {2 * c} inputs, got {n}")
-    s, q, out = float(offset), 2.0 * c / n, []
+    s, q = float(offset), 2.0 * c / n
+    out: list[float] = []
     while s > radius and len(out) < 64:
         out.append(s)
         s *= q
