@@ -292,3 +292,38 @@ def test_lying_vehicles_move_a_session_by_about_c_R_over_n_minus_c(round_size, a
     shift = np.linalg.norm(leader.result - np.mean(honest, axis=0)) / R
     # measured 0.53 R (n = 3, one liar), 0.78 R (two of five): about c R / (n - c) (0.5 R, 0.67 R)
     assert n == answer and shift < 1.25 * liars / (n - liars), shift
+
+
+def test_the_vehicle_loop_survives_a_message_that_raises(capsys):
+    from roadcollab.network.mqtt_run import run_vehicle
+
+    class Agent:
+        subscriptions, started, outcomes, contributed = ["t"], True, {}, False
+        done = False
+
+        def start(self):
+            return []
+
+        def resend(self):
+            return []
+
+        def on_message(self, topic, payload):
+            if topic == "boom":
+                raise KeyError("a defect")
+            self.done = True
+            return []
+
+    class Client:
+        queue = [("boom", b""), ("fine", b"")]
+
+        def subscribe(self, f):
+            pass
+
+        def publish(self, topic, payload, retain=False):
+            pass
+
+        def receive(self, timeout):
+            return self.queue.pop(0) if self.queue else None
+
+    assert run_vehicle(Agent(), Client(), timeout=5.0) is True
+    assert "raised KeyError" in capsys.readouterr().err

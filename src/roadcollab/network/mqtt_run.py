@@ -120,7 +120,8 @@ def run_vehicle(agent: VehicleAgent, client, *, timeout: float, resend_s: float 
         if m is None:
             continue
         before = (agent.started, len(agent.outcomes))
-        for p in agent.on_message(*m):
+        topic, payload = m
+        for p in _guarded(functools.partial(agent.on_message, topic, payload), f"a message on {topic[:200]!r}", None):
             client.publish(p.topic, p.payload, p.retain)
         if (agent.started, len(agent.outcomes)) != before:
             last, wait = time.monotonic(), resend_s
