@@ -106,10 +106,11 @@ def test_a_vehicle_lying_inside_the_box_moves_the_result_by_about_R_over_n(mixed
     orig = memory._round_agent
 
     def liar(ident, trust, policy, prefix, plan_):
-        rounds, inp = orig(ident, trust, policy, prefix, plan_)
-        if ident.vehicle_id != "v1":
-            return rounds, inp
-        return rounds, lambda pl, c: None if (u := inp(pl, c)) is None else u + lie
+        rounds = orig(ident, trust, policy, prefix, plan_)
+        if ident.vehicle_id == "v1":
+            inp = rounds.round_input
+            rounds.round_input = lambda pl, c: None if (u := inp(pl, c)) is None else u + lie
+        return rounds
 
     monkeypatch.setattr(memory, "_round_agent", liar)
     policy = AggregationPolicy(**{**POLICY.to_dict(), "phases": 0})   # the public schedule: 10 phases here

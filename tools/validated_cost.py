@@ -50,9 +50,9 @@ def parties(*a):
 
 
 def agent(ident, *a):
-    rounds, inp = orig_agent(ident, *a)
+    rounds = orig_agent(ident, *a)
     rounds.on_message = timed(f"vehicle {ident.vehicle_id}", rounds.on_message)
-    return rounds, inp
+    return rounds
 
 
 memory._validated_parties, memory._round_agent = parties, agent

@@ -137,15 +137,8 @@ def run(args: argparse.Namespace, command_line: str) -> int:
     # on the fleet's road, on every road of its network, or on the drive's own axis (network/fleetlanes.py)
     engine, road_fields, realign = placed_engine(drive, plan, load_road(args.fleet, plan), index,
                                                  guard=receiver_guard(args))
-    kw = {}
-    if policy.validated:      # it takes part in the sessions of the segments it covered whole
-        from ..network.aggregation import validated_input
-        from ..network.validated_rounds import validated_segments
-
-        road_fields = {**(road_fields or {}), "validated": validated_segments(engine)}
-        kw["round_input"] = validated_input
     agent = VehicleAgent(engine, identity, trust, hello_extra=road_fields, realign=realign, rounds=rounds,
-                         relay_key=relay, **kw)
+                         relay_key=relay)
 
     def contributed() -> None:
         if policy.secure:     # 'roadcollab fleet' starts the next vehicle on this line

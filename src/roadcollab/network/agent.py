@@ -8,8 +8,10 @@ publishes one contribution per segment -> done when every segment is acknowledge
 messages are sent again by :meth:`VehicleAgent.resend` (the service applies each once).
 
 Under secure aggregation (a :class:`~roadcollab.network.secround_agent.RoundAgent` given as ``rounds``)
-the vehicle also takes part in each of its segments' rounds with its inversion on that segment
-(:func:`~roadcollab.network.aggregation.segment_input`); it is :attr:`~VehicleAgent.done` when every
+the vehicle also takes part in each of its segments' rounds with its inversion on that segment (the
+rounds' ``round_input``: :func:`~roadcollab.network.aggregation.segment_input`, or under validated
+aggregation, a :class:`~roadcollab.network.prioagent.PrioAgent` as ``rounds``, the segments it covered whole
+only); it is :attr:`~VehicleAgent.done` when every
 segment is acknowledged and a round has closed with its input in it (:attr:`~VehicleAgent.contributed`
 says only the first).
 """
@@ -18,7 +20,6 @@ from __future__ import annotations
 
 from ..errors import MessageError, ParameterError
 from ..wire.identity import FleetTrust, VehicleIdentity
-from .aggregation import segment_input
 from .engine import VehicleEngine
 from .messages import Topics, decode_contribution, decode_json, encode_contribution, encode_json, \
     encode_sealed_relay, open_from, open_sealed_relay, seal
@@ -50,21 +51,16 @@ class VehicleAgent:
         Its side of the secure-aggregation rounds (module docstring); default: in the clear.
     relay_key : RelayKey, optional
         The fleet's relay key; required with ``rounds`` (the waiting messages are sealed to it).
-    round_input : callable, optional
-        ``round_input(plan, contribution) -> array or None``: the vehicle's input to a segment's round (None:
-        it takes no part there). Default :func:`~roadcollab.network.aggregation.segment_input`; a
-        validated fleet's is :func:`~roadcollab.network.aggregation.validated_input` with a
-        :class:`~roadcollab.network.prioagent.PrioAgent` as ``rounds``.
     """
 
     def __init__(self, engine: VehicleEngine, identity: VehicleIdentity, trust: FleetTrust, *,
-                 hello_extra: dict | None = None, realign=None, rounds=None, relay_key=None,
-                 round_input=segment_input) -> None:
+                 hello_extra: dict | None = None, realign=None, rounds=None, relay_key=None) -> None:
         if rounds is not None and relay_key is None:
             raise ParameterError("secure aggregation needs the fleet's relay key (relay.key in the vehicle folder)")
         self.engine, self.identity, self.trust, self.rounds = engine, identity, trust, rounds
-        self.relay_key, self.round_input = relay_key, round_input
-        self.hello_extra = dict(hello_extra or {})
+        self.relay_key = relay_key
+        # the rounds' own hello fields (a validated fleet: the segments covered whole), computed once
+        self.hello_extra = {**(hello_extra or {}), **(rounds.hello_fields(engine) if rounds is not None else {})}
         self.realign = realign
         self.vid = identity.vehicle_id
         self.topics = Topics(engine.plan.fleet_id)
@@ -156,7 +152,7 @@ class VehicleAgent:
         out = []
         for c in self.engine.contributions(checked):
             if self.rounds is not None and c.segment not in self.rounds.inputs:
-                u = self.round_input(self.engine.plan, c)
+                u = self.rounds.round_input(self.engine.plan, c)   # None: no part in that round
                 if u is not None:
                     self.rounds.inputs[c.segment] = u
             if c.segment in self.outcomes:

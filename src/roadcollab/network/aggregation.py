@@ -29,14 +29,14 @@ every grid point of the segment; the count of every point is the number of input
 
 from __future__ import annotations
 
+import math
 from dataclasses import asdict, dataclass
 
 import numpy as np
 
-import math
-
 from .._validation import check_int, check_real
 from ..errors import ParameterError
+from ..experiments.drives.distance_maps import covered
 from ..privacy.secagg_flp import ValidityEncoding
 from ..privacy.secagg_messages import SecAggSpec
 from ..privacy.secagg_phased import colluder_schedule
@@ -44,7 +44,7 @@ from .engine import Contribution
 from .plan import RoadPlan
 from .prioround import PrioParams
 
-__all__ = ["AggregationPolicy", "segment_input", "sums_from_total", "validated_input", "validated_params",
+__all__ = ["AggregationPolicy", "segment_input", "sums_from_total", "validated_input", "validated_segments", "validated_params",
            "validated_schedule", "validated_radii", "sums_from_mean", "MODES"]
 
 MODES = ("clear", "secure", "validated")
@@ -241,6 +241,27 @@ def validated_input(plan: RoadPlan, c: Contribution) -> np.ndarray | None:
     return np.asarray(c.inversion, float).reshape(-1).copy()
 
 
+def validated_segments(engine) -> list[int]:
+    """The segments a vehicle's engine covers at every grid point (its inversion and observer finite):
+    those it can give to a validated session.
+
+    Parameters
+    ----------
+    engine : VehicleEngine
+
+    Returns
+    -------
+    list of int
+    """
+    plan, ok = engine.plan, covered(engine.inversion) & covered(engine.single)
+    out = []
+    for s in engine.segments:
+        a, b = plan.segment_range(s)
+        if a >= engine.i_first and b - 1 <= engine.i_last and bool(np.all(ok[a - engine.i_first:b - engine.i_first])):
+            out.append(s)
+    return out
+
+
 def validated_radii(plan: RoadPlan, policy: AggregationPolicy) -> list[float]:
     """The balls of phases ``2..K`` of the public schedule
     (:func:`~roadcollab.privacy.secagg_phased.colluder_schedule`): built for ``c = max(1, max_colluders)``
@@ -286,9 +307,11 @@ def validated_params(plan: RoadPlan, policy: AggregationPolicy) -> PrioParams:
     """
     L = 2 * plan.points_per_segment
     radii = validated_radii(plan, policy)
-    if policy.phases:
-        want = policy.phases - 1
-        radii = [] if want == 0 else radii[-want:] if want <= len(radii) else radii + [radii[-1]] * (want - len(radii))
+    want = policy.phases - 1
+    if want == 0:
+        radii = []
+    elif want > 0:       # the schedule's last K - 1 balls, or it and more at R
+        radii = radii[-want:] + [radii[-1]] * max(0, want - len(radii))
     wide = ValidityEncoding(np.full(L, policy.clip_m), policy.resolution_m)
     tight = tuple(ValidityEncoding(np.full(L, r), policy.resolution_m, norm=r) for r in radii)
     return PrioParams(wide, tight, min_inputs=policy.min_inputs)

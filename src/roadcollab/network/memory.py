@@ -20,7 +20,7 @@ from ..experiments.drives.fleet_estimation import GUARD_ROAD_DEFAULT, FleetEstim
 from ..wire.identity import FleetAuthority, VehicleIdentity
 from ..privacy.secagg_store import ReleaseLog, SessionLedger
 from .agent import VehicleAgent
-from .aggregation import AggregationPolicy, segment_input, validated_input, validated_params
+from .aggregation import AggregationPolicy, validated_params
 from .fleetlanes import placed_engine
 from .plan import RoadPlan
 from .prioagent import PrioAgent
@@ -33,7 +33,7 @@ from .secround_agent import RoundAgent
 from .service import Service
 from .store import ServiceStore
 from .transport import MemoryBroker
-from .validated_rounds import ValidatedRounds, validated_segments
+from .validated_rounds import ValidatedRounds
 
 __all__ = ["run_in_memory", "estimate_fleet_in_memory"]
 
@@ -148,11 +148,10 @@ def _validated_parties(store: ServiceStore, authority: FleetAuthority, policy: A
 
 
 def _round_agent(ident: VehicleIdentity, trust, policy: AggregationPolicy, prefix: str, plan: RoadPlan):
-    """``(rounds, round_input)`` of a vehicle: its side of the fleet's rounds and its input to them."""
+    """A vehicle's side of the fleet's rounds (it knows its inputs to them and its hello fields)."""
     if policy.validated:
-        return (PrioAgent(ident, trust, validated_params(plan, policy), SessionLedger(), prefix, {}),
-                validated_input)
-    return RoundAgent(ident, trust, policy.spec, SessionLedger(), prefix, {}), segment_input
+        return PrioAgent(ident, trust, validated_params(plan, policy), SessionLedger(), prefix, {})
+    return RoundAgent(ident, trust, policy.spec, SessionLedger(), prefix, {})
 
 
 def _run_secure(drives, plan, store, authority, service, broker, svc, policy, offline, timeouts, road=None,
@@ -167,12 +166,10 @@ def _run_secure(drives, plan, store, authority, service, broker, svc, policy, of
         cars[helper.keys.party], parties[helper.keys.party] = hc, _Handler(helper.handle)
     for j, d in enumerate(drives):
         ident = VehicleIdentity.enroll(authority, f"v{j + 1}")
-        rounds, round_input = _round_agent(ident, trust, policy, f"rc/{plan.fleet_id}", plan)
+        rounds = _round_agent(ident, trust, policy, f"rc/{plan.fleet_id}", plan)
         engine, extra, realign = placed_engine(d, plan, road, j, guard=guard)
-        if policy.validated:
-            extra = {**(extra or {}), "validated": validated_segments(engine)}
         agent = VehicleAgent(engine, ident, trust, rounds=rounds, relay_key=relay, hello_extra=extra,
-                             realign=realign, round_input=round_input)
+                             realign=realign)
         car = broker.client()
         for f in agent.subscriptions:
             car.subscribe(f)

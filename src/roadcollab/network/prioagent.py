@@ -20,6 +20,7 @@ from ..privacy.secagg_store import SessionLedger, segment_key
 from ..privacy.secagg_validity import submit
 from ..wire.certificate import verify_signature
 from ..wire.identity import FleetTrust, VehicleIdentity
+from .aggregation import validated_input, validated_segments
 from .messages import seal
 from .priohelper import PrioHelperService
 from .prioround import PrioLeader, PrioParams
@@ -70,6 +71,28 @@ class PrioAgent:
     @property
     def subscription(self) -> str:
         return f"{self.prefix}/prio/+/+/to/{self.vid}"
+
+    @staticmethod
+    def round_input(plan, c):
+        """Its input to the session of ``c.segment``, None unless it covered the segment whole
+        (:func:`~roadcollab.network.aggregation.validated_input`).
+
+        Parameters
+        ----------
+        plan : RoadPlan
+        c : Contribution
+        """
+        return validated_input(plan, c)
+
+    @staticmethod
+    def hello_fields(engine) -> dict:
+        """``{"validated": [...]}``: the segments it covered whole, so the service invites it to those only.
+
+        Parameters
+        ----------
+        engine : VehicleEngine
+        """
+        return {"validated": validated_segments(engine)}
 
     def finished(self, segment: int) -> bool:
         """True when a session that took this vehicle's phase-1 upload on ``segment`` has closed (finished or

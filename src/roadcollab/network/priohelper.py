@@ -279,8 +279,12 @@ class HelperParty:
         if self.service is None:
             return []
         out = self.service.handle(topic, payload)
-        for key, h in self.service.sessions.items():
-            if h.closed and key not in self._closed:
-                self._closed.add(key)
-                self._event(f"session {key[0]}/{key[1]}: closed")
+        try:               # only this message's session can have closed
+            key = PrioTopics.parse(self.prefix, topic)[:2]
+        except MessageError:
+            return out
+        h = self.service.sessions.get(key)
+        if h is not None and h.closed and key not in self._closed:
+            self._closed.add(key)
+            self._event(f"session {key[0]}/{key[1]}: closed")
         return out

@@ -41,7 +41,7 @@ from .priowire import AggregatorKeys, PrioTopics, elements, ids_field, int_field
     result_bytes, unpack, verify_key, vshare_message
 from .service import Publish
 
-__all__ = ["PrioParams", "PrioAggregator", "PrioLeader"]
+__all__ = ["PrioParams", "PrioAggregator", "PrioLeader", "closed_notices"]
 
 
 @dataclass(frozen=True)
@@ -90,6 +90,28 @@ class PrioParams:
         if not 1 <= phase <= self.phases:
             raise MessageError(f"phase {phase} is not in 1..{self.phases}")
         return self.wide if phase == 1 else self.tight[phase - 2]
+
+
+def closed_notices(topics: PrioTopics, keys: AggregatorKeys, roster: list[str], outcome: str, reason: str,
+                   accepted=(), phase: int = 1) -> list[Publish]:
+    """The leader's ``closed`` notices of a session: to the helper (signed) and to every vehicle of ``roster``.
+
+    Parameters
+    ----------
+    topics : PrioTopics
+    keys : AggregatorKeys
+        The leader's.
+    roster : list of str
+    outcome, reason : str
+    accepted : sequence of int
+        Phase 1's accepted set.
+    phase : int
+        The phase it closed in.
+    """
+    head = {"t": "closed", "outcome": outcome, "reason": reason, "accepted": list(accepted)}
+    body = pack(dict(head, phase=phase))
+    return [Publish(topics.leader, seal(keys.identity, topics.leader, body))] + \
+        [Publish(topics.to(v), pack(head)) for v in roster]
 
 
 class PrioAggregator:
@@ -381,9 +403,7 @@ class PrioLeader(PrioAggregator):
         return [self._invite(vids[i]) for i in self.accepted]
 
     def _closed(self, outcome: str, reason: str) -> list[Publish]:
-        head = {"t": "closed", "outcome": outcome, "reason": reason, "accepted": list(self.accepted)}
-        return [self._to_helper(dict(head, phase=self.phase))] + \
-            [Publish(self.topics.to(v), pack(head)) for v in self.pid]
+        return closed_notices(self.topics, self.keys, list(self.pid), outcome, reason, self.accepted, self.phase)
 
     def _abort(self, reason: str) -> list[Publish]:
         self.state = "aborted"

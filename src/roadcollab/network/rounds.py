@@ -212,11 +212,15 @@ class SecureRounds:
             return []
         return self._step(key, co, co.handle(topic, bytes(payload)))
 
-    def _step(self, key: tuple[int, int], co: RoundCoordinator, out: list[Publish]) -> list[Publish]:
+    def _record_events(self, key: tuple[int, int], co, what: str = "secagg") -> None:
+        """A round's refusals and duplicates into the store's events, and out of the round's own list."""
         for kind, reason in co.events:
             if kind in ("refused", "duplicate"):
-                self.store.log(kind, reason, topic=f"{self.prefix}/secagg/{key[0]}/{key[1]}")
+                self.store.log(kind, reason, topic=f"{self.prefix}/{what}/{key[0]}/{key[1]}")
         co.events[:] = [ev for ev in co.events if ev[0] not in ("refused", "duplicate")]
+
+    def _step(self, key: tuple[int, int], co: RoundCoordinator, out: list[Publish]) -> list[Publish]:
+        self._record_events(key, co)
         if co.journal:
             try:
                 self.store.journal_add(*key, co.journal, co.phase, owner=self.owner)

@@ -19,6 +19,7 @@ from ..privacy.secagg_messages import AggregationRefused, SecAggSpec, session_id
 from ..privacy.secagg_store import SessionLedger, segment_key
 from ..wire.identity import FleetTrust, VehicleIdentity
 from ..wire.protocol import encode
+from .aggregation import segment_input
 from .messages import seal
 from .secround import RoundCoordinator, RoundTopics, _b64, _int_map, _json
 from .service import Publish
@@ -86,6 +87,27 @@ class RoundAgent:
             # any other epoch, earlier ones included, also after a restart (the loop above sees earlier ones only)
             raise MessageError(f"invited to round {key}: its measurement of segment {s} went to another round")
         return self.inputs[s]
+
+    @staticmethod
+    def round_input(plan, c):
+        """Its input to the round of ``c.segment``: :func:`~roadcollab.network.aggregation.segment_input`.
+
+        Parameters
+        ----------
+        plan : RoadPlan
+        c : Contribution
+        """
+        return segment_input(plan, c)
+
+    @staticmethod
+    def hello_fields(engine) -> dict:
+        """Hello fields the rounds need (none).
+
+        Parameters
+        ----------
+        engine : VehicleEngine
+        """
+        return {}
 
     def finished(self, segment: int) -> bool:
         """True when a round that took this vehicle's masked input on ``segment`` has closed, or when its

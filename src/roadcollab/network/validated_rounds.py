@@ -13,7 +13,7 @@ rules differ:
 
 - **Roster.** Only vehicles that covered every grid point of the segment are invited (the input is the
   inversion alone, :func:`~roadcollab.network.aggregation.validated_input`); a vehicle says which segments
-  it covered so in its hello (``"validated"``, :func:`validated_segments`).
+  it covered so in its hello (``"validated"``, :func:`~roadcollab.network.aggregation.validated_segments`).
 - **Restart.** The leader holds its shares of a running session in memory only, so a session this service
   held when it stopped is closed as aborted when it restarts (or another service adopts it); its vehicles
   have spent that measurement (privacy before liveness). Sessions therefore do not move between services:
@@ -28,42 +28,18 @@ from __future__ import annotations
 import time
 from typing import Callable
 
-import numpy as np
 
 from ..errors import MessageError, ParameterError
-from ..experiments.drives.distance_maps import covered
 from ..privacy.secagg_store import ReleaseLog
 from ..wire.identity import FleetTrust
 from .aggregation import AggregationPolicy, sums_from_mean, validated_params
-from .prioround import PrioLeader
-from .messages import seal
-from .priowire import AggregatorKeys, PrioTopics, key_topic, open_advert, pack
+from .prioround import PrioLeader, closed_notices
+from .priowire import AggregatorKeys, PrioTopics, key_topic, open_advert
 from .rounds import SecureRounds
 from .service import Publish
 from .store import ServiceStore
 
-__all__ = ["ValidatedRounds", "validated_segments"]
-
-
-def validated_segments(engine) -> list[int]:
-    """The segments a vehicle's engine covers at every grid point (its inversion and observer finite):
-    those it can give to a validated session.
-
-    Parameters
-    ----------
-    engine : VehicleEngine
-
-    Returns
-    -------
-    list of int
-    """
-    plan, ok = engine.plan, covered(engine.inversion) & covered(engine.single)
-    out = []
-    for s in engine.segments:
-        a, b = plan.segment_range(s)
-        if a >= engine.i_first and b - 1 <= engine.i_last and bool(np.all(ok[a - engine.i_first:b - engine.i_first])):
-            out.append(s)
-    return out
+__all__ = ["ValidatedRounds"]
 
 
 class ValidatedRounds(SecureRounds):
@@ -98,17 +74,16 @@ class ValidatedRounds(SecureRounds):
         if keys.party != self.params.leader_id:
             raise ParameterError(f"the service leads as {self.params.leader_id!r}, got the keys of {keys.party!r}")
         self.keys, self.release_log = keys, release_log
-        self.helper_advert: bytes | None = None
-        self._trust_for_adverts = trust
-        if helper_advert is not None:
-            self._set_helper(helper_advert, prefix)
+        # Set before the base class adopts (and may reopen) this service's rounds.
+        self.helper_advert = None if helper_advert is None else self._helper(helper_advert, trust, prefix)
         super().__init__(store, trust, policy, prefix, log=log, on_fused=on_fused, phase_timeout_s=phase_timeout_s,
                          round_wait_s=round_wait_s, clock=clock, owner=owner, lease_s=lease_s)
         self.resend.insert(0, Publish(key_topic(prefix, keys.party), keys.advert(prefix), retain=True))
 
-    def _set_helper(self, advert: bytes, prefix: str) -> None:
-        open_advert(advert, self._trust_for_adverts, prefix, self.params.helper_id)   # MessageError if not B's
-        self.helper_advert = bytes(advert)
+    def _helper(self, advert: bytes, trust: FleetTrust, prefix: str) -> bytes:
+        """``advert`` if it is the helper's key advert (MessageError otherwise)."""
+        open_advert(advert, trust, prefix, self.params.helper_id)
+        return bytes(advert)
 
     def _adopt(self) -> list[Publish]:
         """Sessions this service held before a restart (or another's whose lease ran out) are closed as
@@ -120,18 +95,11 @@ class ValidatedRounds(SecureRounds):
                 continue
             row = next(r for r in self.store.rounds(key[0]) if r["epoch"] == key[1])
             reason = "the leader restarted during the session"
-            out += self._notices(key, list(row["roster"]), reason)
+            # nobody waits for it: the helper and the roster are told it closed
+            out += closed_notices(PrioTopics(self.prefix, *key), self.keys, list(row["roster"]), "aborted", reason)
             out += self._closed(key, "aborted", list(row["roster"]), [], reason,
                                 "aborted (the leader restarted during the session; its vehicles' measurement is spent)")
         return out
-
-    def _notices(self, key: tuple[int, int], roster: list[str], reason: str) -> list[Publish]:
-        """The ``closed`` notices of an aborted session the leader no longer holds, to the helper and the
-        roster (as :meth:`PrioLeader._closed` sends them), so that nobody waits for it."""
-        topics = PrioTopics(self.prefix, *key)
-        head = {"t": "closed", "outcome": "aborted", "reason": reason, "accepted": []}
-        return [Publish(topics.leader, seal(self.keys.identity, topics.leader, pack(head)))] + \
-            [Publish(topics.to(v), pack(head)) for v in roster]
 
     @property
     def subscription(self) -> str:
@@ -184,7 +152,7 @@ class ValidatedRounds(SecureRounds):
         """
         if topic == key_topic(self.prefix, self.params.helper_id):
             try:
-                self._set_helper(bytes(payload), self.prefix)
+                self.helper_advert = self._helper(bytes(payload), self.trust, self.prefix)
             except MessageError as err:
                 self.store.log("refused", f"{topic}: {err}", topic=topic)
                 return []
@@ -206,10 +174,7 @@ class ValidatedRounds(SecureRounds):
         return self._step((s, e), co, co.handle(topic, bytes(payload)))
 
     def _step(self, key, co, out: list[Publish]) -> list[Publish]:
-        for kind, reason in co.events:
-            if kind in ("refused", "duplicate"):
-                self.store.log(kind, reason, topic=f"{self.prefix}/prio/{key[0]}/{key[1]}")
-        co.events[:] = [ev for ev in co.events if ev[0] not in ("refused", "duplicate")]
+        self._record_events(key, co, "prio")
         if out:
             self.phase_since[key] = self.clock()      # progress: the phase's timeout starts again
         if co.done:
