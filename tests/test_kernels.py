@@ -309,3 +309,22 @@ def test_compiled_hiding_similarity_is_the_reference_one_to_round_off():
         for x, y in ((a.A, b.A), (a.B, b.B), (a.C, b.C)):
             assert np.max(np.abs(x - y)) <= 1e-13 * np.max(np.abs(x))
         assert np.array_equal(a.D, b.D)
+
+
+@needs_numba
+def test_every_kernel_is_compiled_once_for_every_mechanism():
+    # A kernel fed read-only (a checked message's) and writable (a vehicle's own) arrays compiled two
+    # specialisations, about 5.5 s of a fresh installation's first run (docs/speed.md, "Seventh pass").
+    import gc
+
+    from numba.core.registry import CPUDispatcher
+
+    from roadcollab.experiments.bench.study import bench_segment
+
+    for mechanism in ("paper", "paper_vehicle", "none", "hardened"):
+        bench_segment(512, mechanism=mechanism, repeats=2, kernels="compiled")
+    ours = [d for d in gc.get_objects() if isinstance(d, CPUDispatcher) and d.py_func.__module__.startswith("roadcollab")]
+    assert len(ours) >= 10
+    twice = {f"{d.py_func.__module__}.{d.py_func.__name__}": [str(s) for s in d.signatures] for d in ours
+             if len(d.signatures) > 1}
+    assert twice == {}

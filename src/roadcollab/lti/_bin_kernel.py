@@ -12,7 +12,7 @@ from typing import Any
 
 import numpy as np
 
-from .kernels import compiled_available, jit_options
+from .kernels import compiled_available, jit_options, read_only
 
 __all__ = ["matvec2", "inv2"]
 
@@ -74,7 +74,7 @@ def matvec2(M: np.ndarray, x: np.ndarray) -> np.ndarray | None:
     if k is None:
         return None
     out = np.empty(x.shape, np.complex128)
-    k(np.ascontiguousarray(M), np.ascontiguousarray(x), out)     # one (C-layout) specialisation to compile
+    k(read_only(np.ascontiguousarray(M)), np.ascontiguousarray(x), out)     # one specialisation to compile
     return out
 
 
@@ -96,5 +96,5 @@ def inv2(M: np.ndarray) -> np.ndarray | None:
     if k is None:
         return None
     out = np.empty(M.shape, np.complex128)
-    k(np.ascontiguousarray(M), out)
+    k(read_only(np.ascontiguousarray(M)), out)
     return out

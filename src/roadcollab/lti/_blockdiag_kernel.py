@@ -19,7 +19,7 @@ from typing import Any
 
 import numpy as np
 
-from .kernels import compiled_available, jit_options
+from .kernels import compiled_available, jit_options, read_only
 
 __all__ = ["decouple", "clusters"]
 
@@ -166,7 +166,7 @@ def _decouple_pass(T: np.ndarray, U: np.ndarray, B: np.ndarray, C: np.ndarray, o
             for r in range(n):
                 acc += C[i, r] * U[r, j]
             Cw[i, j] = acc
-    start = 0
+    start = sizes[0] - sizes[0]      # int64, not Literal[int](0): one specialisation of _sylvester
     for c in range(sizes.size - 1):
         stop = start + sizes[c]
         X = np.empty((stop - start, n - stop), dtype=np.complex128)
@@ -222,8 +222,8 @@ def decouple(T0: np.ndarray, U0: np.ndarray, B: np.ndarray, C: np.ndarray, clust
     """
     T = np.array(T0, dtype=np.complex128, order="C")
     U = np.array(U0, dtype=np.complex128, order="C")
-    B = np.ascontiguousarray(B, dtype=float)
-    C = np.ascontiguousarray(C, dtype=float)
+    B = read_only(np.ascontiguousarray(B, dtype=float))
+    C = read_only(np.ascontiguousarray(C, dtype=float))
     order = np.array([i for g in clusters for i in g], dtype=np.int64)
     sizes = np.array([len(g) for g in clusters], dtype=np.int64)
     Bw = np.empty((T.shape[0], B.shape[1]), dtype=np.complex128)

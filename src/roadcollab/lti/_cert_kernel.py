@@ -21,7 +21,7 @@ from typing import Any
 import numpy as np
 import scipy.linalg
 
-from .kernels import compiled_available, jit_options
+from .kernels import compiled_available, jit_options, read_only
 
 __all__ = ["schur_lyapunov", "schur_certificate", "complex_schur"]
 
@@ -298,5 +298,5 @@ def schur_certificate(R: np.ndarray, U: np.ndarray, A: np.ndarray) -> tuple[np.n
         ``||X||_F (1 + ||A||_F^2)``.
     """
     X, resid, scale = _build()["certificate"](np.ascontiguousarray(R, complex), np.ascontiguousarray(U, complex),
-                                               np.ascontiguousarray(A, float))
+                                               read_only(np.ascontiguousarray(A, float)))
     return X, float(resid), float(scale)

@@ -46,8 +46,8 @@ import numpy as np
 
 from ..errors import ParameterError
 
-__all__ = ["KERNELS", "kernel_path", "use_kernels", "compiled_available", "jit_options", "block_eval",
-           "pole_residue_eval"]
+__all__ = ["KERNELS", "kernel_path", "use_kernels", "compiled_available", "jit_options", "read_only",
+           "block_eval", "pole_residue_eval"]
 
 KERNELS = ("compiled", "reference")
 
@@ -68,6 +68,29 @@ def jit_options() -> dict[str, Any]:
         in float divisions, module docstring), ``nogil=True``.
     """
     return {"cache": True, "error_model": "numpy", "nogil": True}
+
+
+def read_only(x: np.ndarray) -> np.ndarray:
+    """``x`` itself if it is read-only, else a read-only view of it (no copy).
+
+    numba compiles one specialisation per argument type, and a read-only array is another type than a
+    writable one. The checked messages' arrays are read-only and a vehicle's own are not, so a kernel fed
+    both compiled twice (about 5.5 s of a fresh installation's first run, docs/speed.md, "Seventh pass").
+    Its wrappers pass arrays the kernel only reads through this.
+
+    Parameters
+    ----------
+    x : ndarray
+
+    Returns
+    -------
+    ndarray
+        The same data, ``flags.writeable`` False.
+    """
+    if x.flags.writeable:
+        x = x.view()
+        x.flags.writeable = False
+    return x
 
 
 def _build() -> dict[str, Any]:   # Long: the kernels are defined here so that numba is imported on first use only
@@ -304,7 +327,7 @@ def block_eval(R: np.ndarray, Bw: np.ndarray, Cw: np.ndarray, D: np.ndarray, blo
     z = np.asarray(z, dtype=complex)
     out = np.empty((z.size, D.shape[0], D.shape[1]), complex)
     k(np.ascontiguousarray(R, complex), np.ascontiguousarray(Bw, complex), np.ascontiguousarray(Cw, complex),
-      np.ascontiguousarray(D, float), starts, stops, np.ascontiguousarray(z.real), np.ascontiguousarray(z.imag), out.reshape(z.size, -1))
+      read_only(np.ascontiguousarray(D, float)), starts, stops, np.ascontiguousarray(z.real), np.ascontiguousarray(z.imag), out.reshape(z.size, -1))
     return out
 
 
