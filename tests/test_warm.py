@@ -1,0 +1,44 @@
+"""The second process that compiles the sender's kernels (``experiments.bench.warm``)."""
+
+import os
+import subprocess
+import sys
+
+import pytest
+
+from roadcollab.lti import kernels
+
+pytestmark = [pytest.mark.slow, pytest.mark.skipif(not kernels.compiled_available(), reason="numba not importable")]
+
+#: In a fresh process: is the draw loop cached; then a bench segment on the compiled path, and which of the
+#: sender's kernels it loaded from disk and which it compiled.
+_PROBE = """
+import json
+from roadcollab.experiments.bench import warm
+from roadcollab.experiments.bench.study import bench_segment
+from roadcollab.privacy import _draw_kernel
+from roadcollab.lti import _hide_kernel
+cached = warm.sender_kernels_cached()
+bench_segment(512, mechanism="paper", repeats=1, kernels="compiled")
+stats = {name: (sum(d.stats.cache_hits.values()), sum(d.stats.cache_misses.values()))
+         for name, d in (("loop", _draw_kernel._KERNEL["loop"]), ("realise", _draw_kernel._KERNEL["realise"]),
+                         ("hide", _hide_kernel._KERNEL["hide"]))}
+print(json.dumps({"cached": cached, "stats": stats}))
+"""
+
+
+def _probe(env):
+    import json
+    out = subprocess.run([sys.executable, "-c", _PROBE], env=env, capture_output=True, text=True, timeout=600, check=True)
+    return json.loads(out.stdout.strip().splitlines()[-1])
+
+
+def test_the_second_process_compiles_the_specialisations_the_command_then_loads(tmp_path):
+    env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path / "cache"))
+    cold = _probe(dict(env, NUMBA_CACHE_DIR=str(tmp_path / "cold")))
+    assert cold["cached"] is False
+    assert all(hits == 0 and misses == 1 for hits, misses in cold["stats"].values())   # compiled itself
+    subprocess.run([sys.executable, "-m", "roadcollab.experiments.bench.warm"], env=env, timeout=600, check=True)
+    warm = _probe(env)
+    assert warm["cached"] is True
+    assert all(hits == 1 and misses == 0 for hits, misses in warm["stats"].values())   # loaded, not compiled
