@@ -105,7 +105,7 @@ def test_a_later_phase_cheater_aborts_the_session_and_nothing_after_phase_one_is
     run_prio_session(leader, w["helper"], w["agents"], list(w["agents"]))
     assert leader.state == "aborted" and leader.result is None and leader.phase == 2
     assert "circuit output" in leader.refused[3] and set(leader.refused) == {3}
-    helper = w["helper"].sessions[(7, 0)]
+    helper = w["helper"].session((7, 0))
     assert [e for e in helper.events if e[0] == "released"] == [("released", "phase 1 over 5 vehicles")]
 
 
@@ -155,7 +155,7 @@ def test_the_helper_releases_once_per_phase_also_after_a_restart(tmp_path):
     restarted = PrioHelperService(PREFIX, w["params"], w["trust"], w["kb"], w["ka"].advert(PREFIX), ReleaseLog(log))
     out = [p for t, pl in broker_msgs for p in restarted.handle(t, pl)]
     assert not any(b"result" in p.payload[:200] for p in out)          # no sum share released again
-    events = restarted.sessions[(7, 0)].events
+    events = restarted.session((7, 0)).events
     assert any("already released" in r for k, r in events if k == "refused")
 
 
@@ -206,7 +206,7 @@ def test_the_helper_refuses_a_roster_with_an_aggregator_as_a_vehicle():
     leader = PrioLeader(PREFIX, 7, 0, params, w["trust"], w["ka"], w["kb"].advert(PREFIX), ReleaseLog())
     run_prio_session(leader, helper, {"v1": victim, "aggregator-a": sybil}, ["v1", "aggregator-a"])
     assert leader.result is None and leader.state == "aborted"
-    assert any("aggregator id 'aggregator-a'" in r for k, r in helper.sessions[(7, 0)].events if k == "refused")
+    assert any("aggregator id 'aggregator-a'" in r for k, r in helper.session((7, 0)).events if k == "refused")
     assert helper.log.released(session_id(7, 0), 1) is None
 
 
@@ -274,3 +274,41 @@ def test_a_deviating_leader_cannot_steer_the_centre_the_vehicles_clip_around():
     run_prio_session(leader, w["helper"], w["agents"], list(w["agents"]))
     refused = [r for a in w["agents"].values() for r in a.refusals] + [r for k, r in leader.events if k == "aborted"]
     assert refused, f"the session {leader.state} around a centre A moved by {shift[0]} m in every value"
+
+
+def _opened(w, helper, epoch):
+    """Feed the helper a new leader's ``open`` for session (7, epoch)."""
+    leader = _leader(w, epoch=epoch)
+    return [p for m in leader.open(list(w["agents"])) if m.topic.endswith("/leader") for p in helper.handle(m.topic, m.payload)]
+
+
+def test_a_finished_session_leaves_the_helper_its_state_dropped_and_a_replay_gets_nothing():
+    # A long-running helper kept every session's per-vehicle state for ever (noticed in issue 20's review).
+    w = _world()
+    leader, helper = _leader(w), w["helper"]
+    seen, handle = [], helper.handle
+    helper.handle = lambda t, p: seen.append((t, p)) or handle(t, p)
+    run_prio_session(leader, helper, w["agents"], list(w["agents"]))
+    assert leader.state == "finished" and helper.sessions == {}
+    why, done = helper.finished[(7, 0)]
+    assert why == "finished" and done.finished and not done._own and not done._peer
+    assert [e for e in done.events if e[0] == "released"][-1] == ("released", "phase 3 over 5 vehicles")
+    assert seen and not [out for t, p in seen for out in handle(t, p)]
+    assert helper.sessions == {}
+
+
+def test_the_helper_refuses_sessions_beyond_its_open_limit_and_ends_idle_ones():
+    w = _world()
+    now = [0.0]
+    helper = PrioHelperService(PREFIX, w["params"], w["trust"], w["kb"], w["ka"].advert(PREFIX), ReleaseLog(),
+                               max_open=2, max_idle_s=60.0, clock=lambda: now[0])
+    for epoch in range(3):
+        _opened(w, helper, epoch)
+    assert sorted(helper.sessions) == [(7, 0), (7, 1)]
+    assert helper.refused == ["session 7/2 refused: 2 sessions are open"]
+    now[0] = 61.0
+    assert sorted(helper.expire()) == [(7, 0), (7, 1)]
+    assert helper.sessions == {} and helper.finished[(7, 0)][0] == "idle"
+    assert _opened(w, helper, 0) == [] and (7, 0) not in helper.sessions      # an ended session stays ended
+    _opened(w, helper, 2)
+    assert list(helper.sessions) == [(7, 2)]                                   # room again for a new one

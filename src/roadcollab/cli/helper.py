@@ -94,6 +94,7 @@ def run(args: argparse.Namespace, command_line: str) -> int:
     finally:
         client.close()
         log.close()
-    n = 0 if party.service is None else len(party.service.sessions)
-    print(f"stopped: {handled} messages handled, {n} sessions seen this run", flush=True)
+    svc = party.service
+    done, running = (0, 0) if svc is None else (len(svc.finished), len(svc.sessions))
+    print(f"stopped: {handled} messages handled; sessions this run: {done} finished, {running} still open", flush=True)
     return 0

@@ -147,7 +147,7 @@ def _run(args: argparse.Namespace) -> int:
             svc = PrioHelperService(prefix, params, trust, keys, _advert(client, prefix, params.leader_id, deadline), log)
             client.subscribe(svc.subscription)
             key = (args.segment, args.epoch)
-            ok = _loop(client, svc.handle, lambda: key in svc.sessions and svc.sessions[key].closed, deadline)
+            ok = _loop(client, svc.handle, lambda: key in svc.finished, deadline)
             return 0 if ok else 3
         leader = PrioLeader(prefix, args.segment, args.epoch, params, trust, keys,
                             _advert(client, prefix, params.helper_id, deadline), log)

@@ -14,6 +14,10 @@
 
 from __future__ import annotations
 
+import time
+from collections import OrderedDict
+from typing import Callable
+
 import numpy as np
 
 from ..errors import MessageError, ParameterError
@@ -61,6 +65,7 @@ class PrioHelper(PrioAggregator):
         super().__init__(prefix, segment, epoch, params, trust, keys, leader_advert, log)
         self.roster: dict[int, str] = {}
         self.closed = False
+        self.finished = False
 
     def _send(self, header: dict, *blobs: bytes) -> list[Publish]:
         head = dict(header, phase=self.phase)
@@ -93,7 +98,7 @@ class PrioHelper(PrioAggregator):
         if not self.roster:
             raise MessageError(f"{kind} before the session was opened")
         if kind == "closed":
-            self.closed = True
+            self.closed = self.finished = True
             self.events.append(("closed", str(h.get("reason"))[:300]))
             return []
         if int_field(h, "phase", "leader message", 1) != self.phase:
@@ -174,11 +179,27 @@ class PrioHelper(PrioAggregator):
         if k < self.params.phases:
             self.phase += 1
             self._new_phase()
+        else:
+            self.finished = True          # the last phase is released: nothing is left to answer
         return out
+
+    def forget(self) -> None:
+        """Drop the session's per-vehicle state (uploads, verifier shares, the sum share): a finished session
+        keeps its roster, its events and :attr:`closed` only (:class:`PrioHelperService` calls it)."""
+        self._new_phase()
+        self._m = None
 
 
 class PrioHelperService:
     """Aggregator ``B`` for every session of a fleet: routes the leader's messages by measurement.
+
+    A long-running helper keeps only what it still needs: a session that finished (its last phase
+    released, or closed by the leader) or that heard nothing for ``max_idle_s`` leaves the open sessions,
+    its per-vehicle state is dropped (:meth:`PrioHelper.forget`), and its key and events are kept among
+    the last ``max_finished`` finished sessions; a later message for it is dropped. At most ``max_open``
+    sessions are open at once: beyond, a new session is refused, so a deviating leader cannot fill B's
+    memory. Whatever is forgotten, the persisted :class:`~roadcollab.privacy.secagg_store.ReleaseLog`
+    still refuses a second release of any (session, phase).
 
     Parameters
     ----------
@@ -189,18 +210,53 @@ class PrioHelperService:
     leader_advert : bytes
     log : ReleaseLog
         Shared by every session (persisted).
+    max_open : int
+        Sessions open at once.
+    max_idle_s : float
+        Seconds without a message after which :meth:`expire` ends an open session.
+    max_finished : int
+        Finished sessions remembered.
+    clock : callable
+        Seconds (``time.monotonic``).
+
+    Attributes
+    ----------
+    sessions : dict
+        The open sessions' :class:`PrioHelper` by ``(segment, epoch)``.
+    finished : OrderedDict
+        ``(segment, epoch) -> (why, PrioHelper)`` of the finished ones, oldest first; ``why`` is
+        ``"finished"`` or ``"idle"``.
+    refused : list of str
+        Sessions refused because ``max_open`` were open (the first 1,000).
     """
 
     def __init__(self, prefix: str, params: PrioParams, trust: FleetTrust, keys: AggregatorKeys,
-                 leader_advert: bytes, log: ReleaseLog) -> None:
+                 leader_advert: bytes, log: ReleaseLog, *, max_open: int = 256, max_idle_s: float = 900.0,
+                 max_finished: int = 65536, clock: Callable[[], float] = time.monotonic) -> None:
         self.prefix, self.params, self.trust, self.keys, self.log = prefix, params, trust, keys, log
         self.leader_advert = bytes(leader_advert)
         open_advert(self.leader_advert, trust, prefix, params.leader_id)        # fails early on a bad advert
+        self.max_open, self.max_idle_s, self.max_finished = max_open, float(max_idle_s), max_finished
+        self._clock = clock
         self.sessions: dict[tuple[int, int], PrioHelper] = {}
+        self._heard: dict[tuple[int, int], float] = {}
+        self.finished: OrderedDict[tuple[int, int], tuple[str, PrioHelper]] = OrderedDict()
+        self.refused: list[str] = []
 
     @property
     def subscription(self) -> str:
         return f"{self.prefix}/prio/+/+/leader"
+
+    def session(self, key: tuple[int, int]) -> PrioHelper | None:
+        """The open or finished session ``(segment, epoch)`` (None if unknown or forgotten).
+
+        Parameters
+        ----------
+        key : (int, int)
+        """
+        if key in self.sessions:
+            return self.sessions[key]
+        return self.finished[key][1] if key in self.finished else None
 
     def handle(self, topic: str, payload: bytes) -> list[Publish]:
         """Route one message to its session's helper (created on first sight; it refuses all but ``open``).
@@ -214,12 +270,44 @@ class PrioHelperService:
             s, e, rest = PrioTopics.parse(self.prefix, topic)
         except MessageError:
             return []
-        if rest != ["leader"]:
+        key = (s, e)
+        if rest != ["leader"] or key in self.finished:
             return []
-        if (s, e) not in self.sessions:
-            self.sessions[(s, e)] = PrioHelper(self.prefix, s, e, self.params, self.trust, self.keys,
-                                               self.leader_advert, self.log)
-        return self.sessions[(s, e)].handle(topic, payload)
+        h = self.sessions.get(key)
+        if h is None:
+            if len(self.sessions) >= self.max_open:
+                if len(self.refused) < 1000:       # the first ones tell the operator enough
+                    self.refused.append(f"session {s}/{e} refused: {self.max_open} sessions are open")
+                return []
+            h = self.sessions[key] = PrioHelper(self.prefix, s, e, self.params, self.trust, self.keys,
+                                                self.leader_advert, self.log)
+        self._heard[key] = self._clock()
+        out = h.handle(topic, payload)
+        if h.finished:
+            self._finish(key, "finished")
+        return out
+
+    def expire(self) -> list[tuple[int, int]]:
+        """End the open sessions that heard nothing for ``max_idle_s`` (a leader that went away).
+
+        Returns
+        -------
+        list of (int, int)
+            Their keys.
+        """
+        now = self._clock()
+        stale = [key for key, t in self._heard.items() if now - t > self.max_idle_s]
+        for key in stale:
+            self._finish(key, "idle")
+        return stale
+
+    def _finish(self, key: tuple[int, int], why: str) -> None:
+        h = self.sessions.pop(key)
+        self._heard.pop(key, None)
+        h.forget()
+        self.finished[key] = (why, h)
+        while len(self.finished) > self.max_finished:
+            self.finished.popitem(last=False)
 
 
 class HelperParty:
@@ -245,7 +333,6 @@ class HelperParty:
         self.prefix, self.params, self.trust, self.keys, self.log = prefix, params, trust, keys, log
         self.service: PrioHelperService | None = None
         self._event = on_event or (lambda line: None)
-        self._closed: set[tuple[int, int]] = set()
 
     @property
     def subscriptions(self) -> list[str]:
@@ -256,6 +343,10 @@ class HelperParty:
         return [Publish(key_topic(self.prefix, self.keys.party), self.keys.advert(self.prefix), retain=True)]
 
     def tick(self) -> list[Publish]:
+        """Ends the sessions idle for too long (:meth:`PrioHelperService.expire`); publishes nothing."""
+        if self.service is not None:
+            for s, e in self.service.expire():
+                self._event(f"session {s}/{e}: no message for {self.service.max_idle_s:.0f} s, ended")
         return []
 
     def handle(self, topic: str, payload: bytes) -> list[Publish]:
@@ -278,13 +369,14 @@ class HelperParty:
             return []
         if self.service is None:
             return []
-        out = self.service.handle(topic, payload)
-        try:               # only this message's session can have closed
+        try:
             key = PrioTopics.parse(self.prefix, topic)[:2]
         except MessageError:
-            return out
-        h = self.service.sessions.get(key)
-        if h is not None and h.closed and key not in self._closed:
-            self._closed.add(key)
-            self._event(f"session {key[0]}/{key[1]}: closed")
+            return []
+        known, refused = key in self.service.finished, len(self.service.refused)
+        out = self.service.handle(topic, payload)
+        if not known and key in self.service.finished:
+            self._event(f"session {key[0]}/{key[1]}: finished")
+        if len(self.service.refused) > refused:
+            self._event(self.service.refused[-1])
         return out
