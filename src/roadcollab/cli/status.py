@@ -58,7 +58,7 @@ def run(args: argparse.Namespace, command_line: str) -> int:
           f"estimate, {st['contributions']} contributions applied, {st['duplicates']} copies applied once")
     if st["rounds"]:
         r = st["rounds"]
-        print(f"  secure-aggregation rounds: {r.get('finished', 0)} finished, {r.get('open', 0)} open, "
+        print(f"  aggregation rounds (secure or validated sessions): {r.get('finished', 0)} finished, {r.get('open', 0)} open, "
               f"{r.get('aborted', 0)} aborted")
     for reason, k in sorted(st["refused"].items(), key=lambda kv: -kv[1]):
         print(f"  refused {k}: {reason}")
