@@ -22,7 +22,7 @@ The block diagonalisation of a received system (reordering, Sylvester splits, ei
 The default is ``"reference"`` (numpy). The compiled path passes the 300-segment exactness test and
 makes ``paper`` about 2.2-2.6x faster per segment than the reference path (the bench's alternating
 line), but every process that uses it pays 1.2-1.5 s of numba start-up (import, cache load, code
-generation) and about 145 MiB, and a fresh installation compiles for about 16 s in one process, 11.6-11.8 s of wall
+generation) and about 145 MiB, and a fresh installation compiles for 14-16 s in one process, 8.4-11.8 s of wall
 time when the command line compiles the sender's kernels in a second one (docs/speed.md, "Seventh pass"). So it
 is opt-in, for long runs. The
 environment variable ``ROADCOLLAB_KERNELS=compiled`` (or ``reference``) sets the default, and
