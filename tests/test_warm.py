@@ -8,7 +8,7 @@ import pytest
 
 from roadcollab.lti import kernels
 
-pytestmark = [pytest.mark.slow, pytest.mark.skipif(not kernels.compiled_available(), reason="numba not importable")]
+_SLOW = [pytest.mark.slow, pytest.mark.skipif(not kernels.compiled_available(), reason="numba not importable")]
 
 #: In a fresh process: is the draw loop cached; then a bench segment on the compiled path, and which of the
 #: sender's kernels it loaded from disk and which it compiled.
@@ -33,6 +33,8 @@ def _probe(env):
     return json.loads(out.stdout.strip().splitlines()[-1])
 
 
+@_SLOW[0]
+@_SLOW[1]
 def test_the_second_process_compiles_the_specialisations_the_command_then_loads(tmp_path):
     env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path / "cache"))
     cold = _probe(dict(env, NUMBA_CACHE_DIR=str(tmp_path / "cold")))
@@ -42,3 +44,22 @@ def test_the_second_process_compiles_the_specialisations_the_command_then_loads(
     warm = _probe(env)
     assert warm["cached"] is True
     assert all(hits == 1 and misses == 0 for hits, misses in warm["stats"].values())   # loaded, not compiled
+
+
+@pytest.mark.parametrize("command, env, started", [("bench", None, True), ("bench", "reference", True),
+                                                    ("reproduce", "compiled", True), ("reproduce", None, False),
+                                                    ("status", "compiled", False), ("estimate", "compiled", False)])
+def test_the_command_line_compiles_alongside_only_for_paper_on_the_compiled_path(monkeypatch, command, env, started):
+    import argparse
+
+    from roadcollab.cli import main
+    from roadcollab.experiments.bench import warm
+
+    calls = []
+    monkeypatch.setattr(warm, "start_background_compile", lambda: calls.append(1))
+    if env is None:
+        monkeypatch.delenv("ROADCOLLAB_KERNELS", raising=False)
+    else:
+        monkeypatch.setenv("ROADCOLLAB_KERNELS", env)
+    main._compile_alongside(argparse.Namespace(command=command))
+    assert bool(calls) is started
