@@ -251,8 +251,10 @@ def complex_schur(A: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     Tr, _, _, _, Zr, _, info = scipy.linalg.lapack.dgees(_no_sort, A, lwork=lwork)
     if info != 0:
         raise np.linalg.LinAlgError(f"dgees failed (info={info})")
-    T = Tr.astype(np.complex128)
-    U = Zr.astype(np.complex128)
+    # C order: dgees returns Fortran arrays, but a 1x1 one is C-contiguous too and numba then compiled the
+    # rotations a second time (docs/speed.md, "Seventh pass"); the certificate wants C order anyway.
+    T = np.array(Tr, dtype=np.complex128, order="C")
+    U = np.array(Zr, dtype=np.complex128, order="C")
     _build()["rsf2csf"](T, U)
     return T, U
 
