@@ -306,9 +306,28 @@ def test_the_helper_refuses_sessions_beyond_its_open_limit_and_ends_idle_ones():
         _opened(w, helper, epoch)
     assert sorted(helper.sessions) == [(7, 0), (7, 1)]
     assert helper.refused == ["session 7/2 refused: 2 sessions are open"]
+    now[0] = 50.0
+    bad = seal(w["ka"].identity, f"{PREFIX}/prio/7/0/leader", pack({"t": "bogus"}))
+    assert helper.handle(f"{PREFIX}/prio/7/0/leader", bad) == []     # refused: keeps the session no longer alive
     now[0] = 61.0
     assert sorted(helper.expire()) == [(7, 0), (7, 1)]
     assert helper.sessions == {} and helper.finished[(7, 0)][0] == "idle"
+    assert helper.finished[(7, 0)][1].roster == {}
     assert _opened(w, helper, 0) == [] and (7, 0) not in helper.sessions      # an ended session stays ended
     _opened(w, helper, 2)
     assert list(helper.sessions) == [(7, 2)]                                   # room again for a new one
+
+
+def test_only_the_leaders_signed_message_on_the_canonical_topic_creates_a_helper_session():
+    w = _world()
+    helper = w["helper"]
+    assert PrioHelperService.__init__.__kwdefaults__["max_open"] is None     # a dropped session spends measurements
+    leader = _leader(w, epoch=0)
+    opening = next(m for m in leader.open(list(w["agents"])) if m.topic.endswith("/leader"))
+    forged = seal(w["kb"].identity, opening.topic, pack({"t": "open", "roster": {"v1": 1}}))
+    helper.handle(opening.topic, forged)                                        # signed, but not by the leader
+    helper.handle(opening.topic.replace("/prio/7/", "/prio/07/"), opening.payload)   # another topic, same key
+    helper.handle(opening.topic, b"not a signed message")
+    assert helper.sessions == {}
+    helper.handle(opening.topic, opening.payload)
+    assert list(helper.sessions) == [(7, 0)] and helper.sessions[(7, 0)].roster

@@ -46,10 +46,12 @@ def test_the_second_process_compiles_the_specialisations_the_command_then_loads(
     assert all(hits == 1 and misses == 0 for hits, misses in warm["stats"].values())   # loaded, not compiled
 
 
-@pytest.mark.parametrize("command, env, started", [("bench", None, True), ("bench", "reference", True),
-                                                    ("reproduce", "compiled", True), ("reproduce", None, False),
-                                                    ("status", "compiled", False), ("estimate", "compiled", False)])
-def test_the_command_line_compiles_alongside_only_for_paper_on_the_compiled_path(monkeypatch, command, env, started):
+@pytest.mark.parametrize("command, env, started, scale", [
+    ("bench", None, True, None), ("bench", "reference", True, None), ("bench", None, False, [100]),
+    ("reproduce", "compiled", True, None), ("reproduce", None, False, None), ("status", "compiled", False, None),
+    ("estimate", "compiled", False, None)])
+def test_the_command_line_compiles_alongside_only_for_paper_on_the_compiled_path(monkeypatch, command, env, started,
+                                                                                 scale):
     import argparse
 
     from roadcollab.cli import main
@@ -61,5 +63,5 @@ def test_the_command_line_compiles_alongside_only_for_paper_on_the_compiled_path
         monkeypatch.delenv("ROADCOLLAB_KERNELS", raising=False)
     else:
         monkeypatch.setenv("ROADCOLLAB_KERNELS", env)
-    main._compile_alongside(argparse.Namespace(command=command))
+    main._compile_alongside(argparse.Namespace(command=command, scale=scale))
     assert bool(calls) is started

@@ -120,9 +120,9 @@ def _compile_alongside(args: argparse.Namespace) -> None:
     """On the compiled path with an empty kernel cache, compile the sender's kernels in a second
     process while the command compiles the receiver's (:mod:`roadcollab.experiments.bench.warm`): a
     fresh installation's first ``paper`` run compiles in 8.4-11.8 instead of 14-16 s. Only for the
-    commands that run the ``paper`` mechanism (``bench`` always times both paths)."""
-    if not (args.command == "bench" or (args.command in _PAPER_COMMANDS
-                                        and os.environ.get("ROADCOLLAB_KERNELS") == "compiled")):
+    commands that run the ``paper`` mechanism (``bench`` always times both paths, but not ``bench --scale``)."""
+    bench = args.command == "bench" and getattr(args, "scale", None) is None    # --scale: the numpy path on Dask
+    if not (bench or (args.command in _PAPER_COMMANDS and os.environ.get("ROADCOLLAB_KERNELS") == "compiled")):
         return
     from ..experiments.bench.warm import start_background_compile
     start_background_compile()

@@ -166,7 +166,7 @@ def _decouple_pass(T: np.ndarray, U: np.ndarray, B: np.ndarray, C: np.ndarray, o
             for r in range(n):
                 acc += C[i, r] * U[r, j]
             Cw[i, j] = acc
-    start = sizes[0] - sizes[0]      # int64, not Literal[int](0): one specialisation of _sylvester
+    start = sizes.size * 0           # int64, not Literal[int](0): one specialisation of _sylvester
     for c in range(sizes.size - 1):
         stop = start + sizes[c]
         X = np.empty((stop - start, n - stop), dtype=np.complex128)

@@ -36,6 +36,9 @@ from .service import Publish
 
 __all__ = ["PrioHelper", "PrioHelperService", "HelperParty"]
 
+#: Events a session keeps (the first ones; a deviating leader can send any number of refused messages).
+MAX_EVENTS = 200
+
 
 class PrioHelper(PrioAggregator):
     """Aggregator ``B`` of one session (module docstring).
@@ -86,7 +89,7 @@ class PrioHelper(PrioAggregator):
             h, blobs = unpack(body, "leader message")
             return self._apply(h, blobs)
         except (MessageError, ParameterError) as err:
-            self.events.append(("refused", f"{topic}: {err}"))
+            self.events.append(("refused", f"{topic}: {str(err)[:300]}"))
             return []
 
     def _apply(self, h: dict, blobs: list[bytes]) -> list[Publish]:
@@ -188,18 +191,26 @@ class PrioHelper(PrioAggregator):
         keeps its roster, its events and :attr:`closed` only (:class:`PrioHelperService` calls it)."""
         self._new_phase()
         self._m = None
+        self.roster = {}
+        del self.events[MAX_EVENTS:]
 
 
 class PrioHelperService:
     """Aggregator ``B`` for every session of a fleet: routes the leader's messages by measurement.
 
     A long-running helper keeps only what it still needs: a session that finished (its last phase
-    released, or closed by the leader) or that heard nothing for ``max_idle_s`` leaves the open sessions,
-    its per-vehicle state is dropped (:meth:`PrioHelper.forget`), and its key and events are kept among
-    the last ``max_finished`` finished sessions; a later message for it is dropped. At most ``max_open``
-    sessions are open at once: beyond, a new session is refused, so a deviating leader cannot fill B's
-    memory. Whatever is forgotten, the persisted :class:`~roadcollab.privacy.secagg_store.ReleaseLog`
-    still refuses a second release of any (session, phase).
+    released, or closed by the leader) or that heard no valid leader message for ``max_idle_s`` leaves the
+    open sessions, its per-vehicle state and roster are dropped (:meth:`PrioHelper.forget`), and its key
+    and first :data:`MAX_EVENTS` events are kept among the last ``max_finished`` finished sessions; a
+    later message for it is dropped. A session is created only for a message signed by the leader on its
+    session's own topic. Whatever is forgotten, the persisted
+    :class:`~roadcollab.privacy.secagg_store.ReleaseLog` still refuses a second release of any (session,
+    phase).
+
+    How many sessions are open at once is the leader's to decide (one per segment with vehicles): by
+    default the helper refuses none, since a session it drops aborts and spends its vehicles'
+    measurement. ``max_open`` caps them for an operator who prefers that to the memory (about 10 MB per
+    open session at L = 4,000 with 4 vehicles).
 
     Parameters
     ----------
@@ -210,10 +221,12 @@ class PrioHelperService:
     leader_advert : bytes
     log : ReleaseLog
         Shared by every session (persisted).
-    max_open : int
-        Sessions open at once.
+    max_open : int, optional
+        Sessions open at once (default: no limit).
     max_idle_s : float
-        Seconds without a message after which :meth:`expire` ends an open session.
+        Seconds without a valid leader message after which :meth:`expire` ends an open session; the
+        default is twice ``serve``'s longest round timeout (3,600 s), so a phase waiting for slow vehicles
+        is never ended.
     max_finished : int
         Finished sessions remembered.
     clock : callable
@@ -231,7 +244,7 @@ class PrioHelperService:
     """
 
     def __init__(self, prefix: str, params: PrioParams, trust: FleetTrust, keys: AggregatorKeys,
-                 leader_advert: bytes, log: ReleaseLog, *, max_open: int = 256, max_idle_s: float = 900.0,
+                 leader_advert: bytes, log: ReleaseLog, *, max_open: int | None = None, max_idle_s: float = 7200.0,
                  max_finished: int = 65536, clock: Callable[[], float] = time.monotonic) -> None:
         self.prefix, self.params, self.trust, self.keys, self.log = prefix, params, trust, keys, log
         self.leader_advert = bytes(leader_advert)
@@ -275,14 +288,24 @@ class PrioHelperService:
             return []
         h = self.sessions.get(key)
         if h is None:
-            if len(self.sessions) >= self.max_open:
+            try:     # only the leader's own signed message on the canonical topic opens a session here
+                if topic != PrioTopics(self.prefix, s, e).leader:
+                    return []
+                open_signed(payload, self.trust, topic, self.params.leader_id)
+            except (MessageError, ParameterError):
+                return []
+            if self.max_open is not None and len(self.sessions) >= self.max_open:
                 if len(self.refused) < 1000:       # the first ones tell the operator enough
                     self.refused.append(f"session {s}/{e} refused: {self.max_open} sessions are open")
                 return []
             h = self.sessions[key] = PrioHelper(self.prefix, s, e, self.params, self.trust, self.keys,
                                                 self.leader_advert, self.log)
-        self._heard[key] = self._clock()
+            self._heard[key] = self._clock()
+        before = len(h.events)
         out = h.handle(topic, payload)
+        if not any(kind == "refused" for kind, _ in h.events[before:]):
+            self._heard[key] = self._clock()          # a refused message keeps no session alive
+        del h.events[MAX_EVENTS:]
         if h.finished:
             self._finish(key, "finished")
         return out

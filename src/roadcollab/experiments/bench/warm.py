@@ -33,6 +33,9 @@ from ..config import ExperimentConfig
 
 __all__ = ["sender_kernels_cached", "compile_sender_kernels", "start_background_compile"]
 
+#: The processes started by :func:`start_background_compile` in this process.
+_STARTED: list[subprocess.Popen] = []
+
 
 def sender_kernels_cached() -> bool:
     """Whether the ``Psi`` draw loop (the largest of the sender's kernels, 5-6 s to compile) is on disk.
@@ -86,10 +89,12 @@ def start_background_compile() -> subprocess.Popen | None:
     if sender_kernels_cached():
         return None
     try:
-        return subprocess.Popen([sys.executable, "-m", __name__], stdin=subprocess.DEVNULL,
+        proc = subprocess.Popen([sys.executable, "-m", __name__], stdin=subprocess.DEVNULL,
                                 stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     except OSError:
         return None
+    _STARTED.append(proc)     # kept: a Popen collected while running warns (ResourceWarning) and is not reaped
+    return proc
 
 
 if __name__ == "__main__":    # pragma: no cover - run in the second process
