@@ -46,12 +46,17 @@ def test_the_second_process_compiles_the_specialisations_the_command_then_loads(
     assert all(hits == 1 and misses == 0 for hits, misses in warm["stats"].values())   # loaded, not compiled
 
 
-@pytest.mark.parametrize("command, env, started, scale", [
-    ("bench", None, True, None), ("bench", "reference", True, None), ("bench", None, False, [100]),
-    ("reproduce", "compiled", True, None), ("reproduce", None, False, None), ("status", "compiled", False, None),
-    ("estimate", "compiled", False, None)])
-def test_the_command_line_compiles_alongside_only_for_paper_on_the_compiled_path(monkeypatch, command, env, started,
-                                                                                 scale):
+@pytest.mark.parametrize("command, option, env, kernels, started, scale", [
+    ("bench", None, None, "compiled", True, None), ("bench", None, "reference", "reference", True, None),
+    ("bench", None, None, "compiled", False, [100]),
+    ("reproduce", None, None, "compiled", True, None), ("reproduce", None, "reference", "reference", False, None),
+    ("reproduce", "reference", "compiled", "reference", False, None),
+    ("attack", "compiled", "reference", "compiled", True, None), ("sweep", None, "compiled", "compiled", True, None),
+    ("status", "-", "compiled", None, False, None), ("estimate", "-", None, None, False, None)])
+def test_the_batch_commands_default_to_the_compiled_path_and_compile_alongside(monkeypatch, command, option, env,
+                                                                              kernels, started, scale):
+    """--kernels, else ROADCOLLAB_KERNELS, else compiled for the commands with the option ("-": the command has none,
+    and keeps the library's default); the second compile process starts on the compiled path (bench: always)."""
     import argparse
 
     from roadcollab.cli import main
@@ -63,5 +68,18 @@ def test_the_command_line_compiles_alongside_only_for_paper_on_the_compiled_path
         monkeypatch.delenv("ROADCOLLAB_KERNELS", raising=False)
     else:
         monkeypatch.setenv("ROADCOLLAB_KERNELS", env)
-    main._compile_alongside(argparse.Namespace(command=command, scale=scale))
+    args = argparse.Namespace(command=command, scale=scale, **({} if option == "-" else {"kernels": option}))
+    assert main._kernels(args) == kernels
+    main._compile_alongside(args, main._kernels(args))
     assert bool(calls) is started
+
+
+def test_a_bad_kernels_environment_variable_is_one_clear_line(monkeypatch, capsys, tmp_path):
+    from roadcollab.cli.main import main
+
+    monkeypatch.setenv("ROADCOLLAB_KERNELS", "turbo")
+    assert main(["reproduce", "--runs", "1", "--vehicles", "2", "--out", str(tmp_path / "r")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err == ["roadcollab reproduce: error: environment variable ROADCOLLAB_KERNELS must be 'compiled' or "
+                   "'reference', got 'turbo'"]
+    assert not (tmp_path / "r").exists()

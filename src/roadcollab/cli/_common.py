@@ -6,9 +6,8 @@ import argparse
 import dataclasses
 import shlex
 import textwrap
-import time
 from pathlib import Path
-from typing import TYPE_CHECKING, Callable, Sequence, TypeVar
+from typing import TYPE_CHECKING, Callable, Sequence
 
 import re
 
@@ -16,16 +15,15 @@ from ..errors import FileFormatError, ParameterError
 from ..io.limits import DEFAULT_MAX_FILE_MB, DEFAULT_MAX_ROWS, FileLimits, check_regular_file
 from ._arguments import MAX_FILE_MB, MAX_ROWS, SEED, SPEED, WORKERS, add_check, count, help_range, plural, ranged
 from ._outputs import input_paths, out_path
+from ._progress import progress, progress_bars, run_with_progress
 from ._table import print_table
 
 if TYPE_CHECKING:     # annotations only: the subcommands import these lazily (start-up time)
-    from rich.progress import Progress
-
     from ..experiments.config import ExperimentConfig
 
-__all__ = ["input_paths", "out_path", "positive_int", "nonneg_int", "positive_float", "paillier_bits", "add_out_option", "add_dask_options",
-           "add_road_options", "add_limit_options", "add_seed_option", "file_limits", "dask_options",
-           "check_dask_options", "command_line", "progress", "run_with_progress", "print_table", "plural",
+__all__ = ["input_paths", "out_path", "positive_int", "nonneg_int", "positive_float", "paillier_bits", "add_out_option",
+           "add_dask_options", "add_road_options", "add_kernels_option", "BATCH_KERNELS", "add_limit_options",
+           "add_seed_option", "file_limits", "dask_options", "check_dask_options", "command_line", "progress", "progress_bars", "run_with_progress", "print_table", "plural",
            "config_from_args"]
 
 #: The shortest measured profile a simulated command accepts: lead-in + lead-out (15 m each), one metre
@@ -63,10 +61,6 @@ def _int_at_least(low: int, what: str) -> Callable[[str], int]:
 
 positive_int = _int_at_least(1, "positive")
 nonneg_int = _int_at_least(0, "non-negative")
-
-#: What a subcommand's work returns.
-_T = TypeVar("_T")
-
 
 def positive_float(text: str) -> float:
     """argparse type: a positive finite number.
@@ -198,6 +192,19 @@ def add_dask_options(p: argparse.ArgumentParser) -> None:
                         f"{help_range(WORKERS)})")
     g.add_argument("--scheduler", default=None, metavar="ADDRESS",
                    help="run on an existing Dask cluster, e.g. tcp://host:8786")
+
+
+#: Where no ``--kernels`` and no ``ROADCOLLAB_KERNELS`` say otherwise, the commands that run Algorithm 2 many
+#: times (``reproduce``, ``attack``, ``sweep``, ``bench``) use the compiled kernels: a fresh installation's first
+#: run compiles for 6-10 s once (docs/speed.md), every later run loads them from disk.
+BATCH_KERNELS = "compiled"
+
+
+def add_kernels_option(p: argparse.ArgumentParser) -> None:
+    """``--kernels {compiled,reference}`` of the commands that run Algorithm 2 many times."""
+    p.add_argument("--kernels", choices=("compiled", "reference"), default=None,
+                   help="kernels: compiled (numba; the default unless ROADCOLLAB_KERNELS says otherwise; without "
+                        "numba the numpy path runs) or reference (numpy only). Results agree to round-off")
 
 
 def add_road_options(p: argparse.ArgumentParser) -> None:
@@ -335,59 +342,6 @@ def check_dask_options(args: argparse.Namespace, timeout: float = 5.0) -> None:
 def command_line(argv: Sequence[str]) -> str:
     """The command line as recorded in ``config.json`` and ``report.md``: ``roadcollab`` and the quoted arguments."""
     return "roadcollab " + " ".join(shlex.quote(a) for a in argv)
-
-
-def progress(total: int, description: str) -> tuple[Progress, Callable[[int], None]]:
-    """A rich progress bar (on stderr) and a callback that advances it.
-
-    Parameters
-    ----------
-    total : int
-        Number of steps.
-    description : str
-        Label left of the bar.
-
-    Returns
-    -------
-    prog : rich.progress.Progress
-        Use as a context manager around the work.
-    advance : callable
-        ``advance(done)`` sets the number of completed steps.
-    """
-    from rich.console import Console
-    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
-
-    prog = Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
-                    console=Console(stderr=True), transient=False)
-    task = prog.add_task(description, total=total)
-    return prog, (lambda done: prog.update(task, completed=done))
-
-
-def run_with_progress(total: int, description: str, work: Callable[[Callable[[int], None]], _T]
-                      ) -> tuple[_T, float]:
-    """Run ``work(advance)`` under a progress bar (:func:`progress`).
-
-    Parameters
-    ----------
-    total : int
-        Number of steps the bar counts.
-    description : str
-        Label left of the bar.
-    work : callable
-        Called once with the bar's ``advance(done)`` callback; returns the result.
-
-    Returns
-    -------
-    result
-        What ``work`` returned.
-    elapsed : float
-        Wall time of ``work``, s.
-    """
-    prog, cb = progress(total, description)
-    t0 = time.perf_counter()
-    with prog:
-        result = work(cb)
-    return result, time.perf_counter() - t0
 
 
 # --- simulation options --------------------------------------------------------------------------

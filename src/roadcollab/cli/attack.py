@@ -5,8 +5,8 @@ from __future__ import annotations
 import argparse
 
 from ._arguments import count, help_range
-from ._common import (input_paths, command_parser, add_dask_options, add_study_options, check_dask_options, dask_options,
-                      paillier_bits, plural, print_table, run_with_progress)
+from ._common import (add_kernels_option, input_paths, command_parser, add_dask_options, add_study_options,
+                      check_dask_options, dask_options, paillier_bits, plural, print_table, run_with_progress)
 
 #: Vehicles the replica attacks target (AttackStudyConfig.replica_targets): the fleet needs at least as many.
 _REPLICA_TARGETS = 3
@@ -53,6 +53,7 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
     p.add_argument("--poisoning-runs", type=_POISONING_RUNS, default=2,
                    help=f"runs of the poisoning measurements (default 2; {help_range(_POISONING_RUNS)})")
     add_dask_options(p)
+    add_kernels_option(p)
     return p
 
 

@@ -7,7 +7,7 @@ import argparse
 import json
 
 from ._arguments import WORKERS, add_check, count, help_range, ranged, ranged_list
-from ._common import MAX_VEHICLES, MIN_SCORED_M, command_parser, plural, print_table, progress
+from ._common import MAX_VEHICLES, MIN_SCORED_M, add_kernels_option, command_parser, plural, print_table, progress
 
 __all__ = ["NAME", "add_parser", "run"]
 
@@ -53,10 +53,7 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
     p.add_argument("--repeats", type=_REPEATS, default=30,
                    help=f"timed segments per point (default 30; {help_range(_REPEATS)})")
     p.add_argument("--quick", action="store_true", help="only up to 16k samples")
-    p.add_argument("--kernels", choices=("compiled", "reference"), default=None,
-                   help="kernels: compiled (numba: the responses and the Psi draws) or reference (numpy only; the "
-                        "default unless ROADCOLLAB_KERNELS=compiled); the paper mechanism is also timed on both, "
-                        "alternating")
+    add_kernels_option(p)   # the paper mechanism is also timed on both paths, alternating
     g = p.add_argument_group("fleet scale (a local Dask cluster)")
     g.add_argument("--scale", type=_SCALE, default=None, metavar="SEGMENTS",
                    help="instead of the per-segment benchmark: drive this many road segments (comma-separated "

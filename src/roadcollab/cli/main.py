@@ -11,17 +11,20 @@ Each subcommand is a module of this package with ``NAME``, ``add_parser(subparse
 from __future__ import annotations
 
 import argparse
+import contextlib
 import os
 import signal
 import sys
 from pathlib import Path
 
 from .. import __version__
+from ..errors import ParameterError
+from ..lti.kernels import KERNELS, use_kernels
 from . import anomalies, attack, bench, calibrate, enroll, estimate, export, fleet, helper, iri, message, reproduce, \
     serve, simulate_drives, status, sweep, vehicle
 from . import map as map_cmd
 from ._arguments import CommandParser
-from ._common import command_line
+from ._common import BATCH_KERNELS, command_line
 
 __all__ = ["main", "build_parser"]
 
@@ -93,8 +96,10 @@ def main(argv: list[str] | None = None) -> int:
     previous = signal.signal(signal.SIGTERM, _terminated)
     try:
         _check_out(args)
-        _compile_alongside(args)
-        return run(args, command_line(argv))
+        kernels = _kernels(args)
+        with contextlib.nullcontext() if kernels is None else use_kernels(kernels):
+            _compile_alongside(args, kernels)
+            return run(args, command_line(argv))
     except (KeyboardInterrupt, Terminated) as err:
         status = 143 if isinstance(err, Terminated) else 130
         where = "" if out is None else (f"; the previous results in {out} are untouched" if had_results
@@ -112,17 +117,30 @@ def main(argv: list[str] | None = None) -> int:
         signal.signal(signal.SIGTERM, previous)
 
 
-#: Commands that run Algorithm 2 (the sender's kernels are worth compiling alongside).
-_PAPER_COMMANDS = ("reproduce", "attack", "sweep")
+def _kernels(args: argparse.Namespace) -> str | None:
+    """The kernel path of a command with ``--kernels`` (``reproduce``, ``attack``, ``sweep``, ``bench``):
+    the option, else ``ROADCOLLAB_KERNELS``, else :data:`~roadcollab.cli._common.BATCH_KERNELS`; None for the
+    other commands (they keep the library's default, the numpy path, unless ``ROADCOLLAB_KERNELS`` is set: a
+    vehicle process starts faster on it)."""
+    if not hasattr(args, "kernels"):
+        return None
+    choice = args.kernels or os.environ.get("ROADCOLLAB_KERNELS") or BATCH_KERNELS
+    if choice not in KERNELS:
+        raise ParameterError(f"environment variable ROADCOLLAB_KERNELS must be 'compiled' or 'reference', "
+                             f"got {choice!r}")
+    return choice
 
 
-def _compile_alongside(args: argparse.Namespace) -> None:
+def _compile_alongside(args: argparse.Namespace, kernels: str | None) -> None:
     """On the compiled path with an empty kernel cache, compile the sender's kernels in a second
     process while the command compiles the receiver's (:mod:`roadcollab.experiments.bench.warm`): a
-    fresh installation's first ``paper`` run compiles in 8.4-11.8 instead of 14-16 s. Only for the
-    commands that run the ``paper`` mechanism (``bench`` always times both paths, but not ``bench --scale``)."""
-    bench = args.command == "bench" and getattr(args, "scale", None) is None    # --scale: the numpy path on Dask
-    if not (bench or (args.command in _PAPER_COMMANDS and os.environ.get("ROADCOLLAB_KERNELS") == "compiled")):
+    fresh installation's first ``paper`` run compiles in about half the time. Only for the commands
+    with ``--kernels`` (they run the ``paper`` mechanism): on the compiled path, and for ``bench`` always (it
+    times ``paper`` on both paths) but not ``bench --scale`` (the numpy path on Dask)."""
+    if args.command == "bench":
+        if getattr(args, "scale", None) is not None:
+            return
+    elif kernels != "compiled":
         return
     from ..experiments.bench.warm import start_background_compile
     start_background_compile()

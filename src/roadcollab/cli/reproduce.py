@@ -5,8 +5,9 @@ from __future__ import annotations
 import argparse
 
 from ._arguments import GAMMA, NOISE, UNCERTAINTY, count, help_range, iso_class
-from ._common import (input_paths, command_parser, add_dask_options, add_road_options, add_study_options, check_dask_options,
-                      config_from_args, dask_options, plural, print_table, run_with_progress)
+from ._common import (add_kernels_option, input_paths, command_parser, add_dask_options, add_road_options,
+                      add_study_options, check_dask_options, config_from_args, dask_options, plural, print_table,
+                      progress_bars)
 
 _MEASURED_RUNS = count("number of runs", 0, 10_000)
 
@@ -57,39 +58,34 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
                         f"independent of --runs; 0: skip; ignored with --road-profile; {help_range(_MEASURED_RUNS)})")
     add_road_options(p)
     add_dask_options(p)
+    add_kernels_option(p)
     return p
 
 
-def _measured(args: argparse.Namespace, cache):
-    """The extra runs on the shipped measured profile for the report, or None if not wanted.
+def _measured_config(args: argparse.Namespace):
+    """The configuration of the extra runs on the shipped measured profile for the report, or None if not wanted.
 
     Parameters
     ----------
     args : argparse.Namespace
-        The command's options (``--measured-runs``, ``--road-profile``, the fleet and the workers).
-    cache : PipelineCache
-        The reproduction's :class:`~roadcollab.experiments.pipeline.PipelineCache`: it already holds the
-        fleet's estimators, which the measured road shares.
+        The command's options (``--measured-runs``, ``--road-profile``, the fleet).
 
     Returns
     -------
-    (ReproductionResult, float) or None
-        The result and its wall time, s.
+    ExperimentConfig or None
+        The fleet and its estimators are the reproduction's; the runs drive the packaged profile.
     """
-    from ..experiments.reproduction.study import run_reproduction
-    from ..experiments.reproduction.iri import IRI_SEGMENT_LENGTH
-
     if args.road_profile is not None or args.measured_runs <= 0:
         return None
     margs = argparse.Namespace(**{**vars(args), "road_profile": "packaged", "runs": args.measured_runs})
-    mcfg = config_from_args(margs)
-    return run_with_progress(mcfg.n_runs, "measured profile",
-                             lambda cb: run_reproduction(mcfg, args.seed, progress=cb, **dask_options(args),
-                                                         iri_segment_length=IRI_SEGMENT_LENGTH, cache=cache))
+    return config_from_args(margs)
 
 
 def run(args: argparse.Namespace, command_line: str) -> int:
     """Run the reproduction, write its outputs to ``args.out`` and print the MSE table.
+
+    The reproduction and its measured-profile runs share one pool and one fleet setup
+    (:func:`~roadcollab.experiments.reproduction.study.run_reproductions`).
 
     Parameters
     ----------
@@ -106,18 +102,27 @@ def run(args: argparse.Namespace, command_line: str) -> int:
     from rich.console import Console
 
     from ..experiments.pipeline import PipelineCache
-    from ..experiments.reproduction.study import run_reproduction
+    from ..lti.kernels import kernel_path
+    from ..experiments.reproduction.iri import IRI_SEGMENT_LENGTH
+    from ..experiments.reproduction.study import run_reproductions
     from ..reporting.records import staged_output
     from ..reporting.reproduction_report import headline_table, write_reproduction
 
     check_dask_options(args)
     with staged_output(args.out, NAME, input_paths(args)) as out:
-        cfg = config_from_args(args)
-        cache = PipelineCache()
-        result, elapsed = run_with_progress(cfg.n_runs, NAME, lambda cb: run_reproduction(
-            cfg, args.seed, progress=cb, **dask_options(args), cache=cache))
-        measured = _measured(args, cache)
-        timings = {"workers": (args.workers or 1) if args.scheduler is None else args.scheduler, "runs_s": elapsed,
+        cfg, mcfg = config_from_args(args), _measured_config(args)
+        configs, iris, labels = [cfg], [None], [NAME]
+        if mcfg is not None:
+            configs, iris, labels = [cfg, mcfg], [None, IRI_SEGMENT_LENGTH], [NAME, "measured profile"]
+        prog, callbacks = progress_bars([(c.n_runs, label) for c, label in zip(configs, labels)])
+        with prog:
+            done = run_reproductions(configs, args.seed, progress=callbacks, **dask_options(args),
+                                     iri_segment_lengths=iris, cache=PipelineCache())
+        (result, elapsed), measured = done[0], None
+        if mcfg is not None:    # its wall time after the reproduction's last run (both share the pool)
+            measured = (done[1][0], done[1][1] - elapsed)
+        timings = {"workers": (args.workers or 1) if args.scheduler is None else args.scheduler,
+                   "kernels": kernel_path(), "runs_s": elapsed,
                    "measured_runs_s": 0.0 if measured is None else measured[1]}
         summary = write_reproduction(result, out, command=command_line, elapsed=elapsed, measured=measured,
                                      timings=timings)

@@ -6,8 +6,9 @@ import argparse
 from typing import TYPE_CHECKING
 
 from ._arguments import GAMMA, NOISE, UNCERTAINTY, add_check, count, help_range, ranged_list
-from ._common import (input_paths, MAX_VEHICLES, command_parser, add_dask_options, add_out_option, add_seed_option,
-                      check_dask_options, dask_options, plural, print_table, run_with_progress)
+from ._common import (add_kernels_option, input_paths, MAX_VEHICLES, command_parser, add_dask_options,
+                      add_out_option, add_seed_option, check_dask_options, dask_options, plural, print_table,
+                      run_with_progress)
 
 _RUNS = count("number of runs", 1, 1000)
 _VEHICLES = count("fleet size", 2, MAX_VEHICLES)
@@ -74,6 +75,7 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
                    help=f"relative parameter uncertainties, comma-separated (default 0.05,0.15; each "
                         f"{help_range(_UNCERTAINTIES)})")
     add_dask_options(p)
+    add_kernels_option(p)
     add_check(p, _check)
     return p
 

@@ -13,6 +13,11 @@ is passed once as ``shared``:
 - ``scheduler=ADDRESS`` (an existing Dask cluster, e.g. many machines) scatters ``shared`` once to every
   worker, so it is built once per worker process, not once per chunk.
 
+Several studies that share ``shared`` can run on one pool (:func:`map_jobs`): a reproduction and its
+measured-profile runs then pay for one pool and its workers' warm-up, not two, and the second study's
+runs start while the first's last chunks finish. Every task runs with the kernel path in effect where
+the call was made (:func:`~roadcollab.lti.kernels.use_kernels`), in every worker and backend.
+
 Nothing is kept between calls.
 """
 
@@ -32,27 +37,50 @@ from threadpoolctl import threadpool_limits
 
 from .._validation import check_int
 from ..errors import ParameterError
+from ..lti.kernels import kernel_path, use_kernels
 
-__all__ = ["map_runs", "pool_context", "local_dask_cluster"]
+__all__ = ["Job", "map_jobs", "map_runs", "pool_context", "local_dask_cluster"]
 
 #: One run's result, as the task returns it.
 _R = TypeVar("_R")
 
-#: The task and shared object of this process when it is a pool worker (set once by the pool's
+#: The tasks and shared object of this process when it is a pool worker (set once by the pool's
 #: initializer, in the worker process only; the parent never writes it).
 _WORKER: dict = {}
 
 
 @dataclass(frozen=True)
-class _SingleThreaded:
-    """Run a task with single-threaded BLAS. Threaded BLAS sums in a different order, so
-    serial and parallel runs would differ in the last bits; one thread everywhere makes them
-    bit-identical (and avoids oversubscribing cores when several workers share a machine)."""
+class Job:
+    """One study's runs for :func:`map_jobs`.
+
+    Attributes
+    ----------
+    task : callable
+        Picklable ``task(indices) -> list of results`` (``task(indices, shared)`` with ``shared``).
+    n_runs : int
+        The runs are ``range(n_runs)``.
+    progress : callable, optional
+        Called with the number of this job's finished runs.
+    """
 
     task: Callable
+    n_runs: int
+    progress: Callable[[int], None] | None = None
+
+
+@dataclass(frozen=True)
+class _SingleThreaded:
+    """Run a task with single-threaded BLAS and the caller's kernel path. Threaded BLAS sums in a
+    different order, so serial and parallel runs would differ in the last bits; one thread everywhere
+    makes them bit-identical (and avoids oversubscribing cores when several workers share a machine).
+    The kernel path is carried explicitly: a spawned or Dask worker does not inherit the caller's
+    :func:`~roadcollab.lti.kernels.use_kernels` choice."""
+
+    task: Callable
+    kernels: str
 
     def __call__(self, indices, *shared):
-        with threadpool_limits(limits=1):
+        with threadpool_limits(limits=1), use_kernels(self.kernels):
             return self.task(indices, *shared)
 
 
@@ -83,8 +111,8 @@ def _watch_parent(parent: int) -> None:
             os._exit(1)
 
 
-def _init_worker(task: Callable, extra: tuple, parent: int) -> None:
-    """Pool initializer: keep the task and the shared object for every chunk of this worker.
+def _init_worker(tasks: tuple, extra: tuple, parent: int) -> None:
+    """Pool initializer: keep the tasks and the shared object for every chunk of this worker.
 
     A worker leaves interrupts to its parent: Ctrl-C reaches the whole process group, and a worker's
     own ``KeyboardInterrupt`` would print a traceback per worker; the parent stops the workers itself
@@ -94,7 +122,7 @@ def _init_worker(task: Callable, extra: tuple, parent: int) -> None:
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     signal.signal(signal.SIGTERM, signal.SIG_DFL)
     threading.Thread(target=_watch_parent, args=(parent,), daemon=True, name="roadcollab-parent-watch").start()
-    _WORKER["task"], _WORKER["extra"] = task, extra
+    _WORKER["tasks"], _WORKER["extra"] = tasks, extra
 
 
 def _stop_workers(pool: ProcessPoolExecutor) -> None:
@@ -109,27 +137,26 @@ def _stop_workers(pool: ProcessPoolExecutor) -> None:
             p.join(timeout=2.0)
 
 
-def _run_chunk(indices: list) -> list:
-    """A pool worker's chunk, with the task and shared object its initializer received."""
-    return _WORKER["task"](indices, *_WORKER["extra"])
+def _run_chunk(job: int, indices: list) -> list:
+    """A pool worker's chunk of job ``job``, with the tasks and shared object its initializer received."""
+    return _WORKER["tasks"][job](indices, *_WORKER["extra"])
 
 
-def _pool_map(task: Callable, extra: tuple, chunks: list[range], workers: int, progress) -> list:
-    """Evaluate the chunks on a local process pool; results per chunk, in chunk order."""
+def _pool_map(tasks: tuple, extra: tuple, chunks: list[tuple[int, range]], workers: int,
+              on_done: Callable[[int, int], None]) -> list:
+    """Evaluate ``(job, runs)`` chunks on one local process pool, submitted in order; results per chunk.
+    ``on_done(job, runs)`` is called as each chunk finishes."""
     results: list = [None] * len(chunks)
-    done = 0
     pool = ProcessPoolExecutor(max_workers=min(workers, len(chunks)), mp_context=pool_context(),
-                               initializer=_init_worker, initargs=(task, extra, os.getpid()))
+                               initializer=_init_worker, initargs=(tasks, extra, os.getpid()))
     try:
-        pending = {pool.submit(_run_chunk, list(c)): k for k, c in enumerate(chunks)}
+        pending = {pool.submit(_run_chunk, job, list(c)): k for k, (job, c) in enumerate(chunks)}
         while pending:
             finished, _ = wait(pending, return_when=FIRST_COMPLETED)
             for fut in finished:
                 k = pending.pop(fut)
                 results[k] = fut.result()
-                done += len(chunks[k])
-                if progress is not None:
-                    progress(done)
+                on_done(chunks[k][0], len(chunks[k][1]))
     except BaseException:  # an error, Ctrl-C or SIGTERM: no worker may outlive the run
         _stop_workers(pool)
         raise
@@ -245,24 +272,80 @@ def map_runs(task: Callable[..., list[_R]], n_runs: int, *, workers: int | None 
     >>> map_runs(lambda idx: [10 * i for i in idx], 3)
     [0, 10, 20]
     """
-    n_runs = check_int("n_runs", n_runs, low=1)
+    return map_jobs([Job(task, n_runs, progress)], workers=workers, scheduler=scheduler, chunk_size=chunk_size,
+                    shared=shared)[0][0]
+
+
+def map_jobs(jobs: list[Job], *, workers: int | None = None, scheduler: str | None = None,
+             chunk_size: int | None = None, shared: object | None = None) -> list[tuple[list, float]]:
+    """Evaluate several jobs (:class:`Job`) that share ``shared``, on one pool, in order.
+
+    Serially the jobs run one after the other. On a local pool every chunk of every job is submitted at
+    once, the first job's first, so the pool starts once and the next job's chunks fill the workers while
+    the previous job's last chunks finish; the results are the same as from :func:`map_runs` per job.
+    On Dask the jobs run one after the other.
+
+    Parameters
+    ----------
+    jobs : list of Job
+    workers, scheduler, chunk_size, shared
+        As for :func:`map_runs` (``chunk_size`` per job).
+
+    Returns
+    -------
+    list of (list, float)
+        Per job: its results in run order, and the wall time from this call's start until its last run
+        finished, s.
+
+    Raises
+    ------
+    ParameterError
+        ``workers`` and ``scheduler`` both given, ``workers`` outside 1..256, or a job with no run.
+
+    Examples
+    --------
+    >>> [r for r, _ in map_jobs([Job(lambda idx: list(idx), 2), Job(lambda idx: [-i for i in idx], 3)])]
+    [[0, 1], [0, -1, -2]]
+    """
+    jobs = list(jobs)
+    if not jobs or not all(isinstance(j, Job) for j in jobs):
+        raise ParameterError("jobs must be a non-empty list of Job")
+    sizes = [check_int("n_runs", j.n_runs, low=1) for j in jobs]
     if workers is not None:
         workers = check_int("workers", workers, low=1, high=256)
     if scheduler is not None and workers is not None:
         raise ParameterError("give either workers (a local pool) or scheduler (a Dask cluster), not both")
-    single = _SingleThreaded(task)
+    path = kernel_path()
+    singles = tuple(_SingleThreaded(j.task, path) for j in jobs)
     extra: tuple[Any, ...] = () if shared is None else (shared,)
-    if workers is None and scheduler is None:
-        out: list[_R] = []
-        for i in range(n_runs):
-            out.extend(single([i], *extra))
-            if progress is not None:
-                progress(i + 1)
+    t0 = time.perf_counter()
+    out: list[tuple[list, float]] = []
+    if workers is None:
+        for job, single, n in zip(jobs, singles, sizes):
+            if scheduler is not None:
+                results = [r for chunk in _dask_map(single, extra, n, scheduler, chunk_size, job.progress)
+                           for r in chunk]
+            else:
+                results = []
+                for i in range(n):
+                    results.extend(single([i], *extra))
+                    if job.progress is not None:
+                        job.progress(i + 1)
+            out.append((results, time.perf_counter() - t0))
         return out
-    if scheduler is not None:
-        results = _dask_map(single, extra, n_runs, scheduler, chunk_size, progress)
-    else:
-        assert workers is not None  # neither None above, and scheduler is None here
-        chunks = _chunks(n_runs, chunk_size or max(1, -(-n_runs // (4 * workers))))
-        results = _pool_map(single, extra, chunks, workers, progress)
-    return [r for chunk in results for r in chunk]
+    chunks = [(k, c) for k, n in enumerate(sizes) for c in _chunks(n, chunk_size or max(1, -(-n // (4 * workers))))]
+    done, left, finished = [0] * len(jobs), [sum(1 for k, _ in chunks if k == j) for j in range(len(jobs))], \
+        [0.0] * len(jobs)
+
+    def on_done(job: int, runs: int) -> None:
+        done[job] += runs
+        left[job] -= 1
+        if not left[job]:
+            finished[job] = time.perf_counter() - t0
+        if jobs[job].progress is not None:
+            jobs[job].progress(done[job])
+
+    results = _pool_map(singles, extra, chunks, workers, on_done)
+    for k in range(len(jobs)):
+        out.append(([r for (job, _), chunk in zip(chunks, results) if job == k for r in chunk], finished[k]))
+    return out

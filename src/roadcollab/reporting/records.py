@@ -19,6 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from .. import __version__
+from ..lti.kernels import kernel_path
 from .output_folder import staged_file, staged_output
 
 __all__ = ["write_rows", "row_columns", "write_csv", "write_config", "strict_json", "markdown_table", "fmt",
@@ -157,7 +158,7 @@ def write_rows(path, rows, row_type: type) -> Path:
 
 
 def write_config(path, *, command: str, seed: int | None, config: dict, extra: dict | None = None) -> Path:
-    """Write ``config.json``: command, seed, configuration, package and platform versions.
+    """Write ``config.json``: command, seed, configuration, package and platform versions, kernel path.
 
     Parameters
     ----------
@@ -184,6 +185,7 @@ def write_config(path, *, command: str, seed: int | None, config: dict, extra: d
         "python": sys.version.split()[0],
         "numpy": np.__version__,
         "platform": platform.platform(),
+        "kernels": kernel_path(),     # compiled or reference: the same numbers to round-off, not bit for bit
         "config": config,
     }
     if extra:

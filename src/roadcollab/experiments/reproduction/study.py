@@ -20,6 +20,7 @@ applications (anomaly detection) use are :func:`roadcollab.experiments.anomalies
 
 from __future__ import annotations
 
+import time
 from dataclasses import dataclass
 from typing import Callable, Sequence
 
@@ -38,9 +39,10 @@ from ..pipeline import FleetPipeline, PipelineCache, fleet_and_run_seeds, record
 from .iri import RunIri, iri_rows, run_iri
 from .rows import WINDOWED_CONTROL, BoundRow, FleetRow, FusionRow, IriRow, MseRow, RunTraces
 from ..seeds import SeedPlan, as_seed_sequence, run_stream
-from ..runner import map_runs
+from ..runner import Job, map_jobs
 
-__all__ = ["ESTIMATORS", "WINDOWED_CONTROL", "RunResult", "ReproductionResult", "run_reproduction", "simulate_run"]
+__all__ = ["ESTIMATORS", "WINDOWED_CONTROL", "RunResult", "ReproductionResult", "run_reproduction", "run_reproductions",
+           "simulate_run"]
 
 
 #: Estimators scored by the reproduction, in the order of ``mse.csv`` and Fig. 4.
@@ -375,20 +377,69 @@ def run_reproduction(config: ExperimentConfig, seed: int, *, progress: Callable[
     >>> all(r.max_rel_diff_privacy < 1e-9 for r in rows)   # Theorem 1, measured
     True
     """
-    if not isinstance(config, ExperimentConfig):
-        raise ParameterError(f"config must be an ExperimentConfig, got {type(config).__name__}")
+    return run_reproductions([config], seed, progress=[progress], privacy=privacy, workers=workers, scheduler=scheduler,
+                             iri_segment_lengths=[iri_segment_length], cache=cache)[0][0]
+
+
+def run_reproductions(configs: Sequence[ExperimentConfig], seed: int, *,
+                      progress: Sequence[Callable[[int], None] | None] | None = None, privacy: bool = True,
+                      workers: int | None = None, scheduler: str | None = None,
+                      iri_segment_lengths: Sequence[float | None] | None = None, cache: PipelineCache | None = None
+                      ) -> list[tuple[ReproductionResult, float]]:
+    """Several reproductions of one seed on one pool (e.g. ``roadcollab reproduce`` and its measured-profile runs).
+
+    Each result equals :func:`run_reproduction` of its configuration alone; on a local pool the pool and
+    its workers' warm-up are paid once (:func:`~roadcollab.experiments.runner.map_jobs`).
+
+    Parameters
+    ----------
+    configs : sequence of ExperimentConfig
+    seed : int
+        Root seed of every reproduction.
+    progress : sequence of callable or None, optional
+        Per configuration, called with its number of finished runs.
+    privacy : bool
+        Run the obfuscated chain too.
+    workers : int, optional
+        Local process pool with this many worker processes (identical results).
+    scheduler : str, optional
+        Address of an existing Dask scheduler.
+    iri_segment_lengths : sequence of float or None, optional
+        Per configuration, as ``iri_segment_length`` of :func:`run_reproduction`.
+    cache : PipelineCache, optional
+        Per-fleet setup shared by the reproductions; a new one by default.
+
+    Returns
+    -------
+    list of (ReproductionResult, float)
+        Per configuration, its result and the wall time from the start (the setup of every configuration
+        included) until its last run finished, s.
+    """
+    configs = list(configs)
+    n = len(configs)
+    progress = [None] * n if progress is None else list(progress)
+    iri_segment_lengths = [None] * n if iri_segment_lengths is None else list(iri_segment_lengths)
+    if not n or len(progress) != n or len(iri_segment_lengths) != n:
+        raise ParameterError(f"configs ({n}), progress and iri_segment_lengths must have one entry per reproduction")
+    for config in configs:
+        if not isinstance(config, ExperimentConfig):
+            raise ParameterError(f"config must be an ExperimentConfig, got {type(config).__name__}")
     seed = check_int("seed", seed, low=0)
     if cache is not None and not isinstance(cache, PipelineCache):
         raise ParameterError(f"cache must be a PipelineCache, got {type(cache).__name__}")
-    fleet = fleet_and_run_seeds(config, seed)[0]
-    if iri_segment_length is not None:
-        iri_segment_length = check_positive("iri_segment_length", iri_segment_length)
-    cache = PipelineCache() if cache is None else cache
-    if not config.redraw_fleet and scheduler is None:   # built here once, inherited by a forked pool
+    fleets = [fleet_and_run_seeds(config, seed)[0] for config in configs]
+    iri_segment_lengths = [None if x is None else check_positive("iri_segment_length", x) for x in iri_segment_lengths]
+    cache, t0 = (PipelineCache() if cache is None else cache), time.perf_counter()
+    if scheduler is None:   # built here once, inherited by a forked pool
         # Single-threaded like the runs: the setup's small dense kernels (6x6 expm, 2x2 stacks) are
         # slower on two BLAS threads (a 6x6 expm 7.9 ms against 0.23-0.52 ms on one, measured).
         with threadpool_limits(limits=1):
-            cache.pipeline(config, seed).warm()
-    runs = map_runs(_ReproductionTask(config, seed, privacy, iri_segment_length), config.n_runs, workers=workers,
-                    scheduler=scheduler, progress=progress, shared=cache)
-    return ReproductionResult(config=config, seed=seed, fleet=fleet, runs=runs)
+            for config in configs:
+                if not config.redraw_fleet:
+                    cache.pipeline(config, seed).warm()
+    jobs = [Job(_ReproductionTask(config, seed, privacy, iri), config.n_runs, cb)
+            for config, iri, cb in zip(configs, iri_segment_lengths, progress)]
+    setup = time.perf_counter() - t0
+    done = map_jobs(jobs, workers=workers, scheduler=scheduler, shared=cache)
+    return [(ReproductionResult(config=config, seed=seed, fleet=fleet, runs=runs), setup + elapsed)
+            for config, fleet, (runs, elapsed) in zip(configs, fleets, done)]
