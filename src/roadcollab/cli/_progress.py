@@ -56,7 +56,11 @@ def progress_bars(bars: Sequence[tuple[int, str]]) -> tuple[Progress, list[Calla
     prog = Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
                     console=Console(stderr=True), transient=False)
     tasks = [prog.add_task(description, total=total) for total, description in bars]
-    return prog, [(lambda done, task=task: prog.update(task, completed=done)) for task in tasks]
+
+    def advance(task) -> Callable[[int], None]:
+        return lambda done: prog.update(task, completed=done)
+
+    return prog, [advance(task) for task in tasks]
 
 
 def run_with_progress(total: int, description: str, work: Callable[[Callable[[int], None]], _T]

@@ -111,7 +111,8 @@ def run(args: argparse.Namespace, command_line: str) -> int:
     check_dask_options(args)
     with staged_output(args.out, NAME, input_paths(args)) as out:
         cfg, mcfg = config_from_args(args), _measured_config(args)
-        configs, iris, labels = [cfg], [None], [NAME]
+        iris: list[float | None] = [None]     # the IRI is compared on the measured profile only
+        configs, labels = [cfg], [NAME]
         if mcfg is not None:
             configs, iris, labels = [cfg, mcfg], [None, IRI_SEGMENT_LENGTH], [NAME, "measured profile"]
         prog, callbacks = progress_bars([(c.n_runs, label) for c, label in zip(configs, labels)])

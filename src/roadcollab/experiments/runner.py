@@ -342,8 +342,9 @@ def map_jobs(jobs: list[Job], *, workers: int | None = None, scheduler: str | No
         left[job] -= 1
         if not left[job]:
             finished[job] = time.perf_counter() - t0
-        if jobs[job].progress is not None:
-            jobs[job].progress(done[job])
+        report = jobs[job].progress
+        if report is not None:
+            report(done[job])
 
     results = _pool_map(singles, extra, chunks, workers, on_done)
     for k in range(len(jobs)):
