@@ -28,6 +28,21 @@ def test_local_dask_cluster_matches_serial_bit_for_bit():
     assert serial == dask
 
 
+@pytest.mark.slow     # end-to-end: two studies on a worker pool (make test-slow)
+def test_reproductions_on_one_pool_match_each_alone_serially():
+    """roadcollab reproduce's two studies (the synthetic road, then the measured profile with the IRI) on one pool:
+    each result equals its study run alone and serially, bit for bit."""
+    from roadcollab.experiments.reproduction.iri import IRI_SEGMENT_LENGTH
+    from roadcollab.experiments.reproduction.study import run_reproductions
+
+    measured = dataclasses.replace(CFG, n_runs=3, road_profile="packaged")
+    (a, ta), (b, tb) = run_reproductions([CFG, measured], 7, workers=2, iri_segment_lengths=[None, IRI_SEGMENT_LENGTH])
+    assert a.table() == run_reproduction(CFG, 7).table()
+    alone = run_reproduction(measured, 7, iri_segment_length=IRI_SEGMENT_LENGTH)
+    assert b.table() == alone.table() and b.iri_rows() == alone.iri_rows()
+    assert 0 < min(ta, tb)
+
+
 def test_pool_keeps_shared_per_worker_not_per_chunk():
     """Six one-run chunks on two workers: each worker process holds one shared object for all its
     chunks (a copy per chunk would count 1 every time)."""
@@ -66,6 +81,61 @@ def test_two_runners_do_not_share_state():
     assert {p for p, _ in pa}.isdisjoint({p for p, _ in pb}) and os.getpid() not in {p for p, _ in pa}
     assert (a.calls, b.calls) == (3, 2)
     assert runner._WORKER == {}
+
+def test_jobs_share_one_pool_and_each_gets_its_own_results():
+    """map_jobs: two jobs on one pool of two workers: the same per-job results as map_runs, one shared object per
+    worker across both jobs (its chunk count keeps rising from the first job to the second), progress per job, and
+    each job's finishing time no later than the call's end."""
+    from roadcollab.experiments.runner import Job, map_jobs
+
+    seen: dict = {0: [], 1: []}
+    jobs = [Job(_Tagged(0), 5, seen[0].append), Job(_Tagged(1), 3, seen[1].append)]
+    (a, ta), (b, tb) = map_jobs(jobs, workers=2, chunk_size=1, shared=_Counter())
+    assert [(job, i) for job, i, _, _ in a] == [(0, i) for i in range(5)]
+    assert [(job, i) for job, i, _, _ in b] == [(1, i) for i in range(3)]
+    per_worker: dict = {}
+    for _, _, pid, calls in a + b:
+        per_worker.setdefault(pid, []).append(calls)
+    assert len(per_worker) <= 2 and sorted(c for v in per_worker.values() for c in v) != [1] * 8
+    assert all(sorted(v) == list(range(1, len(v) + 1)) for v in per_worker.values())   # one object per worker
+    assert seen[0][-1] == 5 and seen[1][-1] == 3 and 0 < min(ta, tb)
+    (sa, _), (sb, _) = map_jobs([Job(_Tagged(0), 5), Job(_Tagged(1), 3)], shared=_Counter())   # serially
+    assert [x[:2] for x in sa] == [x[:2] for x in a] and [x[:2] for x in sb] == [x[:2] for x in b]
+    with pytest.raises(ParameterError, match="non-empty list of Job"):
+        map_jobs([])
+
+
+class _Tagged:
+    def __init__(self, job):
+        self.job = job
+
+    def __call__(self, indices, counter):
+        counter.calls += 1
+        return [(self.job, i, os.getpid(), counter.calls) for i in indices]
+
+
+def _kernel_path_task(indices):
+    from roadcollab.lti.kernels import kernel_path
+
+    return [kernel_path() for _ in indices]
+
+
+@pytest.mark.parametrize("path", ["compiled", "reference"])
+def test_every_worker_runs_with_the_callers_kernel_path(monkeypatch, path):
+    """The caller's use_kernels choice reaches the pool's workers, against an environment variable that says the
+    other: spawned workers (as on a platform without fork, or Dask's) inherit the environment, not the choice."""
+    import multiprocessing
+
+    from roadcollab.experiments import runner
+    from roadcollab.lti.kernels import compiled_available, use_kernels
+
+    monkeypatch.setattr(runner, "pool_context", lambda: multiprocessing.get_context("spawn"))
+    monkeypatch.setenv("ROADCOLLAB_KERNELS", "reference" if path == "compiled" else "compiled")
+    expected = path if compiled_available() else "reference"
+    with use_kernels(path):
+        assert map_runs(_kernel_path_task, 4, workers=2, chunk_size=1) == [expected] * 4
+        assert map_runs(_kernel_path_task, 2) == [expected] * 2
+
 
 def test_pool_propagates_task_errors():
     with pytest.raises(ParameterError, match="run 3 refused"):
