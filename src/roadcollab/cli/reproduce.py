@@ -126,7 +126,7 @@ def run(args: argparse.Namespace, command_line: str) -> int:
                    "kernels": kernel_path(), "runs_s": elapsed,
                    "measured_runs_s": 0.0 if measured is None else measured[1]}
         summary = write_reproduction(result, out, command=command_line, elapsed=elapsed, measured=measured,
-                                     timings=timings)
+                                     timings=timings, workers=args.workers)   # --workers 2: figures on 2 cores
     headers, values = headline_table(result.table())
     print_table(f"MSE per vehicle ((m/s)^2), {plural(cfg.n_runs, 'run')}, {elapsed:.1f} s", headers,
                 [(str(v[0]), *(f"{x:.3g}" for x in v[1:])) for v in values])

@@ -15,6 +15,7 @@ from ..experiments.reproduction.study import ESTIMATORS
 from ..experiments.reproduction.iri import iri_ratios
 from ..experiments.reproduction.rows import (WINDOWED_CONTROL, BoundRow, FleetRow, FusionRow, IriRow, MseRow, RunTraces,
                                              TraceRow)
+from .figure_queue import FigureQueue
 from .records import markdown_table, output_dir, write_config, write_rows
 from .wording import plural
 
@@ -168,21 +169,7 @@ def _headline_table(rows: list[MseRow]) -> str:
     return markdown_table([dict(zip(headers, v)) for v in values], headers)
 
 
-class _FigureClock:
-    """Draws figures and adds up the wall time they take (``seconds``)."""
-
-    def __init__(self) -> None:
-        self.seconds = 0.0
-
-    def __call__(self, plot, *args, **kwargs):
-        t0 = time.perf_counter()
-        try:
-            return plot(*args, **kwargs)
-        finally:
-            self.seconds += time.perf_counter() - t0
-
-
-def _write_trace_figures(traces: RunTraces, out: Path, clock: _FigureClock) -> list[str]:
+def _write_trace_figures(traces: RunTraces, out: Path, clock: FigureQueue) -> list[str]:
     """Figs. 5-7 (a 3 s window of run 1) with their CSVs; returns the file stems written."""
     names = []
     for j in range(min(_N_TRACE_FIGURES, len(traces.plain))):
@@ -300,7 +287,7 @@ def _iri_lines(rows: list[IriRow], estimators, config) -> list[str]:
     ]
 
 
-def _measured_section(measured, out: Path, clock: _FigureClock) -> list[str]:
+def _measured_section(measured, out: Path, clock: FigureQueue) -> list[str]:
     """The run on the shipped measured profile: writes ``mse_measured.csv`` and its figure, returns report lines."""
     mres, mel = measured
     mrows = mres.table()
@@ -339,8 +326,8 @@ def _fleet_lines(fleet_rows: list[FleetRow]) -> list[str]:
     return ["## Fleet (`fleet.csv`)", "", markdown_table(fleet_rows, _FLEET_REPORT_COLUMNS), ""]
 
 
-def write_reproduction(result, out, *, command: str, elapsed: float, measured=None, timings: dict | None = None
-                       ) -> dict:
+def write_reproduction(result, out, *, command: str, elapsed: float, measured=None, timings: dict | None = None,
+                       workers: int | None = None) -> dict:
     """Write every output of ``roadcollab reproduce`` to the folder ``out``.
 
     Files: ``mse.csv``, ``bound_check.csv``, ``fig4_mse.png``, ``fig_fusion.png`` with ``fig_fusion.csv``,
@@ -363,13 +350,16 @@ def write_reproduction(result, out, *, command: str, elapsed: float, measured=No
     timings : dict of str to float, optional
         Wall time of the command's phases, s; recorded in ``config.json`` (``timings_s``) and the report
         with the time spent here writing the outputs (``report_s``) and the figures in it (``figures_s``).
+    workers : int, optional
+        With 2 or more, the figures are drawn at the end on up to that many processes
+        (:class:`~roadcollab.reporting.figure_queue.FigureQueue`); the same files.
 
     Returns
     -------
     dict
         :func:`reproduction_summary` of ``result``.
     """
-    t0, clock = time.perf_counter(), _FigureClock()
+    t0, clock = time.perf_counter(), FigureQueue(workers)
     out = output_dir(out)
     rows = result.table()
     bound = result.bound_check()
@@ -388,6 +378,7 @@ def write_reproduction(result, out, *, command: str, elapsed: float, measured=No
     if measured is not None:
         lines += _measured_section(measured, out, clock)
     lines += _fleet_lines(fleet_rows)
+    clock.finish()
     timings = {**(timings or {}), "figures_s": clock.seconds,
                "report_s": time.perf_counter() - t0}
     lines += _timing_lines(timings)
