@@ -19,13 +19,14 @@ The block diagonalisation of a received system (reordering, Sylvester splits, ei
 :mod:`roadcollab.lti._blockdiag_kernel`), ``Psi``'s pole residues and the hiding similarity of ``T~``, ``S~``
 (:mod:`roadcollab.lti._hide_kernel`) are compiled too.
 
-The default is ``"reference"`` (numpy). The compiled path passes the 300-segment exactness test and
-makes ``paper`` about 2.2-2.6x faster per segment than the reference path (the bench's alternating
-line), but every process that uses it pays 1.2-1.5 s of numba start-up (import, cache load, code
-generation) and about 145 MiB, and a fresh installation compiles for 14-16 s in one process, 8.4-11.8 s of wall
-time when the command line compiles the sender's kernels in a second one (docs/speed.md, "Seventh pass"). So it
-is opt-in, for long runs. The
-environment variable ``ROADCOLLAB_KERNELS=compiled`` (or ``reference``) sets the default, and
+The library's default is ``"reference"`` (numpy). The compiled path passes the 300-segment exactness test and
+makes ``paper`` about 2.7-2.8x faster per segment than the reference path (the bench's alternating
+line), but every process that uses it pays numba's start-up (import, cache load) and about 145 MiB, and a
+fresh installation compiles for 6-7 s of wall time when the command line compiles the sender's kernels in
+a second process (docs/speed.md, "Eighth pass"). So the commands that run Algorithm 2 many times
+(``roadcollab reproduce``, ``attack``, ``sweep``, ``bench``) use it unless told otherwise (``--kernels``),
+and a vehicle process or a library call keeps the numpy path. The
+environment variable ``ROADCOLLAB_KERNELS=compiled`` (or ``reference``) sets the default of both, and
 :func:`use_kernels` selects a path for a block of code (``roadcollab bench --kernels``).
 
 numba is compiled with ``error_model="numpy"``: its default ``"python"`` model checks every float
