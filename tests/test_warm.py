@@ -48,7 +48,7 @@ def test_the_second_process_compiles_the_specialisations_the_command_then_loads(
 
 @pytest.mark.parametrize("command, option, env, kernels, started, scale", [
     ("bench", None, None, "compiled", True, None), ("bench", None, "reference", "reference", True, None),
-    ("bench", None, None, "compiled", False, [100]),
+    ("bench", None, None, "compiled", True, [100]),
     ("reproduce", None, None, "compiled", True, None), ("reproduce", None, "reference", "reference", False, None),
     ("reproduce", "reference", "compiled", "reference", False, None),
     ("attack", "compiled", "reference", "compiled", True, None), ("sweep", None, "compiled", "compiled", True, None),

@@ -136,12 +136,9 @@ def _compile_alongside(args: argparse.Namespace, kernels: str | None) -> None:
     """On the compiled path with an empty kernel cache, compile the sender's kernels in a second
     process while the command compiles the receiver's (:mod:`roadcollab.experiments.bench.warm`): a
     fresh installation's first ``paper`` run compiles in about half the time. Only for the commands
-    with ``--kernels`` (they run the ``paper`` mechanism): on the compiled path, and for ``bench`` always (it
-    times ``paper`` on both paths) but not ``bench --scale`` (the numpy path on Dask)."""
-    if args.command == "bench":
-        if getattr(args, "scale", None) is not None:
-            return
-    elif kernels != "compiled":
+    with ``--kernels`` (they run the ``paper`` mechanism): on the compiled path, and for ``bench`` always
+    (it times ``paper`` on both paths; ``bench --scale``'s Dask workers load what it compiled)."""
+    if args.command != "bench" and kernels != "compiled":
         return
     from ..experiments.bench.warm import start_background_compile
     start_background_compile()
