@@ -110,6 +110,40 @@ def test_everything_runs_on_the_numpy_path_without_numba():
     assert out.stdout.strip() == "ok"
 
 
+def test_the_batch_commands_run_on_the_numpy_path_without_numba(tmp_path):
+    # reproduce defaults to the compiled path; where numba does not import it runs on numpy, says so in
+    # config.json and starts no second compile process.
+    code = (
+        "import sys, json; sys.modules['numba'] = None\n"
+        "from roadcollab.cli.main import main\n"
+        "from roadcollab.experiments.bench import warm\n"
+        f"out = {str(tmp_path / 'r')!r}\n"
+        "assert main(['reproduce', '--runs', '1', '--vehicles', '2', '--measured-runs', '0', '--out', out]) == 0\n"
+        "assert json.load(open(out + '/config.json'))['kernels'] == 'reference'\n"
+        "assert warm._STARTED == []\n"
+        "print('ok')\n")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.strip().splitlines()[-1] == "ok"
+
+
+@needs_numba
+@pytest.mark.parametrize("option, expected", [([], "compiled"), (["--kernels", "reference"], "reference")])
+def test_reproduce_runs_on_the_compiled_path_unless_told_otherwise(tmp_path, monkeypatch, option, expected):
+    import json
+
+    from roadcollab.cli.main import main
+    from roadcollab.experiments.bench import warm
+
+    monkeypatch.delenv("ROADCOLLAB_KERNELS", raising=False)
+    monkeypatch.setattr(warm, "start_background_compile", lambda: None)
+    out = tmp_path / "r"
+    assert main(["reproduce", "--runs", "1", "--vehicles", "2", "--measured-runs", "0", "--out", str(out), *option]) == 0
+    assert json.loads((out / "config.json").read_text())["kernels"] == expected
+    assert f"kernels {expected}" in (out / "report.md").read_text()
+    assert kernels.kernel_path() == "reference"     # the command's choice ends with the command
+
+
 @needs_numba
 def test_compiled_psi_draw_is_the_reference_draw_and_leaves_the_same_generator_state():
     # The compiled rejection loop draws from the caller's generator: the same candidates accepted, the
