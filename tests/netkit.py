@@ -1,13 +1,17 @@
 """Helpers of the networked-fleet tests: drive files, free loopback ports, brokers and CLI processes.
 
 Every process started here listens on 127.0.0.1 only and is stopped by the fixture that started it
-(by its own pid); every wait is bounded.
+(by its own pid); every wait is bounded. On Linux a process started here also gets SIGTERM when the test
+process that started it dies (``PR_SET_PDEATHSIG``), so a test run killed by hand leaves no server behind
+(Mosquitto drops its privileges, which clears that signal: its fixture's ``atexit`` still stops it on a
+normal exit).
 """
 
 from __future__ import annotations
 
 import atexit
 import csv
+import ctypes
 import os
 import shutil
 import signal
@@ -78,9 +82,27 @@ def rc(*args, timeout: float = 300.0, check: bool = True) -> subprocess.Complete
     return p
 
 
+try:    # looked up here, not in the forked child (no loading or locks between fork and exec)
+    _PRCTL = ctypes.CDLL(None, use_errno=True).prctl if sys.platform.startswith("linux") else None
+except (OSError, AttributeError):
+    _PRCTL = None
+_PR_SET_PDEATHSIG = 1
+
+
+def _die_with(parent: int):
+    """``preexec_fn``: SIGTERM to the child when ``parent`` dies; exit at once if it already has."""
+    def preexec() -> None:
+        if _PRCTL is not None:
+            _PRCTL(_PR_SET_PDEATHSIG, int(signal.SIGTERM))
+        if os.getppid() != parent:
+            os._exit(1)
+    return preexec
+
+
 def start(*cmd, log: Path) -> subprocess.Popen:
     with open(log, "ab") as fh:   # the child keeps its own copy of the descriptor
-        return subprocess.Popen(list(map(str, cmd)), stdout=fh, stderr=subprocess.STDOUT, start_new_session=True)
+        return subprocess.Popen(list(map(str, cmd)), stdout=fh, stderr=subprocess.STDOUT, start_new_session=True,
+                                preexec_fn=_die_with(os.getpid()))
 
 
 def start_serve(fleet: Path, store: Path, log: Path, *, listen: int | None = None, broker: str | None = None,

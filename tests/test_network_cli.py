@@ -118,3 +118,37 @@ def test_serve_status_lines_and_live_status(capsys):
     out = buf.getvalue()
     assert "hello from v1" in out and "serving: 3 vehicles, 2 segments, 7 contributions, 3 refused" in out
     assert "rounds" not in out and live.live is None
+
+
+def test_a_process_started_by_the_tests_stops_when_the_test_process_dies(tmp_path):
+    """A test run killed by hand (SIGKILL: no fixture runs) leaves no server behind: the child of netkit.start
+    gets SIGTERM from the kernel when its parent dies."""
+    import os
+    import signal
+    import subprocess
+    import sys
+    import time
+    from pathlib import Path
+
+    here = Path(__file__).resolve().parent
+    parent = subprocess.Popen([sys.executable, "-c", (
+        f"import sys, time; sys.path.insert(0, {str(here)!r}); import netkit\n"
+        f"p = netkit.start(sys.executable, '-c', 'import time; time.sleep(120)', log=__import__('pathlib').Path("
+        f"{str(tmp_path / 'child.log')!r}))\n"
+        "print(p.pid, flush=True); time.sleep(120)\n")], stdout=subprocess.PIPE, text=True)
+    try:
+        child = int(parent.stdout.readline())
+        parent.send_signal(signal.SIGKILL)
+        parent.wait(timeout=10)
+        end = time.monotonic() + 10
+        while time.monotonic() < end and Path(f"/proc/{child}").exists() and \
+                Path(f"/proc/{child}/stat").read_text().split()[2] != "Z":
+            time.sleep(0.05)
+        alive = Path(f"/proc/{child}").exists() and Path(f"/proc/{child}/stat").read_text().split()[2] != "Z"
+        if alive:
+            os.kill(child, signal.SIGKILL)
+        assert not alive, "the child outlived its parent"
+    finally:
+        parent.kill()
+        parent.wait(timeout=10)
+        parent.stdout.close()
