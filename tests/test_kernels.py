@@ -89,6 +89,13 @@ def test_kernel_environment_variable(monkeypatch):
         kernels.kernel_path()
 
 
+def _without_numba(code: str) -> str:
+    """Run ``code`` (which blocks ``import numba`` itself) in a fresh interpreter; its stripped stdout."""
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
+    assert out.returncode == 0, out.stderr
+    return out.stdout.strip()
+
+
 def test_everything_runs_on_the_numpy_path_without_numba():
     # A fresh interpreter where ``import numba`` fails (as when it is not installed).
     code = (
@@ -105,9 +112,7 @@ def test_everything_runs_on_the_numpy_path_without_numba():
         "a, b = steps[1].result.estimate, clear[1].result.estimate\n"
         "assert np.max(np.abs(a - b)) <= 1e-9 * np.max(np.abs(b))\n"
         "print('ok')\n")
-    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
-    assert out.returncode == 0, out.stderr
-    assert out.stdout.strip() == "ok"
+    assert _without_numba(code) == "ok"
 
 
 def test_the_batch_commands_run_on_the_numpy_path_without_numba(tmp_path):
@@ -122,9 +127,7 @@ def test_the_batch_commands_run_on_the_numpy_path_without_numba(tmp_path):
         "assert json.load(open(out + '/config.json'))['kernels'] == 'reference'\n"
         "assert warm._STARTED == []\n"
         "print('ok')\n")
-    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
-    assert out.returncode == 0, out.stderr
-    assert out.stdout.strip().splitlines()[-1] == "ok"
+    assert _without_numba(code).splitlines()[-1] == "ok"
 
 
 @needs_numba

@@ -23,8 +23,8 @@ if TYPE_CHECKING:     # annotations only: the subcommands import these lazily (s
 
 __all__ = ["input_paths", "out_path", "positive_int", "nonneg_int", "positive_float", "paillier_bits", "add_out_option",
            "add_dask_options", "add_road_options", "add_kernels_option", "BATCH_KERNELS", "add_limit_options",
-           "add_seed_option", "file_limits", "dask_options", "check_dask_options", "command_line", "progress", "progress_bars", "run_with_progress", "print_table", "plural",
-           "config_from_args"]
+           "add_seed_option", "file_limits", "dask_options", "check_dask_options", "command_line", "progress",
+           "progress_bars", "run_with_progress", "print_table", "plural", "config_from_args"]
 
 #: The shortest measured profile a simulated command accepts: lead-in + lead-out (15 m each), one metre
 #: of slack and a scored segment of at least 20 m.

@@ -19,8 +19,7 @@ import sys
 from pathlib import Path
 
 from .. import __version__
-from ..errors import ParameterError
-from ..lti.kernels import KERNELS, use_kernels
+from ..lti.kernels import environment_kernels, use_kernels
 from . import anomalies, attack, bench, calibrate, enroll, estimate, export, fleet, helper, iri, message, reproduce, \
     serve, simulate_drives, status, sweep, vehicle
 from . import map as map_cmd
@@ -125,11 +124,7 @@ def _kernels(args: argparse.Namespace) -> str | None:
     vehicle process starts faster on it)."""
     if not hasattr(args, "kernels"):
         return None
-    choice = args.kernels or os.environ.get("ROADCOLLAB_KERNELS") or BATCH_KERNELS
-    if choice not in KERNELS:
-        raise ParameterError(f"environment variable ROADCOLLAB_KERNELS must be 'compiled' or 'reference', "
-                             f"got {choice!r}")
-    return choice
+    return args.kernels or environment_kernels() or BATCH_KERNELS
 
 
 def _compile_alongside(args: argparse.Namespace, kernels: str | None) -> None:

@@ -111,14 +111,12 @@ def run(args: argparse.Namespace, command_line: str) -> int:
     check_dask_options(args)
     with staged_output(args.out, NAME, input_paths(args)) as out:
         cfg, mcfg = config_from_args(args), _measured_config(args)
-        iris: list[float | None] = [None]     # the IRI is compared on the measured profile only
-        configs, labels = [cfg], [NAME]
-        if mcfg is not None:
-            configs, iris, labels = [cfg, mcfg], [None, IRI_SEGMENT_LENGTH], [NAME, "measured profile"]
-        prog, callbacks = progress_bars([(c.n_runs, label) for c, label in zip(configs, labels)])
+        # (configuration, IRI segment length, bar label); the IRI is compared on the measured profile only
+        studies = [(cfg, None, NAME)] + ([] if mcfg is None else [(mcfg, IRI_SEGMENT_LENGTH, "measured profile")])
+        prog, callbacks = progress_bars([(c.n_runs, label) for c, _, label in studies])
         with prog:
-            done = run_reproductions(configs, args.seed, progress=callbacks, **dask_options(args),
-                                     iri_segment_lengths=iris, cache=PipelineCache())
+            done = run_reproductions([c for c, _, _ in studies], args.seed, progress=callbacks, **dask_options(args),
+                                     iri_segment_lengths=[iri for _, iri, _ in studies], cache=PipelineCache())
         (result, elapsed), measured = done[0], None
         if mcfg is not None:    # its wall time after the reproduction's last run (both share the pool)
             measured = (done[1][0], done[1][1] - elapsed)

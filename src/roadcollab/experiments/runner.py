@@ -335,8 +335,8 @@ def map_jobs(jobs: list[Job], *, workers: int | None = None, scheduler: str | No
             out.append((results, time.perf_counter() - t0))
         return out
     chunks = [(k, c) for k, n in enumerate(sizes) for c in _chunks(n, chunk_size or max(1, -(-n // (4 * workers))))]
-    done, left, finished = [0] * len(jobs), [sum(1 for k, _ in chunks if k == j) for j in range(len(jobs))], \
-        [0.0] * len(jobs)
+    done, finished = [0] * len(jobs), [0.0] * len(jobs)
+    left = [sum(1 for k, _ in chunks if k == j) for j in range(len(jobs))]      # chunks not yet finished
 
     def on_done(job: int, runs: int) -> None:
         done[job] += runs

@@ -48,7 +48,7 @@ import numpy as np
 
 from ..errors import ParameterError
 
-__all__ = ["KERNELS", "kernel_path", "use_kernels", "compiled_available", "jit_options", "read_only",
+__all__ = ["KERNELS", "kernel_path", "environment_kernels", "use_kernels", "compiled_available", "jit_options", "read_only",
            "block_eval", "pole_residue_eval"]
 
 KERNELS = ("compiled", "reference")
@@ -274,11 +274,27 @@ def kernel_path() -> str:
     ParameterError
         If ``ROADCOLLAB_KERNELS`` is set to anything else.
     """
-    choice = _CHOICE.get() or os.environ.get("ROADCOLLAB_KERNELS") or "reference"
-    if choice not in KERNELS:
+    choice = _CHOICE.get() or environment_kernels() or "reference"
+    return "compiled" if choice == "compiled" and compiled_available() else "reference"
+
+
+def environment_kernels() -> str | None:
+    """The path ``ROADCOLLAB_KERNELS`` asks for, or None when it is unset or empty.
+
+    Returns
+    -------
+    {"compiled", "reference"} or None
+
+    Raises
+    ------
+    ParameterError
+        If ``ROADCOLLAB_KERNELS`` is set to anything else.
+    """
+    choice = os.environ.get("ROADCOLLAB_KERNELS") or None
+    if choice is not None and choice not in KERNELS:
         raise ParameterError(f"environment variable ROADCOLLAB_KERNELS must be 'compiled' or 'reference', "
                              f"got {choice!r}")
-    return "compiled" if choice == "compiled" and compiled_available() else "reference"
+    return choice
 
 
 @contextlib.contextmanager

@@ -2,33 +2,29 @@
 
 A report's figures are independent of one another: each is a function of rows the report has already
 written. With ``workers`` of 2 or more (``roadcollab reproduce --workers 2``) they are queued and drawn on
-a local process pool when the report is done, so the two cores draw six figures in about half the 1.1-1.4 s
-one core takes (docs/speed.md, "Eighth pass"); the files are the same. Serially they are drawn at once, in
+the study runner's local process pool (:func:`~roadcollab.experiments.runner.map_runs`) when the report is
+done, so the two cores draw six figures in about half the 1.1-1.4 s one core takes (docs/speed.md, "Eighth
+pass"); the files are the same. Serially they are drawn at once, in
 this process.
 """
 
 from __future__ import annotations
 
-import signal
 import time
-from concurrent.futures import ProcessPoolExecutor
 from typing import Callable
 
 from .._validation import check_int
-from ..experiments.runner import pool_context
+from ..experiments.runner import map_runs
 
 __all__ = ["FigureQueue"]
 
 
-def _ignore_interrupts() -> None:
-    """Pool initializer: Ctrl-C reaches the whole process group; the parent handles it (a drawing
-    process finishes its figure, a fraction of a second, and exits)."""
-    signal.signal(signal.SIGINT, signal.SIG_IGN)
-    signal.signal(signal.SIGTERM, signal.SIG_DFL)
-
-
-def _draw(plot: Callable, args: tuple, kwargs: dict):
-    return plot(*args, **kwargs)
+def _draw(indices: list, queued: list) -> list:
+    """A pool worker's share of the queued figures (:func:`~roadcollab.experiments.runner.map_runs` task)."""
+    for i in indices:
+        plot, args, kwargs = queued[i]
+        plot(*args, **kwargs)
+    return [None] * len(indices)
 
 
 class FigureQueue:
@@ -66,14 +62,7 @@ class FigureQueue:
             return
         queued, self._queued = self._queued, []
         t0 = time.perf_counter()
-        pool = ProcessPoolExecutor(max_workers=min(self.workers or 1, len(queued)), mp_context=pool_context(),
-                                   initializer=_ignore_interrupts)
-        try:
-            for future in [pool.submit(_draw, plot, args, kwargs) for plot, args, kwargs in queued]:
-                future.result()
-        except BaseException:
-            pool.shutdown(wait=True, cancel_futures=True)
-            raise
+        try:    # the study runner's pool: one figure per chunk; on an error or interrupt it stops its workers
+            map_runs(_draw, len(queued), workers=self.workers, chunk_size=1, shared=queued)
         finally:
             self.seconds += time.perf_counter() - t0
-        pool.shutdown(wait=True)

@@ -398,12 +398,8 @@ def run_reproductions(configs: Sequence[ExperimentConfig], seed: int, *,
         Root seed of every reproduction.
     progress : sequence of callable or None, optional
         Per configuration, called with its number of finished runs.
-    privacy : bool
-        Run the obfuscated chain too.
-    workers : int, optional
-        Local process pool with this many worker processes (identical results).
-    scheduler : str, optional
-        Address of an existing Dask scheduler.
+    privacy, workers, scheduler
+        As for :func:`run_reproduction`.
     iri_segment_lengths : sequence of float or None, optional
         Per configuration, as ``iri_segment_length`` of :func:`run_reproduction`.
     cache : PipelineCache, optional
