@@ -304,6 +304,44 @@ def test_a_sender_validates_its_outgoing_message_with_the_receivers_certificate(
 
 
 @needs_numba
+def test_one_compiled_call_gives_the_radius_and_gain_of_the_separate_steps():
+    """``certificate_figures`` (radius, Stein solve, residual and the eigenvalues of ``X`` in one call) gives
+    what ``schur_certificate`` and ``np.linalg.eigvalsh`` give, to round-off; and
+    ``spectral_radius_and_gain`` on the compiled path agrees with the numpy path on stable, unstable,
+    defective and non-normal matrices (a Jordan block gets a larger gain than its diagonal)."""
+    from roadcollab.lti import stability
+    from roadcollab.lti._cert_kernel import certificate_figures, complex_schur, schur_certificate
+
+    rng = np.random.default_rng(3)
+    jordan = np.diag(np.full(12, 0.9)) + np.diag(np.full(11, 1.0), 1)
+    cases = [rng.standard_normal((n, n)) for n in (1, 4, 18, 22)]
+    cases = [A / (1.25 * np.max(np.abs(np.linalg.eigvals(A)))) for A in cases] + [1.01 * np.eye(3), jordan,
+                                                                               np.diag([0.5, 0.999999])]
+    for A in cases:
+        R, U = complex_schur(A)
+        radius, resid, scale, lo, hi = certificate_figures(R, U, A)
+        assert radius == float(np.max(np.abs(np.diag(R))))
+        if radius < 1.0:
+            X, resid0, scale0 = schur_certificate(R, U, A)
+            ev = np.linalg.eigvalsh(X)
+            assert (resid, scale) == (resid0, scale0)
+            assert abs(lo - ev[0]) <= 1e-12 * ev[-1] and abs(hi - ev[-1]) <= 1e-12 * ev[-1]
+        else:
+            assert np.isnan(resid) and np.isnan(lo)
+        with kernels.use_kernels("compiled"):
+            got = stability.spectral_radius_and_gain(A, schur=(R, U))
+        with kernels.use_kernels("reference"):
+            ref = stability.spectral_radius_and_gain(A, schur=(R, U))
+        assert got[0] == ref[0]
+        assert (np.isfinite(got[1]), np.isfinite(ref[1])) == (True, True) or got[1] == ref[1] == np.inf
+        if np.isfinite(ref[1]):
+            assert abs(got[1] - ref[1]) <= 1e-9 * ref[1]
+    with kernels.use_kernels("compiled"):
+        assert stability.spectral_radius_and_gain(jordan, schur=complex_schur(jordan))[1] > stability.spectral_radius_and_gain(
+            np.diag(np.full(12, 0.9)), schur=complex_schur(np.diag(np.full(12, 0.9))))[1]
+
+
+@needs_numba
 def test_compiled_schur_form_calls_dgees_as_scipy_does():
     """``complex_schur`` calls LAPACK's ``dgees`` directly with a cached workspace: the same real Schur
     form as ``scipy.linalg.schur``, bit for bit, before the compiled rotations."""

@@ -23,12 +23,12 @@ import scipy.linalg
 
 from .kernels import compiled_available, jit_options, read_only
 
-__all__ = ["schur_lyapunov", "schur_certificate", "complex_schur"]
+__all__ = ["schur_lyapunov", "schur_certificate", "certificate_figures", "complex_schur"]
 
 _KERNEL: dict[str, Any] = {}
 
 #: The functions compiled by :func:`_build` (rebound in place, so compiled callers find compiled callees).
-_COMPILED_NAMES = ("_stein_parts", "_stein_schur", "_certificate", "_real_to_complex")
+_COMPILED_NAMES = ("_stein_parts", "_stein_schur", "_certificate", "_certificate_figures", "_real_to_complex")
 
 
 def _build() -> dict[str, Any]:
@@ -36,7 +36,7 @@ def _build() -> dict[str, Any]:
     if _KERNEL:
         return _KERNEL
     if not compiled_available():
-        _KERNEL.update(schur=None, certificate=None, rsf2csf=None)
+        _KERNEL.update(schur=None, certificate=None, figures=None, rsf2csf=None)
         return _KERNEL
     import numba
 
@@ -44,7 +44,7 @@ def _build() -> dict[str, Any]:
     for name in _COMPILED_NAMES:
         globals()[name] = jit(globals()[name])
     _KERNEL.update(schur=globals()["_stein_schur"], certificate=globals()["_certificate"],
-                   rsf2csf=globals()["_real_to_complex"])
+                   figures=globals()["_certificate_figures"], rsf2csf=globals()["_real_to_complex"])
     return _KERNEL
 
 
@@ -179,6 +179,25 @@ def _certificate(R: np.ndarray, U: np.ndarray, A: np.ndarray) -> tuple[np.ndarra
     return X, resid, np.sqrt(nx) * (1.0 + na)
 
 
+def _certificate_figures(R: np.ndarray, U: np.ndarray, A: np.ndarray
+                         ) -> tuple[float, float, float, float, float]:   # pragma: no cover - compiled
+    """``(radius, resid, scale, lambda_min(X), lambda_max(X))``: the spectral radius from ``diag(R)``
+    and, when it is below 1, :func:`_certificate` and the extreme eigenvalues of its ``X`` (LAPACK
+    ``syevd`` through numba); otherwise, or when ``X`` is not finite, ``resid`` and the eigenvalues
+    are NaN."""
+    n = R.shape[0]
+    radius = 0.0
+    for i in range(n):
+        radius = max(radius, abs(R[i, i]))
+    if not radius < 1.0:
+        return radius, np.nan, np.nan, np.nan, np.nan
+    X, resid, scale = _certificate(R, U, A)
+    if not (np.isfinite(resid) and np.isfinite(scale)):
+        return radius, resid, scale, np.nan, np.nan
+    ev = np.linalg.eigvalsh(X)
+    return radius, resid, scale, ev[0], ev[n - 1]
+
+
 def _real_to_complex(T: np.ndarray, Z: np.ndarray) -> None:   # pragma: no cover - compiled
     """Real Schur form ``(T, Z)`` (complex copies) to complex Schur form in place: one Givens rotation per
     2x2 block, as ``scipy.linalg.rsf2csf``."""
@@ -302,3 +321,32 @@ def schur_certificate(R: np.ndarray, U: np.ndarray, A: np.ndarray) -> tuple[np.n
     X, resid, scale = _build()["certificate"](np.ascontiguousarray(R, complex), np.ascontiguousarray(U, complex),
                                                read_only(np.ascontiguousarray(A, float)))
     return X, float(resid), float(scale)
+
+
+def certificate_figures(R: np.ndarray, U: np.ndarray, A: np.ndarray) -> tuple[float, float, float, float, float]:
+    """Everything :func:`~roadcollab.lti.stability.spectral_radius_and_gain` needs from a complex Schur
+    form, in one compiled call: the radius, and the figures of :func:`schur_certificate` with the
+    extreme eigenvalues of its ``X`` (what the numpy path's ``eigvalsh`` gives, to round-off). One call
+    instead of a certificate call and ``np.linalg.eigvalsh``: the four certificates of a ``paper``
+    vehicle-segment spent about 30 us in the glue between them (docs/speed.md, "Ninth pass").
+
+    Parameters
+    ----------
+    R, U : (n, n) complex ndarray
+        ``R`` upper triangular, ``A = U R U^H``; ``n >= 1``.
+    A : (n, n) ndarray
+        Real, finite.
+
+    Returns
+    -------
+    radius : float
+        ``max |R_ii|``.
+    resid, scale : float
+        As :func:`schur_certificate`; NaN residual when ``radius >= 1`` (not computed) or ``X`` is not
+        finite.
+    lo, hi : float
+        Smallest and largest eigenvalue of ``X``; NaN when ``resid`` or ``scale`` is not finite.
+    """
+    out = _build()["figures"](np.ascontiguousarray(R, complex), np.ascontiguousarray(U, complex),
+                              read_only(np.ascontiguousarray(A, float)))
+    return float(out[0]), float(out[1]), float(out[2]), float(out[3]), float(out[4])

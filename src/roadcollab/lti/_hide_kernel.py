@@ -126,4 +126,7 @@ def qr_similarity(G: np.ndarray, A: np.ndarray, B: np.ndarray, C: np.ndarray
     """
     c = np.ascontiguousarray
     A2, B2, C2 = _build()["hide"](c(G, float), c(A, float), c(B, float), c(C, float))
-    return A2, B2, C2
+    # Arrays that own their data (numba's have its allocator's record as base): a message holding
+    # them can be frozen and its validation memoised, so encoding it does not check it again
+    # (45-50 us of every paper segment, measured).
+    return A2.copy(), B2.copy(), C2.copy()

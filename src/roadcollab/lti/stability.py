@@ -29,7 +29,7 @@ import numpy as np
 import numpy.typing as npt
 import scipy.linalg
 
-from ._cert_kernel import schur_certificate as _compiled_schur_certificate
+from ._cert_kernel import certificate_figures as _compiled_figures, schur_certificate as _compiled_schur_certificate
 from .kernels import kernel_path
 
 __all__ = ["LYAPUNOV_RTOL", "spectral_radius_and_gain"]
@@ -83,6 +83,18 @@ def _schur_lyapunov(R: np.ndarray, U: np.ndarray) -> np.ndarray:
     return np.real(U @ (Y / scale) @ U.conj().T)
 
 
+def _compiled_radius_and_gain(A: np.ndarray, schur: tuple[np.ndarray, np.ndarray]) -> tuple[float, float]:
+    """Radius and verified gain from a Schur form in one compiled call (the compiled path's
+    :func:`_schur_gain` with the radius and ``X``'s eigenvalues; inf gain if anything fails)."""
+    try:
+        radius, resid, scale, lo, hi = _compiled_figures(schur[0], schur[1], A)
+    except (np.linalg.LinAlgError, ValueError):
+        return float(np.max(np.abs(np.diag(schur[0])))), math.inf
+    if not (resid <= LYAPUNOV_RTOL * scale and lo > 0.0):       # NaN figures fail here too
+        return radius, math.inf
+    return radius, float(math.sqrt(hi / lo))
+
+
 def _schur_gain(A: np.ndarray, schur: tuple[np.ndarray, np.ndarray]) -> float:
     """The verified gain from :func:`_schur_lyapunov` (inf if it fails)."""
     try:
@@ -134,6 +146,15 @@ def spectral_radius_and_gain(A: npt.ArrayLike, *,
     A = np.asarray(A, dtype=float)
     if A.shape[0] == 0:
         return 0.0, 1.0
+    if schur is not None and not callable(schur) and kernel_path() == "compiled":
+        # The receiver's route on the compiled path (every system it decodes, and a sender's check
+        # of its own outgoing ones): radius, Stein solve, residual and eigenvalues in one call.
+        radius, gain = _compiled_radius_and_gain(A, schur)
+        if not radius < 1.0:
+            return radius, math.inf
+        if math.isfinite(gain):
+            return radius, gain
+        return radius, _last_resort_gain(A)
     with np.errstate(all="ignore"):      # huge but finite entries may overflow inside LAPACK
         if schur is not None and not callable(schur):
             radius = float(np.max(np.abs(np.diag(schur[0]))))
@@ -156,10 +177,16 @@ def spectral_radius_and_gain(A: npt.ArrayLike, *,
                     gain = math.inf
         if math.isfinite(gain):
             return radius, gain
+    return radius, _last_resort_gain(A)
+
+
+def _last_resort_gain(A: np.ndarray) -> float:
+    """The verified gain from scipy's Lyapunov solver, the fallback of every route (inf if it fails)."""
+    with np.errstate(all="ignore"):      # huge but finite entries may overflow inside LAPACK
         try:
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore", scipy.linalg.LinAlgWarning)   # judged by the residual
                 X = scipy.linalg.solve_discrete_lyapunov(A.T, np.eye(A.shape[0]))
-            return radius, _verified_gain(A, X)
+            return _verified_gain(A, X)
         except (np.linalg.LinAlgError, ValueError):
-            return radius, math.inf      # overflow inside the solver (inf/NaN): no certificate
+            return math.inf      # overflow inside the solver (inf/NaN): no certificate
