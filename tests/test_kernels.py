@@ -409,3 +409,38 @@ def test_every_kernel_is_compiled_once_for_every_mechanism():
     got = json.loads(out.stdout.strip().splitlines()[-1])
     assert got["kernels"] >= 10
     assert got["twice"] == {}
+
+
+@needs_numba
+def test_a_fresh_draw_applies_psi_without_forming_its_response_with_the_same_bits():
+    """``pole_residue_apply`` gives exactly the bits of ``pole_residue_eval``, ``inv2x2`` and ``matvec``; and a
+    ``paper`` message from a fresh draw (applied that way) equals, bit for bit, the one obfuscated through the
+    same draw's responses (a channel passed in)."""
+    from roadcollab.estimation.grid import SegmentGrid
+    from roadcollab.lti.batch2x2 import inv2x2, matvec
+    from roadcollab.lti.realisation import StateSpaceData
+    from roadcollab.lti.response import unit_circle
+    from roadcollab.privacy.obfuscation import ObfuscationChannel, ObfuscationSpec, draw_obfuscator, obfuscate_spectra
+
+    grid = SegmentGrid(sample_rate=200.0, n_samples=1000)
+    rng = np.random.default_rng(5)
+    E = rng.standard_normal((grid.n_bins, 2)) + 1j * rng.standard_normal((grid.n_bins, 2))
+    Wf = rng.standard_normal((grid.n_bins, 2)) + 1j * rng.standard_normal((grid.n_bins, 2))
+    with kernels.use_kernels("compiled"):
+        psi = draw_obfuscator(ObfuscationSpec(), grid, rng=6)
+        zp, res, direct = psi.pole_residues()
+        z = unit_circle(grid.omega_dt)
+        H = kernels.pole_residue_eval(zp, res.reshape(zp.size, 4), direct, z)
+        for inverse in (False, True):
+            got = kernels.pole_residue_apply(zp, res.reshape(zp.size, 4), direct, z, E, inverse=inverse)
+            assert np.array_equal(got, matvec(inv2x2(H) if inverse else H, E))
+        with pytest.raises(ValueError, match="2x2 D"):
+            kernels.pole_residue_apply(zp, res.reshape(zp.size, 4), direct, z, E[:-1])
+        A = np.diag([0.5, 0.8, -0.3, 0.9])
+        T = StateSpaceData(A, rng.standard_normal((4, 2)), rng.standard_normal((2, 4)), np.eye(2), grid.dt)
+        S = StateSpaceData(0.9 * A, rng.standard_normal((4, 2)), rng.standard_normal((2, 4)), np.zeros((2, 2)), grid.dt)
+        fresh, _, _ = obfuscate_spectra(T, S, E, Wf, grid, rng=np.random.default_rng(11))
+        ch = ObfuscationChannel.draw(T, S, grid, rng=np.random.default_rng(11))
+        kept, _, _ = obfuscate_spectra(T, S, E, Wf, grid, channel=ch)
+    assert np.array_equal(fresh.e, kept.e) and np.array_equal(fresh.wf, kept.wf)
+    assert np.array_equal(fresh.T.A, kept.T.A) and np.array_equal(fresh.S.C, kept.S.C)
