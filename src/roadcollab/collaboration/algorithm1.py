@@ -43,6 +43,7 @@ from ..lti.realisation import StateSpaceData, SystemCache, minreal, series
 from ..models.simulation import DiscretePlant, discretize_plant
 from ..estimation.grid import SegmentGrid
 from ..lti.batch2x2 import inv2x2, matmul, matvec, receiver_z
+from ..lti.kernels import kernel_path
 from ..lti.response import FrequencyResponseCache
 from ..models.vehicle import FleetSpec, Vehicle
 from .vehicle_estimate import VehicleEstimate
@@ -141,8 +142,7 @@ class CollaborativeEstimator:
         self._minus_Sinv_T = -matmul(inv2x2(self.S_f[act]), self.T_f[act])
         self._W_Pinv = self._w_act[:, None, None] * inv2x2(self.P_f[act])     # z = W P_hat^-1 y
         self.T_ss, self.S_ss = self._realisations()
-        # Responses of the realisations that are sent; the obfuscator and the receiver both
-        # use exactly these, so privacy changes no estimate beyond round-off.
+        # Responses of the sent realisations: obfuscator and receiver use exactly these (round-off only).
         self.T_ss_f = self.T_ss.frequency_response(om[act])
         self.S_ss_f = self.S_ss.frequency_response(om[act])
         self._offset = self.estimator.steady_offset()
@@ -286,12 +286,12 @@ class CollaborativeEstimator:
         S_prev = self.response_cache.response(message.S, om)
         E_prev = g.rfft(message.e)[act]
         Wf_prev = g.rfft(message.wf)[act]
-        # L1 w^f + L2 e = (-S_j^-1 T_j) W T_prev^-1 (e - S_prev w^f): eqs. 11-12 applied in
-        # factored form, matrix-vector products only (3x faster than forming L1 and L2;
-        # ``learning_filters`` forms them explicitly and the tests check both agree).
+        # L1 w^f + L2 e = (-S_j^-1 T_j) W T_prev^-1 (e - S_prev w^f): eqs. 11-12 in factored form, matrix-vector
+        # products only (3x faster than forming L1 and L2; ``learning_filters`` does, the tests check both agree).
         with np.errstate(all="ignore"):     # a hostile T may be singular: inf/NaN are the guard's to judge
-            T_inv = self.response_cache.response(message.T, om, inverse=True)
-            return receiver_z(None, S_prev, E_prev, Wf_prev, self._w_act, T_inv=T_inv)
+            compiled = kernel_path() == "compiled"      # then T^-1 inline in one pass (round-off apart)
+            T = self.response_cache.response(message.T, om, inverse=not compiled)
+            return receiver_z(T if compiled else None, S_prev, E_prev, Wf_prev, self._w_act, T_inv=None if compiled else T)
 
     def wf_from_active_z(self, z: np.ndarray) -> np.ndarray:
         """``w^f_j = -S_j^-1 T_j z`` from ``z`` on the active bins (see :meth:`received_z`).

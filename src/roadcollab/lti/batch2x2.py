@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..errors import ParameterError
-from ._bin_kernel import inv2, matvec2
+from ._bin_kernel import inv2, matvec2, receiver_z2
 from .kernels import kernel_path
 
 __all__ = ["inv2x2", "matvec", "matmul", "sigma_max_2x2", "condition_2x2", "receiver_z"]
@@ -167,6 +167,11 @@ def receiver_z(T: np.ndarray | None, S: np.ndarray, E: np.ndarray, Wf: np.ndarra
     if T_inv is None:
         if T is None:
             raise ParameterError("receiver_z needs T or T_inv")
+        if weight is not None and kernel_path() == "compiled":
+            # One pass, the steps below to round-off (_bin_kernel.receiver_z2).
+            fused = receiver_z2(T, S, E, Wf, weight)
+            if fused is not None:
+                return fused
         T_inv = inv2x2(T)
     z = matvec(T_inv, E - matvec(S, Wf))
     if weight is not None:
