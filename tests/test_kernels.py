@@ -4,6 +4,7 @@ import subprocess
 import sys
 
 import numpy as np
+import scipy.linalg
 import pytest
 
 from roadcollab.errors import ParameterError
@@ -265,9 +266,11 @@ def test_compiled_certificate_and_schur_form_agree_with_the_reference():
 
 @needs_numba
 def test_a_sender_validates_its_outgoing_message_with_the_receivers_certificate():
-    """On the compiled path a sender certifies its obfuscated ``T~``, ``S~`` as a receiver does on the
-    decoded bytes (Schur form, fused Stein solve and residual): the same radius and gain, bit for bit;
-    and the fused certificate's figures are those of the reference residual check, to round-off."""
+    """On the compiled path a sender certifies its obfuscated ``T~``, ``S~`` from the triangular form it
+    knows from their parts (no Schur decomposition of its own) and a receiver from the Schur form of the
+    decoded bytes: the same radius to 1e-12 and gain to 1e-9 relative; and the fused certificate's
+    figures are those of the reference residual check, to round-off. A sender whose form fails the
+    check certifies its system as a receiver does, bit for bit."""
     from roadcollab.collaboration.relay import Exchange, Relay
     from roadcollab.experiments.bench.study import _config_for
     from roadcollab.experiments.pipeline import FleetPipeline
@@ -288,8 +291,16 @@ def test_a_sender_validates_its_outgoing_message_with_the_receivers_certificate(
             got = protocol.decode(protocol.encode(sent.message), systems=SystemCache())
             for name in ("T", "S"):
                 mine, theirs = getattr(sent.message, name), getattr(got, name)
-                assert mine.stability() == theirs.stability()
-                assert np.isfinite(mine.stability()[1])
+                assert "_cert_form" in mine.__dict__
+                (r_mine, g_mine), (r_theirs, g_theirs) = mine.stability(), theirs.stability()
+                assert abs(r_mine - r_theirs) <= 1e-12 and abs(g_mine - g_theirs) <= 1e-9 * g_theirs
+                assert np.isfinite(g_mine)
+                # A form that fails its check (here: a wrong Q) leaves the receiver's route.
+                key, (Rf, Uf, sc, Q) = mine.__dict__["_cert_form"]
+                again = type(mine)(mine.A, mine.B, mine.C, mine.D, mine.dt)
+                object.__setattr__(again, "_cert_form", (key, (Rf, Uf, sc, np.eye(Q.shape[0]))))
+                assert stability.hidden_radius_and_gain(np.asarray(mine.A), Rf, Uf, sc, np.eye(Q.shape[0]))[1] == np.inf
+                assert again.stability() == theirs.stability()
                 A = np.asarray(mine.A, dtype=float)
                 R, U = complex_schur(A)
                 X, resid, scale = schur_certificate(R, U, A)
@@ -301,6 +312,58 @@ def test_a_sender_validates_its_outgoing_message_with_the_receivers_certificate(
                 assert resid <= stability.LYAPUNOV_RTOL * scale and abs(resid - resid0) <= 1e-6 * scale
     bad = np.full((3, 3), np.nan)
     assert np.isnan(schur_certificate(bad.astype(complex), np.eye(3, dtype=complex), np.eye(3))[1])
+
+
+def test_the_schur_form_of_a_series_connection_comes_from_its_parts():
+    """``series_schur``: ``A = U R U^H`` for the series connection's ``A``, ``U`` unitary, ``R`` upper
+    triangular with the parts' eigenvalues on its diagonal (oracle: the definition)."""
+    from roadcollab.lti.composed_schur import series_schur
+    from roadcollab.lti.realisation import StateSpaceData, series
+
+    rng = np.random.default_rng(11)
+    parts = [StateSpaceData(0.3 * rng.standard_normal((n, n)), rng.standard_normal((n, 2)),
+                            rng.standard_normal((2, n)), rng.standard_normal((2, 2)), 0.01) for n in (5, 3, 4)]
+    forms = [scipy.linalg.schur(p.A, output="complex") for p in parts]     # (R, U) each
+    first = series(parts[0], parts[1])
+    whole = series(first, parts[2])
+    R, U = series_schur(series_schur(forms[0], forms[1], first.A), forms[2], whole.A)
+    assert np.allclose(np.tril(R, -1), 0.0, atol=0.0)
+    assert np.linalg.norm(U.conj().T @ U - np.eye(12)) <= 1e-13
+    assert np.linalg.norm(U @ R @ U.conj().T - whole.A) <= 1e-13 * np.linalg.norm(whole.A)
+    ev, d = np.linalg.eigvals(whole.A), np.diag(R)
+    assert np.abs(d[:, None] - ev[None, :]).min(axis=1).max() <= 1e-12
+    assert np.abs(d[:, None] - ev[None, :]).min(axis=0).max() <= 1e-12
+
+
+@needs_numba
+def test_a_hidden_systems_certificate_from_its_form_is_the_one_of_its_schur_form():
+    """``hidden_figures`` on ``A~ = Q^T D^-1 A D Q`` from ``A``'s Schur form, ``D`` and ``Q`` gives the
+    radius, residual check and eigenvalues of ``X`` that ``certificate_figures`` gives from ``A~``'s own
+    Schur form, to round-off (the Lyapunov solution is unique); an unstable ``A`` gets no certificate."""
+    from roadcollab.lti._cert_kernel import certificate_figures, complex_schur, hidden_figures
+    from roadcollab.lti import stability
+
+    rng = np.random.default_rng(12)
+    for n, spread in ((1, 0), (6, 1), (18, 2), (22, 3)):
+        A = rng.standard_normal((n, n))
+        A /= 1.3 * np.max(np.abs(np.linalg.eigvals(A)))
+        scale = 2.0 ** rng.integers(-spread, spread + 1, n).astype(float)
+        Q = np.linalg.qr(rng.standard_normal((n, n)))[0]
+        At = Q.T @ (A * scale[None, :] / scale[:, None]) @ Q
+        R, U = scipy.linalg.schur(A, output="complex")
+        got = hidden_figures(R, U, scale, Q, At)
+        ref = certificate_figures(*complex_schur(At), At)
+        # The form's radius is A's (1 / 1.3 by construction); At's own Schur form carries the eigenvalue
+        # error of At, which grows with the spread of D (3.7e-11 at 2^20, so the spreads here are small).
+        assert abs(got[0] - 1 / 1.3) <= 1e-14 and abs(got[0] - ref[0]) <= 1e-11
+        assert got[1] <= stability.LYAPUNOV_RTOL * got[2]
+        assert abs(got[3] - ref[3]) <= 1e-9 * ref[4] and abs(got[4] - ref[4]) <= 1e-9 * ref[4]
+        with kernels.use_kernels("compiled"):
+            g = stability.hidden_radius_and_gain(At, R, U, scale, Q)[1]
+            g_ref = stability.spectral_radius_and_gain(At, schur=complex_schur(At))[1]
+        assert abs(g - g_ref) <= 1e-9 * g_ref
+    R, U = scipy.linalg.schur(1.01 * np.eye(3), output="complex")
+    assert stability.hidden_radius_and_gain(1.01 * np.eye(3), R, U, np.ones(3), np.eye(3))[1] == np.inf
 
 
 @needs_numba

@@ -23,12 +23,16 @@ import scipy.linalg
 
 from .kernels import compiled_available, jit_options, read_only
 
-__all__ = ["schur_lyapunov", "schur_certificate", "certificate_figures", "complex_schur"]
+__all__ = ["schur_lyapunov", "schur_certificate", "certificate_figures", "hidden_figures", "complex_schur"]
 
 _KERNEL: dict[str, Any] = {}
 
+#: The right-hand side the compiled solves take when they solve with ``-I`` (not read).
+_NO_RHS = np.zeros((1, 1), dtype=complex)
+
 #: The functions compiled by :func:`_build` (rebound in place, so compiled callers find compiled callees).
-_COMPILED_NAMES = ("_stein_parts", "_stein_schur", "_certificate", "_certificate_figures", "_real_to_complex")
+_COMPILED_NAMES = ("_stein_parts", "_stein_schur", "_certificate", "_certificate_figures", "_hidden_figures",
+                   "_real_to_complex")
 
 
 def _build() -> dict[str, Any]:
@@ -36,7 +40,7 @@ def _build() -> dict[str, Any]:
     if _KERNEL:
         return _KERNEL
     if not compiled_available():
-        _KERNEL.update(schur=None, certificate=None, figures=None, rsf2csf=None)
+        _KERNEL.update(schur=None, certificate=None, figures=None, hidden=None, rsf2csf=None)
         return _KERNEL
     import numba
 
@@ -44,14 +48,15 @@ def _build() -> dict[str, Any]:
     for name in _COMPILED_NAMES:
         globals()[name] = jit(globals()[name])
     _KERNEL.update(schur=globals()["_stein_schur"], certificate=globals()["_certificate"],
-                   figures=globals()["_certificate_figures"], rsf2csf=globals()["_real_to_complex"])
+                   figures=globals()["_certificate_figures"], hidden=globals()["_hidden_figures"], rsf2csf=globals()["_real_to_complex"])
     return _KERNEL
 
 
-def _stein_parts(R: np.ndarray) -> tuple[np.ndarray, np.ndarray]:   # pragma: no cover - compiled
+def _stein_parts(R: np.ndarray, H: np.ndarray, general: bool) -> tuple[np.ndarray, np.ndarray]:   # pragma: no cover - compiled
     """``Y`` of ``R^H Y R - Y = -I`` for an upper triangular ``R`` (module docstring) as ``(Yr, Yi)``,
-    row ``j`` = column ``j`` of ``Y``. Complex numbers as real pairs, plain loops: no array expressions,
-    which cost seconds of first-run compilation."""
+    row ``j`` = column ``j`` of ``Y``; ``R^H Y R - Y = -H`` if ``general`` (``H`` is not read
+    otherwise). Complex numbers as real pairs, plain loops: no array expressions, which cost seconds
+    of first-run compilation."""
     n = R.shape[0]
     Rr = np.empty((n, n))
     Ri = np.empty((n, n))                           # R^H column k = conj(R row k)
@@ -69,14 +74,15 @@ def _stein_parts(R: np.ndarray) -> tuple[np.ndarray, np.ndarray]:   # pragma: no
         for i in range(n):
             vr[i] = 0.0
             vi[i] = 0.0
-            hr[i] = 0.0
-            hi[i] = 0.0
+            hr[i] = -H[i, j].real if general else 0.0
+            hi[i] = -H[i, j].imag if general else 0.0
         for l in range(j):                          # v = sum_{l<j} y_l R_lj
             a, b = Rr[l, j], Ri[l, j]
             for i in range(n):
                 vr[i] += Yr[l, i] * a - Yi[l, i] * b
                 vi[i] += Yr[l, i] * b + Yi[l, i] * a
-        hr[j] = -1.0                                # h = -e_j - R^H v
+        if not general:
+            hr[j] = -1.0                            # h = -e_j - R^H v (-H e_j - R^H v if general)
         for k in range(n):
             a, b = vr[k], vi[k]
             for i in range(k, n):                   # (R^H)_ik = conj(R_ki)
@@ -102,7 +108,7 @@ def _stein_parts(R: np.ndarray) -> tuple[np.ndarray, np.ndarray]:   # pragma: no
 def _stein_schur(R: np.ndarray) -> np.ndarray:   # pragma: no cover - compiled
     """``Y`` of ``R^H Y R - Y = -I`` for an upper triangular ``R``, complex (:func:`_stein_parts`)."""
     n = R.shape[0]
-    Yr, Yi = _stein_parts(R)
+    Yr, Yi = _stein_parts(R, np.zeros((1, 1), dtype=np.complex128), False)
     Y = np.empty((n, n), dtype=np.complex128)
     for j in range(n):
         for k in range(n):
@@ -110,13 +116,16 @@ def _stein_schur(R: np.ndarray) -> np.ndarray:   # pragma: no cover - compiled
     return Y
 
 
-def _certificate(R: np.ndarray, U: np.ndarray, A: np.ndarray) -> tuple[np.ndarray, float, float]:   # pragma: no cover - compiled
+def _certificate(R: np.ndarray, U: np.ndarray, A: np.ndarray, H: np.ndarray, general: bool
+                 ) -> tuple[np.ndarray, float, float]:   # pragma: no cover - compiled
     """The Stein solve, ``X = Re(U Y U^H)`` symmetrised, and the residual figures of
     :func:`~roadcollab.lti.stability._verified_gain` in one call: ``(X, ||A^T X A - X + I||_F,
-    ||X||_F (1 + ||A||_F^2))``; the residual is NaN when ``X`` is not finite. Real pairs, plain loops,
-    every inner loop a contiguous ``axpy`` (so numba vectorises it; reductions it cannot reorder)."""
+    ||X||_F (1 + ||A||_F^2))``; the residual is NaN when ``X`` is not finite. With ``general``, ``Y``
+    solves ``R^H Y R - Y = -H`` (``A = U^-H R U^H`` with ``H = (U^H U)^-1``: :func:`_hidden_figures`);
+    the residual is always the one of ``A`` itself. Real pairs, plain loops, every inner loop a
+    contiguous ``axpy`` (so numba vectorises it; reductions it cannot reorder)."""
     n = R.shape[0]
-    Yr, Yi = _stein_parts(R)                        # Y[k, j] = Yr[j, k] + i Yi[j, k]
+    Yr, Yi = _stein_parts(R, H, general)                        # Y[k, j] = Yr[j, k] + i Yi[j, k]
     Ur = np.empty((n, n))
     Ui = np.empty((n, n))
     Ha = np.empty((n, n))                           # U^H = Ha + i Hb
@@ -179,23 +188,46 @@ def _certificate(R: np.ndarray, U: np.ndarray, A: np.ndarray) -> tuple[np.ndarra
     return X, resid, np.sqrt(nx) * (1.0 + na)
 
 
-def _certificate_figures(R: np.ndarray, U: np.ndarray, A: np.ndarray
+def _certificate_figures(R: np.ndarray, U: np.ndarray, A: np.ndarray, H: np.ndarray, general: bool
                          ) -> tuple[float, float, float, float, float]:   # pragma: no cover - compiled
     """``(radius, resid, scale, lambda_min(X), lambda_max(X))``: the spectral radius from ``diag(R)``
     and, when it is below 1, :func:`_certificate` and the extreme eigenvalues of its ``X`` (LAPACK
     ``syevd`` through numba); otherwise, or when ``X`` is not finite, ``resid`` and the eigenvalues
-    are NaN."""
+    are NaN. ``H``, ``general``: as :func:`_certificate`."""
     n = R.shape[0]
     radius = 0.0
     for i in range(n):
         radius = max(radius, abs(R[i, i]))
     if not radius < 1.0:
         return radius, np.nan, np.nan, np.nan, np.nan
-    X, resid, scale = _certificate(R, U, A)
+    X, resid, scale = _certificate(R, U, A, H, general)
     if not (np.isfinite(resid) and np.isfinite(scale)):
         return radius, resid, scale, np.nan, np.nan
     ev = np.linalg.eigvalsh(X)
     return radius, resid, scale, ev[0], ev[n - 1]
+
+
+def _hidden_figures(R: np.ndarray, U: np.ndarray, scale: np.ndarray, Q: np.ndarray, A: np.ndarray
+                    ) -> tuple[float, float, float, float, float]:   # pragma: no cover - compiled
+    """:func:`_certificate_figures` of ``A = Q^T D^-1 (U R U^H) D Q``, ``D = diag(scale)``: with
+    ``W = Q^T D U`` and ``H = (W^H W)^-1 = U^H D^-2 U`` (``U`` unitary, ``Q`` orthogonal), ``A = W^-H R W^H``
+    and ``X = Re(W Y W^H)`` for ``R^H Y R - Y = -H`` (:mod:`~roadcollab.lti.composed_schur`)."""
+    n = R.shape[0]
+    W = np.zeros((n, n), dtype=np.complex128)
+    for k in range(n):                              # W = Q^T (D U): row k of D U, scattered
+        sk = scale[k]
+        for i in range(n):
+            q = Q[k, i] * sk
+            for j in range(n):
+                W[i, j] += q * U[k, j]
+    H = np.zeros((n, n), dtype=np.complex128)
+    for k in range(n):                              # H = sum_k conj(U_k.)^T U_k. / scale_k^2
+        f = 1.0 / (scale[k] * scale[k])
+        for i in range(n):
+            c = np.conj(U[k, i]) * f
+            for j in range(n):
+                H[i, j] += c * U[k, j]
+    return _certificate_figures(R, W, A, H, True)
 
 
 def _real_to_complex(T: np.ndarray, Z: np.ndarray) -> None:   # pragma: no cover - compiled
@@ -319,7 +351,7 @@ def schur_certificate(R: np.ndarray, U: np.ndarray, A: np.ndarray) -> tuple[np.n
         ``||X||_F (1 + ||A||_F^2)``.
     """
     X, resid, scale = _build()["certificate"](np.ascontiguousarray(R, complex), np.ascontiguousarray(U, complex),
-                                               read_only(np.ascontiguousarray(A, float)))
+                                               read_only(np.ascontiguousarray(A, float)), _NO_RHS, False)
     return X, float(resid), float(scale)
 
 
@@ -348,5 +380,34 @@ def certificate_figures(R: np.ndarray, U: np.ndarray, A: np.ndarray) -> tuple[fl
         Smallest and largest eigenvalue of ``X``; NaN when ``resid`` or ``scale`` is not finite.
     """
     out = _build()["figures"](np.ascontiguousarray(R, complex), np.ascontiguousarray(U, complex),
-                              read_only(np.ascontiguousarray(A, float)))
+                              read_only(np.ascontiguousarray(A, float)), _NO_RHS, False)
+    return float(out[0]), float(out[1]), float(out[2]), float(out[3]), float(out[4])
+
+
+def hidden_figures(R: np.ndarray, U: np.ndarray, scale: np.ndarray, Q: np.ndarray, A: np.ndarray
+                   ) -> tuple[float, float, float, float, float]:
+    """:func:`certificate_figures` of ``A = Q^T D^-1 (U R U^H) D Q`` from that form, without a Schur
+    decomposition of ``A``: ``Y`` of ``R^H Y R - Y = -H`` with ``W = Q^T D U``, ``H = U^H D^-2 U``, and
+    ``X = Re(W Y W^H)`` solves ``A^T X A - X = -I`` (:mod:`~roadcollab.lti.composed_schur`); the residual
+    is checked against ``A`` itself as always. A sender knows this form of its hidden ``T~``, ``S~``.
+
+    Parameters
+    ----------
+    R, U : (n, n) complex ndarray
+        A complex Schur form of the matrix before hiding; ``n >= 1``.
+    scale : (n,) ndarray
+        ``diag(D)``, positive.
+    Q : (n, n) ndarray
+        Orthogonal.
+    A : (n, n) ndarray
+        Real, finite: the hidden matrix.
+
+    Returns
+    -------
+    radius, resid, scale, lo, hi : float
+        As :func:`certificate_figures`.
+    """
+    c = np.ascontiguousarray
+    out = _build()["hidden"](c(R, complex), c(U, complex), read_only(c(scale, float)), read_only(c(Q, float)),
+                             read_only(c(A, float)))
     return float(out[0]), float(out[1]), float(out[2]), float(out[3]), float(out[4])

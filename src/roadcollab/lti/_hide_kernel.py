@@ -60,8 +60,8 @@ def _mul_t(X: np.ndarray, Y: np.ndarray) -> np.ndarray:   # pragma: no cover - c
 
 
 def _qr_similarity(G: np.ndarray, A: np.ndarray, B: np.ndarray, C: np.ndarray
-                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:   # pragma: no cover - compiled
-    """``(Q^T A Q, Q^T B, C Q)`` for the orthogonal factor ``Q`` of ``G = Q R``, ``diag(R) > 0``."""
+                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:   # pragma: no cover - compiled
+    """``(Q^T A Q, Q^T B, C Q, Q)`` for the orthogonal factor ``Q`` of ``G = Q R``, ``diag(R) > 0``."""
     n = G.shape[0]
     R = G.copy()
     Q = np.zeros((n, n))
@@ -105,12 +105,12 @@ def _qr_similarity(G: np.ndarray, A: np.ndarray, B: np.ndarray, C: np.ndarray
             for i in range(n):
                 Q[i, j] = -Q[i, j]
     AQ = _mul(A, Q)
-    return _mul_t(Q, AQ), _mul_t(Q, B), _mul(C, Q)
+    return _mul_t(Q, AQ), _mul_t(Q, B), _mul(C, Q), Q
 
 
 def qr_similarity(G: np.ndarray, A: np.ndarray, B: np.ndarray, C: np.ndarray
-                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """``(Q^T A Q, Q^T B, C Q)`` with ``Q`` the orthogonal factor of ``G`` whose ``R`` has a positive
+                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """``(Q^T A Q, Q^T B, C Q, Q)`` with ``Q`` the orthogonal factor of ``G`` whose ``R`` has a positive
     diagonal (:func:`~roadcollab.lti.realisation.random_orthogonal` of the same ``G``, to round-off).
 
     Parameters
@@ -123,10 +123,12 @@ def qr_similarity(G: np.ndarray, A: np.ndarray, B: np.ndarray, C: np.ndarray
     -------
     A2, B2, C2 : ndarray
         The transformed matrices.
+    Q : (n, n) ndarray
+        The orthogonal factor (a sender certifies ``A2`` from it and ``A``'s Schur form).
     """
     c = np.ascontiguousarray
-    A2, B2, C2 = _build()["hide"](c(G, float), c(A, float), c(B, float), c(C, float))
+    A2, B2, C2, Q = _build()["hide"](c(G, float), c(A, float), c(B, float), c(C, float))
     # Arrays that own their data (numba's have its allocator's record as base): a message holding
     # them can be frozen and its validation memoised, so encoding it does not check it again
     # (45-50 us of every paper segment, measured).
-    return A2.copy(), B2.copy(), C2.copy()
+    return A2.copy(), B2.copy(), C2.copy(), Q

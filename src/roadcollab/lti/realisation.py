@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from collections import OrderedDict
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -15,7 +16,7 @@ from .response import content_key, dlti_frequency_response
 from ._cert_kernel import complex_schur as _compiled_schur
 from ._hide_kernel import qr_similarity as _compiled_qr_similarity
 from .kernels import kernel_path
-from .stability import spectral_radius_and_gain
+from .stability import hidden_radius_and_gain, spectral_radius_and_gain
 
 if TYPE_CHECKING:
     import control
@@ -200,10 +201,17 @@ class StateSpaceData:
         if self.__dict__.get("_received"):
             return spectral_radius_and_gain(A, schur=self.schur())
         if kernel_path() == "compiled":
-            # The computation a receiver makes on these bytes (the branch above): a sender validating
-            # its outgoing message then knows the receiver's certificate passes, and pays a Schur form
-            # instead of an eigendecomposition (docs/speed.md, "Fifth pass"). Not memoised as the
-            # object's Schur form, so its frequency response takes the same path as before.
+            form = self._memo_get("_cert_form", self._digest())
+            if form is not None:
+                # A hidden T~, S~ whose sender knows a triangular form from the parts' Schur forms
+                # (random_similarity): the certificate without a Schur decomposition, 2 x 45 us of
+                # every paper segment (docs/speed.md, "Ninth pass"); checked against A all the same.
+                radius, gain = hidden_radius_and_gain(A, *form)
+                if math.isfinite(gain):
+                    return radius, gain
+            # The computation a receiver makes on these bytes (the branch above): a Schur form instead
+            # of an eigendecomposition (docs/speed.md, "Fifth pass"). Not memoised as the object's
+            # Schur form, so its frequency response takes the same path as before.
             return spectral_radius_and_gain(A, schur=_complex_schur(A))
         return spectral_radius_and_gain(A, schur=self.schur, eig=self.eig())
 
@@ -345,7 +353,8 @@ def random_orthogonal(n: int, rng: np.random.Generator) -> np.ndarray:
     return Q * np.sign(np.diag(R))
 
 
-def random_similarity(sys: StateSpaceData, rng: np.random.Generator) -> StateSpaceData:
+def random_similarity(sys: StateSpaceData, rng: np.random.Generator, *,
+                      schur: tuple[np.ndarray, np.ndarray] | None = None) -> StateSpaceData:
     """``similarity(sys, random_orthogonal(sys.order, rng), balance=True)``: the hiding transform of an
     obfuscated realisation. On the compiled path the ``QR`` factor, its sign fix and the products are
     one numba call (:mod:`~roadcollab.lti._hide_kernel`; same ``Q`` to round-off, the generator advanced
@@ -355,6 +364,11 @@ def random_similarity(sys: StateSpaceData, rng: np.random.Generator) -> StateSpa
     ----------
     sys : StateSpaceData
     rng : numpy.random.Generator
+    schur : (R, U), optional
+        A complex Schur form of ``sys.A`` (e.g. :func:`~roadcollab.lti.composed_schur.series_schur`).
+        On the compiled path the result keeps the triangular form it implies, and its stability
+        certificate starts from that form instead of a Schur decomposition of its own
+        (:meth:`StateSpaceData.stability`).
 
     Returns
     -------
@@ -364,19 +378,23 @@ def random_similarity(sys: StateSpaceData, rng: np.random.Generator) -> StateSpa
     if kernel_path() != "compiled" or n == 0:
         return similarity(sys, random_orthogonal(n, rng), balance=True)
     G = rng.standard_normal((n, n))
-    A, B, C = _balanced(sys)
-    A2, B2, C2 = _compiled_qr_similarity(G, A, B, C)
-    return StateSpaceData(A2, B2, C2, sys.D.copy(), sys.dt)
+    A, B, C, scale = _balanced(sys)
+    A2, B2, C2, Q = _compiled_qr_similarity(G, A, B, C)
+    out = StateSpaceData(A2, B2, C2, sys.D.copy(), sys.dt)
+    if schur is not None:
+        object.__setattr__(out, "_cert_form", (out._digest(), (schur[0], schur[1], scale, Q)))
+    return out
 
 
-def _balanced(sys: StateSpaceData) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """``(A, B, C)`` with the states scaled by LAPACK ``dgebal`` (powers of two, no permutation)."""
+def _balanced(sys: StateSpaceData) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """``(A, B, C, scale)`` with the states scaled by LAPACK ``dgebal`` (powers of two, no permutation):
+    ``D^-1 A D``, ``D^-1 B``, ``C D`` for ``D = diag(scale)``."""
     # LAPACK dgebal directly: what scipy.linalg.matrix_balance(A, permute=False, separate=True)
     # calls, the same output bit for bit, without its wrapper (29 -> 9 us at n = 18, measured).
     A, _, _, scale, info = scipy.linalg.lapack.dgebal(np.asarray(sys.A, dtype=float), scale=1, permute=0)
     if info < 0:
         raise ValueError(f"dgebal failed (info={info})")
-    return A, sys.B / scale[:, None], sys.C * scale[None, :]
+    return A, sys.B / scale[:, None], sys.C * scale[None, :], scale
 
 
 def similarity(sys: StateSpaceData, Q: np.ndarray, *, balance: bool = False) -> StateSpaceData:
@@ -404,5 +422,5 @@ def similarity(sys: StateSpaceData, Q: np.ndarray, *, balance: bool = False) -> 
     -------
     StateSpaceData
     """
-    A, B, C = _balanced(sys) if balance and sys.order else (sys.A, sys.B, sys.C)
+    A, B, C = _balanced(sys)[:3] if balance and sys.order else (sys.A, sys.B, sys.C)
     return StateSpaceData(Q.T @ A @ Q, Q.T @ B, C @ Q, sys.D.copy(), sys.dt)

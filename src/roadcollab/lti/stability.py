@@ -30,9 +30,10 @@ import numpy.typing as npt
 import scipy.linalg
 
 from ._cert_kernel import certificate_figures as _compiled_figures, schur_certificate as _compiled_schur_certificate
+from ._cert_kernel import hidden_figures as _hidden_figures
 from .kernels import kernel_path
 
-__all__ = ["LYAPUNOV_RTOL", "spectral_radius_and_gain"]
+__all__ = ["LYAPUNOV_RTOL", "spectral_radius_and_gain", "hidden_radius_and_gain"]
 
 #: Largest relative residual of the Lyapunov solution ``A^T X A - X + I``.
 LYAPUNOV_RTOL = 1e-8
@@ -91,6 +92,40 @@ def _compiled_radius_and_gain(A: np.ndarray, schur: tuple[np.ndarray, np.ndarray
     except (np.linalg.LinAlgError, ValueError):
         return float(np.max(np.abs(np.diag(schur[0])))), math.inf
     if not (resid <= LYAPUNOV_RTOL * scale and lo > 0.0):       # NaN figures fail here too
+        return radius, math.inf
+    return radius, float(math.sqrt(hi / lo))
+
+
+def hidden_radius_and_gain(A: np.ndarray, R: np.ndarray, U: np.ndarray, scale: np.ndarray, Q: np.ndarray
+                           ) -> tuple[float, float]:
+    """Radius and verified gain of ``A = Q^T D^-1 (U R U^H) D Q``, ``D = diag(scale)``, from that form
+    (compiled path; :mod:`~roadcollab.lti.composed_schur`), checked against ``A`` itself as every
+    certificate here.
+
+    Parameters
+    ----------
+    A : (n, n) ndarray
+        Finite, real, ``n >= 1``.
+    R, U : (n, n) complex ndarray
+        A complex Schur form of ``D Q A Q^T D^-1``.
+    scale : (n,) ndarray
+        Positive.
+    Q : (n, n) ndarray
+        Orthogonal.
+
+    Returns
+    -------
+    radius : float
+        ``max |R_ii|``.
+    gain : float
+        ``sqrt(cond X)``; inf when the radius is not below 1 or the check fails (the caller then
+        certifies ``A`` another way).
+    """
+    try:
+        radius, resid, scale_x, lo, hi = _hidden_figures(R, U, scale, Q, A)
+    except (np.linalg.LinAlgError, ValueError):
+        return float(np.max(np.abs(np.diag(R)))), math.inf
+    if not (resid <= LYAPUNOV_RTOL * scale_x and lo > 0.0):       # NaN figures fail here too
         return radius, math.inf
     return radius, float(math.sqrt(hi / lo))
 

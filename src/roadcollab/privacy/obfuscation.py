@@ -32,6 +32,7 @@ import numpy as np
 
 from ..errors import ParameterError
 from ..wire.message import ExchangeMessage
+from ..lti.composed_schur import series_schur
 from ..lti.realisation import StateSpaceData, random_similarity, series
 from ..estimation.grid import SegmentGrid, bin_index
 from ..lti.batch2x2 import inv2x2, matvec, receiver_z
@@ -101,9 +102,17 @@ class ObfuscationChannel:
         psi1 = draw_obfuscator(spec, grid, rng=rng)
         psi2 = draw_obfuscator(spec, grid, rng=rng)
         T_t = series(T, psi1.system)                        # Psi1 T
-        S_t = series(series(psi2.system, S), psi1.system)   # Psi1 S Psi2
-        T_t = random_similarity(T_t, rng)     # similarity(T_t, random_orthogonal(n, rng), balance=True)
-        S_t = random_similarity(S_t, rng)
+        S_in = series(psi2.system, S)
+        S_t = series(S_in, psi1.system)                     # Psi1 S Psi2
+        form_T = form_S = None
+        if kernel_path() == "compiled":
+            # Schur forms of T~, S~ before hiding from those of the parts (T, S memoised, Psi small):
+            # the sender certifies what it sends without a 20-22 state Schur decomposition each.
+            p1 = psi1.system.schur()
+            form_T = series_schur(T.schur(), p1, T_t.A)
+            form_S = series_schur(series_schur(psi2.system.schur(), S.schur(), S_in.A), p1, S_t.A)
+        T_t = random_similarity(T_t, rng, schur=form_T)     # similarity(T_t, random_orthogonal(n, rng), balance=True)
+        S_t = random_similarity(S_t, rng, schur=form_S)
         return cls(psi1=psi1, psi2=psi2, T=T_t, S=S_t, grid=grid)
 
     @functools.cached_property
