@@ -31,7 +31,7 @@ _KERNEL: dict[str, Any] = {}
 _NO_RHS = np.zeros((1, 1), dtype=complex)
 
 #: The functions compiled by :func:`_build` (rebound in place, so compiled callers find compiled callees).
-_COMPILED_NAMES = ("_stein_parts", "_stein_schur", "_certificate", "_certificate_figures", "_hidden_figures",
+_COMPILED_NAMES = ("_stein_parts", "_stein_schur", "_certificate", "_certificate_figures", "_hidden_parts",
                    "_real_to_complex")
 
 
@@ -48,7 +48,7 @@ def _build() -> dict[str, Any]:
     for name in _COMPILED_NAMES:
         globals()[name] = jit(globals()[name])
     _KERNEL.update(schur=globals()["_stein_schur"], certificate=globals()["_certificate"],
-                   figures=globals()["_certificate_figures"], hidden=globals()["_hidden_figures"], rsf2csf=globals()["_real_to_complex"])
+                   figures=globals()["_certificate_figures"], hidden=globals()["_hidden_parts"], rsf2csf=globals()["_real_to_complex"])
     return _KERNEL
 
 
@@ -121,7 +121,7 @@ def _certificate(R: np.ndarray, U: np.ndarray, A: np.ndarray, H: np.ndarray, gen
     """The Stein solve, ``X = Re(U Y U^H)`` symmetrised, and the residual figures of
     :func:`~roadcollab.lti.stability._verified_gain` in one call: ``(X, ||A^T X A - X + I||_F,
     ||X||_F (1 + ||A||_F^2))``; the residual is NaN when ``X`` is not finite. With ``general``, ``Y``
-    solves ``R^H Y R - Y = -H`` (``A = U^-H R U^H`` with ``H = (U^H U)^-1``: :func:`_hidden_figures`);
+    solves ``R^H Y R - Y = -H`` (``A = U^-H R U^H`` with ``H = (U^H U)^-1``: :func:`hidden_figures`);
     the residual is always the one of ``A`` itself. Real pairs, plain loops, every inner loop a
     contiguous ``axpy`` (so numba vectorises it; reductions it cannot reorder)."""
     n = R.shape[0]
@@ -207,12 +207,14 @@ def _certificate_figures(R: np.ndarray, U: np.ndarray, A: np.ndarray, H: np.ndar
     return radius, resid, scale, ev[0], ev[n - 1]
 
 
-def _hidden_figures(R: np.ndarray, U: np.ndarray, scale: np.ndarray, Q: np.ndarray, A: np.ndarray
-                    ) -> tuple[float, float, float, float, float]:   # pragma: no cover - compiled
-    """:func:`_certificate_figures` of ``A = Q^T D^-1 (U R U^H) D Q``, ``D = diag(scale)``: with
-    ``W = Q^T D U`` and ``H = (W^H W)^-1 = U^H D^-2 U`` (``U`` unitary, ``Q`` orthogonal), ``A = W^-H R W^H``
-    and ``X = Re(W Y W^H)`` for ``R^H Y R - Y = -H`` (:mod:`~roadcollab.lti.composed_schur`)."""
-    n = R.shape[0]
+def _hidden_parts(U: np.ndarray, scale: np.ndarray, Q: np.ndarray
+                  ) -> tuple[np.ndarray, np.ndarray]:   # pragma: no cover - compiled
+    """``(W, H)`` of ``A = Q^T D^-1 (U R U^H) D Q``, ``D = diag(scale)``: ``W = Q^T D U`` and
+    ``H = (W^H W)^-1 = U^H D^-2 U`` (``U`` unitary, ``Q`` orthogonal), so that ``A = W^-H R W^H`` and
+    ``X = Re(W Y W^H)`` for ``R^H Y R - Y = -H`` (:mod:`~roadcollab.lti.composed_schur`). A kernel of
+    its own, not calling :func:`_certificate_figures`: compiling that again inside it cost 3 s of a
+    fresh installation's first run (measured)."""
+    n = U.shape[0]
     W = np.zeros((n, n), dtype=np.complex128)
     for k in range(n):                              # W = Q^T (D U): row k of D U, scattered
         sk = scale[k]
@@ -227,7 +229,7 @@ def _hidden_figures(R: np.ndarray, U: np.ndarray, scale: np.ndarray, Q: np.ndarr
             c = np.conj(U[k, i]) * f
             for j in range(n):
                 H[i, j] += c * U[k, j]
-    return _certificate_figures(R, W, A, H, True)
+    return W, H
 
 
 def _real_to_complex(T: np.ndarray, Z: np.ndarray) -> None:   # pragma: no cover - compiled
@@ -408,6 +410,7 @@ def hidden_figures(R: np.ndarray, U: np.ndarray, scale: np.ndarray, Q: np.ndarra
         As :func:`certificate_figures`.
     """
     c = np.ascontiguousarray
-    out = _build()["hidden"](c(R, complex), c(U, complex), read_only(c(scale, float)), read_only(c(Q, float)),
-                             read_only(c(A, float)))
+    kernel = _build()
+    W, H = kernel["hidden"](c(U, complex), read_only(c(scale, float)), read_only(c(Q, float)))
+    out = kernel["figures"](c(R, complex), W, read_only(c(A, float)), H, True)
     return float(out[0]), float(out[1]), float(out[2]), float(out[3]), float(out[4])
