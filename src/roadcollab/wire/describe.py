@@ -38,8 +38,17 @@ def _as_float(name: str, value: object) -> float:
     return float(value)
 
 
+_F8 = np.dtype(np.float64)
+
+
 def _as_f8(name: str, value: Any, shape: tuple[int | None, int | None]) -> np.ndarray:
     """``value`` as a float64 array of the given shape (None = any), never losing precision."""
+    if type(value) is np.ndarray and value.dtype == _F8 and value.ndim == 2:
+        # The common case (every decoded or library-built message) without the conversions below:
+        # a message is described twice per paper vehicle-segment, ten arrays each.
+        rows, cols = shape
+        if (rows is None or rows == value.shape[0]) and (cols is None or cols == value.shape[1]):
+            return value
     arr = np.asarray(value)
     if arr.dtype.kind not in "fiu":
         raise MessageError(f"{name} must be a real float array, got dtype {arr.dtype}")
