@@ -84,16 +84,23 @@ def _schur_lyapunov(R: np.ndarray, U: np.ndarray) -> np.ndarray:
     return np.real(U @ (Y / scale) @ U.conj().T)
 
 
-def _compiled_radius_and_gain(A: np.ndarray, schur: tuple[np.ndarray, np.ndarray]) -> tuple[float, float]:
-    """Radius and verified gain from a Schur form in one compiled call (the compiled path's
-    :func:`_schur_gain` with the radius and ``X``'s eigenvalues; inf gain if anything fails)."""
+def _figures_gain(figures: Callable[[], tuple[float, float, float, float, float]], R: np.ndarray
+                  ) -> tuple[float, float]:
+    """Radius and verified gain from a compiled certificate's ``(radius, resid, scale, lo, hi)``
+    (inf gain if the call fails, the residual check fails or ``X`` is not positive definite)."""
     try:
-        radius, resid, scale, lo, hi = _compiled_figures(schur[0], schur[1], A)
+        radius, resid, scale, lo, hi = figures()
     except (np.linalg.LinAlgError, ValueError):
-        return float(np.max(np.abs(np.diag(schur[0])))), math.inf
+        return float(np.max(np.abs(np.diag(R)))), math.inf
     if not (resid <= LYAPUNOV_RTOL * scale and lo > 0.0):       # NaN figures fail here too
         return radius, math.inf
     return radius, float(math.sqrt(hi / lo))
+
+
+def _compiled_radius_and_gain(A: np.ndarray, schur: tuple[np.ndarray, np.ndarray]) -> tuple[float, float]:
+    """Radius and verified gain from a Schur form in one compiled call (the compiled path's
+    :func:`_schur_gain` with the radius and ``X``'s eigenvalues; inf gain if anything fails)."""
+    return _figures_gain(lambda: _compiled_figures(schur[0], schur[1], A), schur[0])
 
 
 def hidden_radius_and_gain(A: np.ndarray, R: np.ndarray, U: np.ndarray, scale: np.ndarray, Q: np.ndarray
@@ -121,13 +128,7 @@ def hidden_radius_and_gain(A: np.ndarray, R: np.ndarray, U: np.ndarray, scale: n
         ``sqrt(cond X)``; inf when the radius is not below 1 or the check fails (the caller then
         certifies ``A`` another way).
     """
-    try:
-        radius, resid, scale_x, lo, hi = _hidden_figures(R, U, scale, Q, A)
-    except (np.linalg.LinAlgError, ValueError):
-        return float(np.max(np.abs(np.diag(R)))), math.inf
-    if not (resid <= LYAPUNOV_RTOL * scale_x and lo > 0.0):       # NaN figures fail here too
-        return radius, math.inf
-    return radius, float(math.sqrt(hi / lo))
+    return _figures_gain(lambda: _hidden_figures(R, U, scale, Q, A), R)
 
 
 def _schur_gain(A: np.ndarray, schur: tuple[np.ndarray, np.ndarray]) -> float:
