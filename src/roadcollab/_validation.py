@@ -28,6 +28,8 @@ __all__ = [
     "check_matrix",
     "check_signal",
     "check_psd",
+    "is_frozen",
+    "freeze",
 ]
 
 
@@ -112,3 +114,39 @@ def check_psd(name: str, value, n: int, *, tol: float = 1e-12) -> np.ndarray:
     if lo < -tol * max(1.0, np.abs(arr).max()):
         raise ParameterError(f"{name} must be positive semi-definite, got smallest eigenvalue {lo:.3g}")
     return arr
+
+
+def is_frozen(arr: object) -> bool:
+    """True if ``arr`` is an ndarray whose content cannot change through it or any array it views: it and
+    every array down its ``base`` chain are read-only, and the chain ends in no buffer or in ``bytes``.
+
+    Not a permanent property: the owner of a buffer may make it writable again, so a memo that relies
+    on it checks again on every use.
+
+    Parameters
+    ----------
+    arr : object
+
+    Returns
+    -------
+    bool
+    """
+    while isinstance(arr, np.ndarray):
+        if arr.flags.writeable:
+            return False
+        arr = arr.base
+    return arr is None or isinstance(arr, bytes)
+
+
+def freeze(*arrays: object) -> None:
+    """Make the given ndarrays that own their data read-only (views and other objects are left as they
+    are): for new arrays whose maker holds the only references, so that memos keyed by their content
+    can be found by identity (:func:`is_frozen`).
+
+    Parameters
+    ----------
+    *arrays : object
+    """
+    for arr in arrays:
+        if isinstance(arr, np.ndarray) and arr.base is None:
+            arr.setflags(write=False)

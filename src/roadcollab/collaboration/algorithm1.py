@@ -34,7 +34,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from .._validation import check_signal
+from .._validation import check_signal, freeze
 from ..errors import MessageError, ParameterError
 from ..estimation.estimator import JDPNoise, RoadInputEstimator, build_road_input_estimator
 from ..collaboration.fusion import DESIGN_SEED, posterior_responses
@@ -168,9 +168,9 @@ class CollaborativeEstimator:
         PD = series(Dj, P)
         I_minus_PD = StateSpaceData(PD.A, PD.B, -PD.C, np.eye(2) - PD.D, dt)
         T_full = series(P, I_minus_PD)
-        # Own arrays: a message holding them freezes and validates them once.
         T = minreal(T_full, tol=1e-9)
         S = StateSpaceData(p.Ad.copy(), p.Bd.copy(), -p.C, -p.D, dt)
+        freeze(T.A, T.B, T.C, T.D, S.A, S.B, S.C, S.D)     # own arrays, frozen: memos found by identity
         return T, S
 
     # -- per-segment work ---------------------------------------------------------------------
@@ -282,7 +282,7 @@ class CollaborativeEstimator:
             raise MessageError(f"message signals must have shape ({g.nfft}, 2) on this segment grid, "
                                f"got {message.e.shape} and {message.wf.shape}")
         self._check_grid(message)
-        om = g.omega_dt[act]
+        om = g.omega_active
         S_prev = self.response_cache.response(message.S, om)
         E_prev = g.rfft(message.e)[act]
         Wf_prev = g.rfft(message.wf)[act]

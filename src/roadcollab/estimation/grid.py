@@ -80,7 +80,7 @@ class SegmentGrid:
     nfft : int
         Padded length, a fast FFT length ``>= pad_factor * N``.
     freqs : (n_bins,) ndarray
-        Bin frequencies, Hz.
+        Bin frequencies, Hz. This and the other arrays below are read-only.
     omega_dt : (n_bins,) ndarray
         Normalised bin frequencies, rad/sample.
     weight, reg_weight : (n_bins,) ndarray
@@ -90,6 +90,8 @@ class SegmentGrid:
     active_index : slice | (n_bins,) bool ndarray
         The same bins as a slice when they are contiguous (always for a band-pass ``W_reg``;
         :func:`bin_index`).
+    omega_active : (K_active,) ndarray
+        ``omega_dt`` on the active bins (one array: what is computed from it is found by identity).
 
     Examples
     --------
@@ -117,6 +119,7 @@ class SegmentGrid:
     reg_weight: np.ndarray = field(init=False, repr=False)
     active: np.ndarray = field(init=False, repr=False)
     active_index: slice | np.ndarray = field(init=False, repr=False)
+    omega_active: np.ndarray = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
         check_int("n_samples", self.n_samples, low=16)
@@ -151,6 +154,13 @@ class SegmentGrid:
         object.__setattr__(self, "reg_weight", Wr)
         object.__setattr__(self, "active", Wr > 0)
         object.__setattr__(self, "active_index", bin_index(self.active))
+        object.__setattr__(self, "omega_active", np.array(self.omega_dt[self.active_index]))
+        # A frozen grid with frozen arrays: what depends on them only (exp(j omega_dt), a response cache's
+        # key) is found by identity instead of comparing 3000-6000 entries (lti.response.unit_circle).
+        for arr in (self.freqs, self.omega_dt, self.weight, self.reg_weight, self.active, self.active_index,
+                    self.omega_active):
+            if isinstance(arr, np.ndarray):
+                arr.setflags(write=False)
 
     @property
     def dt(self) -> float:

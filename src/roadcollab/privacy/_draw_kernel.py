@@ -53,7 +53,7 @@ def _build() -> Any:
 
 
 def draw_loop(spec: Any, powers: np.ndarray, rng: np.random.Generator, max_attempts: int, dt: float
-              ) -> tuple[np.ndarray, np.ndarray, tuple[np.ndarray, ...]] | None:
+              ) -> tuple[np.ndarray, np.ndarray, tuple[np.ndarray, ...], tuple[np.ndarray, np.ndarray]] | None:
     """Run the rejection loop compiled, and realise the accepted candidate.
 
     Parameters
@@ -69,9 +69,11 @@ def draw_loop(spec: Any, powers: np.ndarray, rng: np.random.Generator, max_attem
 
     Returns
     -------
-    (poles, numerators, (Ad, Bd, Cd, Dd)) or None
-        Poles (n,) rad/s, numerators (2, 2, n + 1) and the discrete realisation (order 2 n) of the
-        accepted candidate; None if no candidate was accepted in ``max_attempts``.
+    (poles, numerators, (Ad, Bd, Cd, Dd), (T, U)) or None
+        Poles (n,) rad/s, numerators (2, 2, n + 1), the discrete realisation (order 2 n) of the
+        accepted candidate and a complex Schur form ``Ad = U T U^H`` of it (``T`` diagonal, ``U``
+        unitary, both (2 n, 2 n) complex, to round-off); None if no candidate was accepted in
+        ``max_attempts``.
     """
     loop = _build()
     plf = np.log(spec.pole_frequency_range)
@@ -89,7 +91,8 @@ def draw_loop(spec: Any, powers: np.ndarray, rng: np.random.Generator, max_attem
     if n < 0:
         return None
     poles, num = poles[:n].copy(), np.ascontiguousarray(num[:, :n + 1])
-    return poles, num.reshape(2, 2, n + 1), _KERNEL["realise"](poles, num, n, float(dt))
+    Ad, Bd, Cd, Dd, Tz, Uz = _KERNEL["realise"](poles, num, n, float(dt))
+    return poles, num.reshape(2, 2, n + 1), (Ad, Bd, Cd, Dd), (Tz, Uz)
 
 
 def roots_into(rng: Any, n: int, lf0: float, lf1: float, d0: float, d1: float, cf: float, out: np.ndarray,
@@ -284,13 +287,22 @@ def loop(rng: Any, lo: int, hi: int, plf0: float, plf1: float, pd0: float, pd1: 
     return max_attempts, -1
 
 def realise(poles: np.ndarray, num: np.ndarray, n: int, dt: float) -> tuple[np.ndarray, np.ndarray,
+                                                                            np.ndarray, np.ndarray,
                                                                             np.ndarray, np.ndarray]:
     # pragma: no cover - compiled
+    # Long: one pass over the pole blocks writes the realisation and its Schur form together.
     # obfuscator_design._realise (modal blocks, each scaled) then the bilinear map of
     # bilinear_discretize, block by block in closed form: I - (dt/2) A is block diagonal, its inverse
     # 1 / (1 - h p) on a real pole's block and kron([[a, -b], [b, a]] / (a^2 + b^2), I2) on a complex
     # pair's (a = 1 - h sigma, b = h omega). No dense solves (they cost 14 s of compilation).
+    # Also a complex Schur form Ad = U Tz U^H in closed form (Tz diagonal): a real pole's block is
+    # diagonal already; a pair's block kron([[a, -b], [b, a]], I2) has the eigenvalues a +- i b with the
+    # eigenvectors [1, -+i] / sqrt(2) of the 2x2 factor. The sender certifies its T~, S~ from the
+    # Schur forms of the parts (lti.composed_schur): this one saves a dgees per Psi.
     h = 0.5 * dt
+    Tz = np.zeros((2 * n, 2 * n), np.complex128)
+    Uz = np.zeros((2 * n, 2 * n), np.complex128)
+    rt = np.sqrt(0.5)
     den = np.empty(n + 1, np.complex128)
     poly_into(poles, n, den)
     Ad = np.zeros((2 * n, 2 * n))
@@ -320,6 +332,8 @@ def realise(poles: np.ndarray, num: np.ndarray, n: int, dt: float) -> tuple[np.n
             g = 1.0 / (1.0 - h * p.real)
             for a in range(2):
                 Ad[i + a, i + a] = (1.0 + h * p.real) * g
+                Tz[i + a, i + a] = Ad[i + a, i + a]
+                Uz[i + a, i + a] = 1.0
                 Bd[i + a, a] = dt * sc * g
                 for b in range(2):
                     Cc[a, i + b] = R[2 * a + b].real / sc
@@ -341,6 +355,14 @@ def realise(poles: np.ndarray, num: np.ndarray, n: int, dt: float) -> tuple[np.n
                 Ad[i + a, i + 2 + a] = a01
                 Ad[i + 2 + a, i + a] = a10
                 Ad[i + 2 + a, i + 2 + a] = a11
+                # a11 = a00 and a01 = -a10 (products of matrices [[x, -y], [y, x]]): eigenvalue a00 + i a10
+                # on [1, -i] / sqrt(2), its conjugate on [1, i] / sqrt(2), per channel a.
+                Tz[i + a, i + a] = complex(a00, a10)
+                Tz[i + 2 + a, i + 2 + a] = complex(a00, -a10)
+                Uz[i + a, i + a] = rt
+                Uz[i + 2 + a, i + a] = complex(0.0, -rt)
+                Uz[i + a, i + 2 + a] = rt
+                Uz[i + 2 + a, i + 2 + a] = complex(0.0, rt)
                 # B block [I2; 0] sc: Bd = dt M^-1 B
                 Bd[i + a, a] = dt * sc * m00
                 Bd[i + 2 + a, a] = dt * sc * m10
@@ -359,7 +381,7 @@ def realise(poles: np.ndarray, num: np.ndarray, n: int, dt: float) -> tuple[np.n
             for k in range(2 * n):
                 v += Cc[a, k] * Bd[k, b]
             Dd[a, b] += 0.5 * v
-    return Ad, Bd, Cd, Dd
+    return Ad, Bd, Cd, Dd, Tz, Uz
 
 
 def _residues(p: np.ndarray, num: np.ndarray, h: float, zp: np.ndarray, res: np.ndarray,

@@ -14,6 +14,7 @@ from typing import Any
 
 import numpy as np
 
+from .._validation import is_frozen
 from ..errors import MessageError
 from ..lti.realisation import StateSpaceData
 from .layout import (CHANNELS, FLOAT_NBYTES, KEY_NBYTES, MESSAGE_TYPE_EXCHANGE, MESSAGE_TYPE_INVERSION,
@@ -187,15 +188,6 @@ def _message_arrays(message: Any) -> list[np.ndarray]:
     return out
 
 
-def _frozen(arr: object) -> bool:
-    """True if ``arr`` is an ndarray whose content cannot change through it or any array it views."""
-    while isinstance(arr, np.ndarray):
-        if arr.flags.writeable:
-            return False
-        arr = arr.base
-    return arr is None or isinstance(arr, bytes)
-
-
 def validate_message(message: Any) -> tuple[Header | SecAggHeader, dict[str, Any]]:
     """Every check :func:`~roadcollab.wire.protocol.decode` applies, on an in-memory message.
 
@@ -221,7 +213,7 @@ def validate_message(message: Any) -> tuple[Header | SecAggHeader, dict[str, Any
         ids, result = memo
         result_typed: tuple[Header | SecAggHeader, dict[str, Any]] = result
         held = _message_arrays(message)
-        if ids == tuple(map(id, held)) and all(map(_frozen, held)):
+        if ids == tuple(map(id, held)) and all(map(is_frozen, held)):
             return result_typed
     h, arrays = message_fields(message)
     check_header(h)
@@ -237,6 +229,6 @@ def validate_message(message: Any) -> tuple[Header | SecAggHeader, dict[str, Any
         for arr in held:
             if isinstance(arr, np.ndarray) and arr.base is None:
                 arr.setflags(write=False)
-        if all(map(_frozen, held)):
+        if all(map(is_frozen, held)):
             object.__setattr__(message, "_validated", (tuple(map(id, held)), (h, arrays)))
     return h, arrays
