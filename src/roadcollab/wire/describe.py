@@ -27,6 +27,8 @@ __all__ = ["message_fields", "validate_message"]
 
 def _as_int(name: str, value: object) -> int:
     """``value`` as an int; bools and non-integers are refused."""
+    if type(value) is int:          # the common case, without the abstract-class checks below
+        return value
     if isinstance(value, (bool, np.bool_)) or not isinstance(value, (Integral, np.integer)):
         raise MessageError(f"{name} must be an integer, got {value!r} ({type(value).__name__})")
     return int(value)
@@ -34,6 +36,8 @@ def _as_int(name: str, value: object) -> int:
 
 def _as_float(name: str, value: object) -> float:
     """``value`` as a float; bools and non-real numbers are refused."""
+    if type(value) is float:
+        return value
     if isinstance(value, (bool, np.bool_)) or not isinstance(value, (Real, np.floating, np.integer)):
         raise MessageError(f"{name} must be a real number, got {value!r} ({type(value).__name__})")
     return float(value)
@@ -81,7 +85,9 @@ def _exchange_fields(message: Any, base: Header) -> tuple[Header, dict[str, np.n
     arrays["e"] = _as_f8("e", message.e, (None, CHANNELS))
     length = arrays["e"].shape[0]
     arrays["wf"] = _as_f8("wf", message.wf, (length, CHANNELS))
-    h = base._replace(length=length, order_T=orders["T"], order_S=orders["S"], dt_T=dts["T"], dt_S=dts["S"])
+    # One construction instead of NamedTuple._replace (1.3 us each, twice per message described).
+    h = Header(base.msg_type, base.mechanism, base.sample_rate, base.n_samples, length, 0,
+               orders["T"], orders["S"], dts["T"], dts["S"])
     return h, arrays
 
 
@@ -171,7 +177,7 @@ def message_fields(message: Any) -> tuple[Header | SecAggHeader, dict[str, Any]]
         h, arrays = _exchange_fields(message, base)
     else:
         h, arrays = _inversion_fields(message, base)
-    return h._replace(payload_nbytes=h.expected_payload_nbytes()), arrays
+    return Header(*h[:5], h.expected_payload_nbytes(), *h[6:]), arrays      # _replace, without its cost
 
 
 def _message_arrays(message: Any) -> list[np.ndarray]:
