@@ -223,3 +223,68 @@ def test_compiled_clusters_equal_the_label_propagation():
         lam = lam.astype(complex)
         assert clusters(lam, CLUSTER_TOL, CLUSTER_REL) == _clusters(lam, CLUSTER_TOL, CLUSTER_REL)
     assert len(clusters(cases[0], CLUSTER_TOL, CLUSTER_REL)) == 4
+
+
+def test_unit_circle_finds_a_frozen_array_by_identity_only_while_it_stays_frozen():
+    from roadcollab.lti.response import unit_circle
+
+    om = np.linspace(0.0, np.pi, 2999)
+    om.setflags(write=False)
+    z = unit_circle(om)
+    np.testing.assert_array_equal(z, np.exp(1j * om))
+    assert unit_circle(om) is z
+    om.setflags(write=True)         # its owner made it writable and changed it: no identity shortcut
+    om[5] = 1.0
+    z2 = unit_circle(om)
+    assert z2[5] == np.exp(1j * 1.0) and z2 is not z
+
+
+def test_the_response_cache_keys_the_frequencies_by_content_not_by_the_array_object():
+    rng = np.random.default_rng(4)
+    A = np.diag(rng.uniform(0.1, 0.9, 4))
+    sys = StateSpaceData(A, rng.standard_normal((4, 2)), rng.standard_normal((2, 4)), np.zeros((2, 2)), 0.005)
+    cache = FrequencyResponseCache()
+    om = np.linspace(0.01, 3.0, 50)
+    om.setflags(write=False)
+    for _ in range(3):                              # seen twice, then kept: the third call is a hit
+        first = cache.response(sys, om)
+    assert cache.response(sys, om) is first
+    assert cache.response(sys, om.copy()) is first       # an equal vector: the same key
+    other = np.array(om)
+    other[7] += 1e-3
+    np.testing.assert_array_equal(cache.response(sys, other), sys.frequency_response(other))
+    om2 = np.array(om)                              # a writable vector changed in place after use
+    cache.response(sys, om2)
+    om2[3] += 0.5
+    np.testing.assert_array_equal(cache.response(sys, om2), sys.frequency_response(om2))
+
+
+@pytest.mark.skipif(not compiled_available(), reason="numba not importable")
+@pytest.mark.slow
+def test_the_unrolled_four_state_blocks_give_the_general_back_substitution_bit_for_bit():
+    """Two outputs take the unrolled path for a block of four; a third (zero) output row sends the same
+    system through the general one, whose first two outputs must then be the same bits."""
+    from roadcollab.lti._eval_kernel import block_eval
+
+    rng = np.random.default_rng(11)
+    n = 10
+    lam = np.concatenate([0.9 * np.exp(1j * rng.uniform(0, np.pi, 4)), rng.uniform(-0.9, 0.9, 6)])
+    R = np.triu(rng.standard_normal((n, n)) + 1j * rng.standard_normal((n, n)), 1) * 0.3 + np.diag(lam)
+    Bw = rng.standard_normal((n, 2)) + 1j * rng.standard_normal((n, 2))
+    Cw = rng.standard_normal((2, n)) + 1j * rng.standard_normal((2, n))
+    D = rng.standard_normal((2, 2))
+    blocks = [(0, 4), (4, 6), (6, 10)]
+    z = np.exp(1j * np.linspace(0.01, 3.1, 777))                # not a multiple of the tile
+    fast = block_eval(R, Bw, Cw, D, blocks, z)
+    general = block_eval(R, Bw, np.vstack([Cw, np.zeros((1, n))]), np.vstack([D, np.zeros((1, 2))]), blocks, z)
+    np.testing.assert_array_equal(fast, general[:, :2, :])
+    dense = np.array([Cw @ np.linalg.solve(zk * np.eye(n) - np.triu(R) * _mask(blocks, n), Bw) + D for zk in z])
+    assert _rel(fast, dense) < 1e-12
+
+
+def _mask(blocks, n):
+    """1 inside the diagonal blocks, 0 between them (block_eval reads only the blocks)."""
+    M = np.zeros((n, n))
+    for i0, i1 in blocks:
+        M[i0:i1, i0:i1] = 1.0
+    return M

@@ -22,7 +22,8 @@ import numpy as np
 import scipy.linalg
 from scipy.linalg import lapack
 
-from .kernels import block_eval, kernel_path
+from ._eval_kernel import block_eval
+from .kernels import kernel_path
 from ._blockdiag_kernel import clusters as _compiled_clusters, decouple as _compiled_decouple
 
 __all__ = ["MAX_COUPLING", "CLUSTER_TOL", "CLUSTER_REL", "SMALL_BLOCK", "BlockSchur", "block_schur", "block_response"]

@@ -49,7 +49,7 @@ import numpy as np
 from ..errors import ParameterError
 
 __all__ = ["KERNELS", "kernel_path", "environment_kernels", "use_kernels", "compiled_available", "jit_options", "read_only",
-           "block_eval", "pole_residue_eval", "pole_residue_apply"]
+           "pole_residue_eval", "pole_residue_apply"]
 
 KERNELS = ("compiled", "reference")
 
@@ -102,114 +102,9 @@ def _build() -> dict[str, Any]:   # Long: the kernels are defined here so that n
     try:
         import numba
     except ImportError:
-        _COMPILED.update(block=None, pole=None, pole_apply=None)
+        _COMPILED.update(numba=None, pole=None, pole_apply=None)
         return _COMPILED
     jit = numba.njit(**jit_options())
-
-    def block(R: np.ndarray, Bw: np.ndarray, Cw: np.ndarray, D: np.ndarray, starts: np.ndarray,  # pragma: no cover
-              stops: np.ndarray, zr: np.ndarray, zi: np.ndarray, out: np.ndarray) -> None:   # - compiled
-        # Long: one tile of bins through every block in one compiled pass, its three block cases inline.
-        # H = D + sum_b Cw_b (z I - R_b)^-1 Bw_b, TILE bins at a time so every per-bin array stays in
-        # the L1/L2 cache, real and imaginary parts in separate arrays (the bin loops are innermost
-        # and contiguous, so LLVM vectorises them; over 1-D row views, 30 % faster than indexing the
-        # 2-D arrays in the loop: 149-159 against 221-232 us for an order-18 system, same output). Blocks of one and two eigenvalues through their
-        # resolvent entries (g_i = 1 / (z - R_ii); N_01 = g_0 R_01 g_1), as the numpy path does; larger
-        # ones by back substitution, (z I - R_b) X_b = Bw_b. Reciprocals in real arithmetic.
-        M = zr.shape[0]
-        p, m = D.shape
-        n = R.shape[0]
-        pm = p * m
-        nb = starts.shape[0]
-        big = 1
-        for b in range(nb):
-            big = max(big, stops[b] - starts[b])
-        gr = np.empty((n, TILE))
-        gi = np.empty((n, TILE))
-        ar = np.empty((pm, TILE))
-        ai = np.empty((pm, TILE))
-        hr = np.empty(TILE)
-        hi = np.empty(TILE)
-        xr = np.empty((big, m, TILE))
-        xi = np.empty((big, m, TILE))
-        for t0 in range(0, M, TILE):
-            L = min(TILE, M - t0)
-            zrt = zr[t0:t0 + L]
-            zit = zi[t0:t0 + L]
-            for i in range(n):
-                lr, li = R[i, i].real, R[i, i].imag
-                gri = gr[i]
-                gii = gi[i]
-                for k in range(L):
-                    dr = zrt[k] - lr
-                    di = zit[k] - li
-                    s = 1.0 / (dr * dr + di * di)
-                    gri[k] = dr * s
-                    gii[k] = -di * s
-            for c in range(pm):
-                d = D[c // m, c % m]
-                for k in range(L):
-                    ar[c, k] = d
-                    ai[c, k] = 0.0
-            for b in range(nb):
-                i0, i1 = starts[b], stops[b]
-                sz = i1 - i0
-                if sz == 1:
-                    for c in range(pm):
-                        res = Cw[c // m, i0] * Bw[i0, c % m]
-                        rr, ri = res.real, res.imag
-                        arc = ar[c]
-                        aic = ai[c]
-                        g0 = gr[i0]
-                        g1 = gi[i0]
-                        for k in range(L):
-                            arc[k] += rr * g0[k] - ri * g1[k]
-                            aic[k] += rr * g1[k] + ri * g0[k]
-                elif sz == 2:
-                    i, l = i0, i0 + 1
-                    gri, gii, grl, gil = gr[i], gi[i], gr[l], gi[l]
-                    for k in range(L):
-                        hr[k] = gri[k] * grl[k] - gii[k] * gil[k]
-                        hi[k] = gri[k] * gil[k] + gii[k] * grl[k]
-                    rho = R[i, l]
-                    for c in range(pm):
-                        q, r = c // m, c % m
-                        r0 = Cw[q, i] * Bw[i, r]
-                        r1 = Cw[q, l] * Bw[l, r]
-                        r2 = Cw[q, i] * rho * Bw[l, r]
-                        a0, b0, a1, b1, a2, b2 = r0.real, r0.imag, r1.real, r1.imag, r2.real, r2.imag
-                        arc = ar[c]
-                        aic = ai[c]
-                        for k in range(L):
-                            arc[k] += (a0 * gri[k] - b0 * gii[k]) + (a1 * grl[k] - b1 * gil[k]) + (a2 * hr[k] - b2 * hi[k])
-                            aic[k] += (a0 * gii[k] + b0 * gri[k]) + (a1 * gil[k] + b1 * grl[k]) + (a2 * hi[k] + b2 * hr[k])
-                else:
-                    for ii in range(sz - 1, -1, -1):
-                        i = i0 + ii
-                        for r in range(m):
-                            br, bi = Bw[i, r].real, Bw[i, r].imag
-                            for k in range(L):
-                                xr[ii, r, k] = br
-                                xi[ii, r, k] = bi
-                            for jj in range(ii + 1, sz):
-                                rr, ri = R[i, i0 + jj].real, R[i, i0 + jj].imag
-                                for k in range(L):
-                                    xr[ii, r, k] += rr * xr[jj, r, k] - ri * xi[jj, r, k]
-                                    xi[ii, r, k] += rr * xi[jj, r, k] + ri * xr[jj, r, k]
-                            for k in range(L):
-                                a, bb = xr[ii, r, k], xi[ii, r, k]
-                                xr[ii, r, k] = a * gr[i, k] - bb * gi[i, k]
-                                xi[ii, r, k] = a * gi[i, k] + bb * gr[i, k]
-                    for c in range(pm):
-                        q, r = c // m, c % m
-                        for ii in range(sz):
-                            cr, ci = Cw[q, i0 + ii].real, Cw[q, i0 + ii].imag
-                            for k in range(L):
-                                ar[c, k] += cr * xr[ii, r, k] - ci * xi[ii, r, k]
-                                ai[c, k] += cr * xi[ii, r, k] + ci * xr[ii, r, k]
-            for k in range(L):
-                for c in range(pm):
-                    out[t0 + k, c] = complex(ar[c, k], ai[c, k])
-
 
     def pole_tile(lr: np.ndarray, li: np.ndarray, Rr: np.ndarray, Ri: np.ndarray, Dr: np.ndarray,  # pragma: no cover
                   Di: np.ndarray, zrt: np.ndarray, zit: np.ndarray, gr: np.ndarray, gi: np.ndarray,     # - compiled
@@ -278,7 +173,7 @@ def _build() -> dict[str, Any]:   # Long: the kernels are defined here so that n
                 out[t0 + k, 1] = c * x0 + d * x1
 
     # Compiled by calling numba's decorator (an untyped one to mypy), as in the package's other kernel modules.
-    _COMPILED.update(block=jit(block), pole=jit(pole), pole_apply=jit(pole_apply))
+    _COMPILED.update(numba=numba, pole=jit(pole), pole_apply=jit(pole_apply))
     return _COMPILED
 
 
@@ -289,7 +184,7 @@ def compiled_available() -> bool:
     -------
     bool
     """
-    return _build()["block"] is not None
+    return _build()["numba"] is not None
 
 
 def kernel_path() -> str:
@@ -349,35 +244,6 @@ def use_kernels(name: str) -> Iterator[None]:
         yield
     finally:
         _CHOICE.reset(token)
-
-
-def block_eval(R: np.ndarray, Bw: np.ndarray, Cw: np.ndarray, D: np.ndarray, blocks: Sequence[tuple[int, int]],
-               z: np.ndarray) -> np.ndarray:
-    """``D + sum_b Cw_b (z I - R_b)^-1 Bw_b`` over the diagonal blocks of ``R``, compiled.
-
-    Parameters
-    ----------
-    R : (n, n) complex ndarray
-        Upper triangular within each block (entries between blocks are not read).
-    Bw : (n, m) complex ndarray
-    Cw : (p, n) complex ndarray
-    D : (p, m) real ndarray
-    blocks : list of (int, int)
-        ``[start, stop)`` of each diagonal block.
-    z : (M,) complex ndarray
-
-    Returns
-    -------
-    (M, p, m) complex ndarray
-    """
-    k = _build()["block"]
-    starts = np.array([b[0] for b in blocks], dtype=np.int64)
-    stops = np.array([b[1] for b in blocks], dtype=np.int64)
-    z = np.asarray(z, dtype=complex)
-    out = np.empty((z.size, D.shape[0], D.shape[1]), complex)
-    k(np.ascontiguousarray(R, complex), np.ascontiguousarray(Bw, complex), np.ascontiguousarray(Cw, complex),
-      read_only(np.ascontiguousarray(D, float)), starts, stops, np.ascontiguousarray(z.real), np.ascontiguousarray(z.imag), out.reshape(z.size, -1))
-    return out
 
 
 def pole_residue_eval(lam: np.ndarray, Res: np.ndarray, D: np.ndarray, z: np.ndarray) -> np.ndarray:
