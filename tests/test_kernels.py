@@ -8,7 +8,7 @@ import scipy.linalg
 import pytest
 
 from roadcollab.errors import ParameterError
-from roadcollab.lti import kernels
+from roadcollab.lti import _pole_kernel, kernels
 from roadcollab.lti.blockdiag import block_response, block_schur
 from roadcollab.lti.response import ss_response
 
@@ -493,12 +493,12 @@ def test_a_fresh_draw_applies_psi_without_forming_its_response_with_the_same_bit
         psi = draw_obfuscator(ObfuscationSpec(), grid, rng=6)
         zp, res, direct = psi.pole_residues()
         z = unit_circle(grid.omega_dt)
-        H = kernels.pole_residue_eval(zp, res.reshape(zp.size, 4), direct, z)
+        H = _pole_kernel.pole_residue_eval(zp, res.reshape(zp.size, 4), direct, z)
         for inverse in (False, True):
-            got = kernels.pole_residue_apply(zp, res.reshape(zp.size, 4), direct, z, E, inverse=inverse)
+            got = _pole_kernel.pole_residue_apply(zp, res.reshape(zp.size, 4), direct, z, E, inverse=inverse)
             assert np.array_equal(got, matvec(inv2x2(H) if inverse else H, E))
         with pytest.raises(ValueError, match="2x2 D"):
-            kernels.pole_residue_apply(zp, res.reshape(zp.size, 4), direct, z, E[:-1])
+            _pole_kernel.pole_residue_apply(zp, res.reshape(zp.size, 4), direct, z, E[:-1])
         A = np.diag([0.5, 0.8, -0.3, 0.9])
         T = StateSpaceData(A, rng.standard_normal((4, 2)), rng.standard_normal((2, 4)), np.eye(2), grid.dt)
         S = StateSpaceData(0.9 * A, rng.standard_normal((4, 2)), rng.standard_normal((2, 4)), np.zeros((2, 2)), grid.dt)

@@ -83,3 +83,24 @@ def test_a_bad_kernels_environment_variable_is_one_clear_line(monkeypatch, capsy
     assert err == ["roadcollab reproduce: error: environment variable ROADCOLLAB_KERNELS must be 'compiled' or "
                    "'reference', got 'turbo'"]
     assert not (tmp_path / "r").exists()
+
+
+_SEGMENT = """
+from roadcollab.experiments.bench.study import bench_segment
+for mechanism in ("paper", "none"):
+    bench_segment(512, mechanism=mechanism, repeats=1, kernels="compiled")
+"""
+
+
+@_SLOW[0]
+@_SLOW[1]
+def test_a_second_process_compiles_no_kernel_again(tmp_path):
+    """Every kernel a bench segment uses is loaded from the on-disk cache by the next process: a kernel that
+    calls a jitted closure is not (its cache key holds the closure's cell), and before they moved to module
+    level the pole-residue kernels were compiled again, and saved once more, by every process."""
+    env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path / "cache"))
+    subprocess.run([sys.executable, "-c", _SEGMENT], env=env, timeout=600, check=True)
+    first = sorted(p.name for p in (tmp_path / "cache").rglob("*.nbc"))
+    subprocess.run([sys.executable, "-c", _SEGMENT], env=env, timeout=600, check=True)
+    second = sorted(p.name for p in (tmp_path / "cache").rglob("*.nbc"))
+    assert first and second == first, sorted(set(second) - set(first))

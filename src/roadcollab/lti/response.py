@@ -12,7 +12,8 @@ from numpy.typing import ArrayLike
 from .._validation import is_frozen
 from .batch2x2 import inv2x2
 from .blockdiag import block_response, block_schur
-from .kernels import kernel_path, pole_residue_eval
+from ._pole_kernel import pole_residue_eval
+from .kernels import kernel_path
 
 __all__ = ["dlti_frequency_response", "unit_circle", "ss_response", "content_key", "FrequencyResponseCache"]
 

@@ -36,7 +36,8 @@ from ..lti.composed_schur import series_schur
 from ..lti.realisation import StateSpaceData, random_similarity, series
 from ..estimation.grid import SegmentGrid, bin_index
 from ..lti.batch2x2 import inv2x2, matvec, receiver_z
-from ..lti.kernels import kernel_path, pole_residue_apply
+from ..lti._pole_kernel import pole_residue_apply
+from ..lti.kernels import kernel_path
 from ..lti.response import unit_circle
 from .obfuscator_design import ObfuscationSpec, Obfuscator, draw_obfuscator
 

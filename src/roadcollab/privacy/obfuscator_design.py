@@ -20,7 +20,8 @@ import numpy as np
 from .._validation import check_int, check_positive, check_real, freeze
 from ..errors import ParameterError
 from ..lti.discretisation import bilinear_discretize
-from ..lti.kernels import kernel_path, pole_residue_eval
+from ..lti._pole_kernel import pole_residue_eval
+from ..lti.kernels import kernel_path
 from ..lti.response import unit_circle
 from ..lti.realisation import StateSpaceData
 from ..estimation.grid import SegmentGrid
