@@ -84,9 +84,9 @@ def unit_circle(omega_dt: ArrayLike) -> np.ndarray:
         if source is omega_dt and is_frozen(source):
             return z
     om = np.asarray(omega_dt, dtype=float)
-    for key, z in tuple(_UNIT_CIRCLE):
-        if key.shape == om.shape and np.array_equal(key, om):
-            break
+    kept = [z for key, z in tuple(_UNIT_CIRCLE) if key.shape == om.shape and np.array_equal(key, om)]
+    if kept:
+        z = kept[0]
     else:
         z = np.exp(1j * om)
         z.flags.writeable = False
@@ -94,7 +94,7 @@ def unit_circle(omega_dt: ArrayLike) -> np.ndarray:
         key.flags.writeable = False
         _UNIT_CIRCLE.insert(0, (key, z))
         del _UNIT_CIRCLE[4:]
-    if is_frozen(omega_dt):
+    if isinstance(omega_dt, np.ndarray) and is_frozen(omega_dt):
         _UNIT_CIRCLE_BY_ARRAY.insert(0, (omega_dt, z))
         del _UNIT_CIRCLE_BY_ARRAY[4:]
     return z
