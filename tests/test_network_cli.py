@@ -30,11 +30,35 @@ def test_enroll_writes_a_fleet_and_never_replaces_one(tmp_path, capsys):
     assert (fleet / "authority" / "authority.key").read_bytes() == key
 
 
+def test_enroll_validated_writes_one_folder_per_helper_and_their_topics(tmp_path, capsys):
+    from roadcollab.network.fleetdir import load_aggregation
+
+    fleet = tmp_path / "fleet"
+    args = ["--vehicles", "4", "--aggregation", "validated", "--min-inputs", "3", "--round-size", "4", "--clip", "0.2"]
+    assert main(["enroll", "--fleet", str(fleet), *args]) == 0
+    out = capsys.readouterr().out
+    assert "3 aggregators" in out and f"{fleet}/helper and {fleet}/helper-c" in out and "note:" not in out
+    assert load_aggregation(fleet).aggregators == 3
+    for name, cert in (("helper", "aggregator-b"), ("helper-c", "aggregator-c")):
+        assert load_login(fleet / name / "broker.toml").username == cert
+        assert (fleet / name / "x25519.key").is_file() and (fleet / name / "fleet.toml").is_file()
+    acl = (fleet / "broker" / "mosquitto_acl").read_text()
+    assert ("user aggregator-c\ntopic write rc/fleet/prio/+/+/agg/aggregator-c\ntopic write rc/fleet/prio/key/aggregator-c\n"
+            "topic read rc/fleet/prio/+/+/agg/+\ntopic read rc/fleet/prio/+/+/fwd/aggregator-c\n") in acl
+    two = tmp_path / "two"
+    assert main(["enroll", "--fleet", str(two), *args, "--aggregators", "2"]) == 0
+    out = capsys.readouterr().out
+    assert "2 aggregators" in out and "note: with 2 aggregators, privacy of the later phases" in out
+    assert (two / "helper").is_dir() and not (two / "helper-c").exists()
+    assert "aggregator-c" not in (two / "broker" / "mosquitto_acl").read_text()
+
+
 @pytest.mark.parametrize("args, msg", [
     (["--vehicles", "0"], "argument --vehicles: expected a number of vehicles from 1 to 1,000, got 0"),
     (["--vehicles", "2", "--fleet-id", "a/b"], "--fleet-id must be 1-64 characters"),
     (["--vehicles", "2", "--segment-length", "0.5"], "argument --segment-length: expected a segment length from 1"),
     (["--vehicles", "2", "--segment-length", "1.01"], "segment_length must be a whole number"),
+    (["--vehicles", "2", "--aggregators", "4"], "argument --aggregators: expected a number of aggregators from 2 to 3, got 4"),
 ])
 def test_enroll_bad_input_is_one_line(tmp_path, capsys, args, msg):
     try:

@@ -1,10 +1,10 @@
 """Validated, phased sessions with every party its own process over a real broker on 127.0.0.1 (issue 20).
 
-The leader, the helper and each vehicle run ``python -m roadcollab.network.prio_mqtt`` with their own
-login, under the broker's ACL; the aggregators find each other's key adverts on the broker. Oracles: the
+The leader, the two helpers and each vehicle run ``python -m roadcollab.network.prio_mqtt`` with their own
+login, under the broker's ACL; the leader finds the helpers' key adverts on the broker. Oracles: the
 leader's result equals the in-process ``run_phased_session`` on the same inputs bit for bit; a rostered
 vehicle that never starts is left out at the leader's timeout and the session completes with ``k``; the
-helper's release log and the vehicles' ledgers are on disk afterwards.
+helpers' release logs and the vehicles' ledgers are on disk afterwards.
 """
 
 from __future__ import annotations
@@ -41,7 +41,7 @@ def _world(root, n=4):
     params = PrioParams(wide, (tight, tight), min_inputs=3)
     (root / "params.json").write_text(json.dumps(params_to_dict(params, "rc/t")))
     vids = [f"v{i}" for i in range(1, n + 1)]
-    users = {"service": ("leader", params.leader_id), params.helper_id: ("helper", params.helper_id),
+    users = {"service": ("leader", params.leader_id), **{h: (h, h) for h in params.helper_ids},
              **{v: (v, v) for v in vids}}
     gen = np.random.default_rng(0)
     road = gen.normal(0, 1.0, L)
@@ -53,12 +53,12 @@ def _world(root, n=4):
         auth.trust().save(d / "trust.toml")
         logins[user] = secrets.token_urlsafe(16)
         (d / "broker.toml").write_text(f'username = "{user}"\npassword = "{logins[user]}"\n')
-        if name in ("leader", "helper"):
+        if name == "leader" or name in params.helper_ids:
             RelayKey.generate().save(d / "x25519.key")
         else:
             inputs[name] = road + gen.normal(0, 0.08, L)
             np.save(d / "input.npy", inputs[name])
-    write_broker(root / "broker", logins, acl_rules("t", vids, helper=params.helper_id))
+    write_broker(root / "broker", logins, acl_rules("t", vids, helpers=params.helper_ids))
     return params, inputs, vids
 
 
@@ -76,11 +76,11 @@ def test_every_party_a_process_over_the_broker(tmp_path, broker):
                      log=tmp_path / f"{name}.log")
     procs = []
     try:
-        procs = [party("helper", "helper")] + [party("vehicle", v) for v in vids[:3]]   # v4 never starts
-        leader = party("leader", "leader", "--roster", ",".join(vids), "--idle", 4)
+        procs = [party("helper", h) for h in params.helper_ids] + [party("vehicle", v) for v in vids[:3]]
+        leader = party("leader", "leader", "--roster", ",".join(vids), "--idle", 4)     # v4 never starts
         assert leader.wait(150) == 0, (tmp_path / "leader.log").read_text()
         for p in procs:
-            assert p.wait(30) == 0, [(tmp_path / f"{n}.log").read_text() for n in ("helper", *vids[:3])]
+            assert p.wait(30) == 0, [(tmp_path / f"{n}.log").read_text() for n in (*params.helper_ids, *vids[:3])]
     finally:
         for p in procs:
             if p.poll() is None:
@@ -96,4 +96,5 @@ def test_every_party_a_process_over_the_broker(tmp_path, broker):
         led = SessionLedger(tmp_path / v / "ledger.sqlite")
         assert led.contributed(session_id(7, 0))
         led.close()
-    assert (tmp_path / "helper" / "releases.sqlite").stat().st_size > 0
+    for h in params.helper_ids:
+        assert (tmp_path / h / "releases.sqlite").stat().st_size > 0

@@ -66,6 +66,15 @@ def test_policy_schedule_and_table_round_trip(plan):
     with pytest.raises(ParameterError, match="deviation_m"):
         AggregationPolicy(mode="validated", clip_m=0.2, deviation_m=0.5)
     assert POLICY.secure and POLICY.validated and not AggregationPolicy(mode="secure").validated
+    assert validated_params(plan, POLICY).helper_ids == ("aggregator-b", "aggregator-c")
+    two = AggregationPolicy(**{**POLICY.to_dict(), "aggregators": 2})
+    assert validated_params(plan, two).helper_ids == ("aggregator-b",)
+    # a fleet file of before the choice was enrolled with one helper
+    old = {k: v for k, v in POLICY.to_dict().items() if k != "aggregators"}
+    assert AggregationPolicy.from_dict(old, "f.toml").aggregators == 2
+    assert AggregationPolicy.from_dict({"mode": "secure"}, "f.toml").aggregators == 3
+    with pytest.raises(ParameterError, match="aggregators"):
+        AggregationPolicy(mode="validated", round_size=4, min_inputs=3, threshold=3, aggregators=4)
 
 
 def test_only_a_segment_covered_whole_gives_an_input(plan):
@@ -138,22 +147,23 @@ def test_a_restarted_service_aborts_its_running_session_and_spends_nothing_twice
     auth = FleetAuthority.generate("t")
     params = validated_params(plan, POLICY)
     ka = AggregatorKeys(VehicleIdentity.enroll(auth, params.leader_id), RelayKey.generate())
-    kb = AggregatorKeys(VehicleIdentity.enroll(auth, params.helper_id), RelayKey.generate())
+    kh = {h: AggregatorKeys(VehicleIdentity.enroll(auth, h), RelayKey.generate()) for h in params.helper_ids}
+    adverts = {h: k.advert("rc/t") for h, k in kh.items()}
     store = ServiceStore(":memory:", plan)
     for v in ("v1", "v2", "v3"):
         store.add_vehicle(v, {"segments": [2], "validated": [2]})
         store.add_sealed(v, 2, b"RCSEAL1\x00" + v.encode(), b"env-" + v.encode())
     rounds = ValidatedRounds(store, auth.trust(), POLICY, "rc/t", keys=ka, release_log=ReleaseLog(),
-                             helper_advert=kb.advert("rc/t"), round_wait_s=0.0)
+                             helper_adverts=adverts, round_wait_s=0.0)
     out = rounds.maybe_open(2)
     assert any(p.topic == "rc/t/prio/2/0/to/v1" for p in out) and (2, 0) in rounds.active
     again = ValidatedRounds(store, auth.trust(), POLICY, "rc/t", keys=ka, release_log=ReleaseLog(),
-                            helper_advert=kb.advert("rc/t"), round_wait_s=0.0)
+                            helper_adverts=adverts, round_wait_s=0.0)
     (r,) = store.rounds(2)
     assert r["phase"] == "aborted" and sorted(r["used"]) == ["v1", "v2", "v3"] and "restarted" in r["reason"]
-    # nobody waits for it: the helper and every vehicle of the roster are told it closed
+    # nobody waits for it: the helpers and every vehicle of the roster are told it closed
     assert sorted(p.topic for p in again.resend if "/prio/2/0/" in p.topic) == [
-        "rc/t/prio/2/0/leader", "rc/t/prio/2/0/to/v1", "rc/t/prio/2/0/to/v2", "rc/t/prio/2/0/to/v3"]
+        "rc/t/prio/2/0/agg/aggregator-a", "rc/t/prio/2/0/to/v1", "rc/t/prio/2/0/to/v2", "rc/t/prio/2/0/to/v3"]
     assert again.free(2) == [] and again.maybe_open(2) == []     # their measurement of segment 2 is spent
 
 
@@ -172,7 +182,7 @@ def test_no_message_raises_out_of_the_validated_parties(plan):
 
     auth = FleetAuthority.generate("t")
     store = ServiceStore(":memory:", plan)
-    rounds, helper = memory._validated_parties(store, auth, POLICY)
+    rounds, helpers = memory._validated_parties(store, auth, POLICY)
     svc = Service(store, auth.trust(), rounds=rounds)
     car, T = VehicleIdentity.enroll(auth, "v1"), Topics("t")
     for bad in (5, [0, 1], ["0"], [True], list(range(10))):
@@ -181,7 +191,7 @@ def test_no_message_raises_out_of_the_validated_parties(plan):
     assert any("'validated' must be a list" in reason for _, _, _, reason in store.events())
     for topic in ("rc/t/prio/\u00b2/0/up/v1", "rc/t/v/v1/seg/\u00b2", "rc/t/prio/7/\u0663/up/v1", "rc/t/secagg/\u00b2/0/x/v1"):
         assert svc.handle(topic, b"x") == []
-    assert helper.handle("rc/t/prio/\u00b2/0/leader", b"x") == []
+    assert all(h.handle("rc/t/prio/\u00b2/0/agg/aggregator-a", b"x") == [] for h in helpers)
     agent = PrioAgent(car, auth.trust(), validated_params(plan, POLICY), SessionLedger(), "rc/t", {})
     assert agent.on_message("rc/t/prio/\u00b2/0/to/v1", b"x") == [] and agent.refusals
     with pytest.raises(MessageError):
@@ -242,7 +252,7 @@ class _Liar:
         class Liar(PrioAgent):
             def _answer(self, key, k, h, blobs):
                 if k > 1:
-                    rh, rb = unpack(blobs[1], "previous result")
+                    rh, rb = unpack(blobs[-1], "previous result")
                     self._u[key] = np.frombuffer(rb[0], dtype="<f8") + 1e3 * direction
                 return super()._answer(key, k, h, blobs)
         return Liar
@@ -272,7 +282,7 @@ def test_lying_vehicles_move_a_session_by_about_c_R_over_n_minus_c(round_size, a
     params, R = validated_params(plan, pol), pol.deviation_m * math.sqrt(L)
     auth = FleetAuthority.generate("t")
     ka = AggregatorKeys(VehicleIdentity.enroll(auth, params.leader_id), RelayKey.generate())
-    kb = AggregatorKeys(VehicleIdentity.enroll(auth, params.helper_id), RelayKey.generate())
+    kh = {h: AggregatorKeys(VehicleIdentity.enroll(auth, h), RelayKey.generate()) for h in params.helper_ids}
     g = np.random.default_rng(0)
     road = np.clip(g.normal(0, 0.03, L), -0.15, 0.15)
     away = np.where(road > 0, -1.0, 1.0)
@@ -285,9 +295,9 @@ def test_lying_vehicles_move_a_session_by_about_c_R_over_n_minus_c(round_size, a
             honest.append(u)
         agents[v] = (Liar if j < liars else PrioAgent)(VehicleIdentity.enroll(auth, v), auth.trust(), params,
                                                         SessionLedger(), "rc/t", {7: u}, rng=np.random.default_rng(j))
-    leader = PrioLeader("rc/t", 7, 0, params, auth.trust(), ka, kb.advert("rc/t"), ReleaseLog())
-    helper = PrioHelperService("rc/t", params, auth.trust(), kb, ka.advert("rc/t"), ReleaseLog())
-    run_prio_session(leader, helper, agents, vids, offline=vids[answer:])
+    leader = PrioLeader("rc/t", 7, 0, params, auth.trust(), ka, [k.advert("rc/t") for k in kh.values()], ReleaseLog())
+    helpers = [PrioHelperService("rc/t", params, auth.trust(), k, ReleaseLog()) for k in kh.values()]
+    run_prio_session(leader, helpers, agents, vids, offline=vids[answer:])
     assert leader.state == "finished", leader.events
     n = len(leader.accepted)
     shift = np.linalg.norm(leader.result - np.mean(honest, axis=0)) / R

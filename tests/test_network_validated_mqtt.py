@@ -1,14 +1,15 @@
 """Validated aggregation as a fleet mode, between separate processes over a real broker on 127.0.0.1 (issue 20).
 
 A fleet enrolled with ``--aggregation validated``: ``serve`` leads every segment's phased validated session,
-``roadcollab helper`` (a second operator's process, from the ``helper/`` folder ``enroll`` wrote) is the
-second aggregator, and every vehicle process gives each segment it covered whole to one session. Oracles:
+two ``roadcollab helper`` processes (other operators', from the ``helper/`` and ``helper-c/`` folders ``enroll``
+wrote) are the other aggregators, and every vehicle process gives each segment it covered whole to one
+session. Oracles:
 
 - ``export``'s fused elevation on those segments equals ``estimate``'s ``final_estimate.csv`` (the clear mean
   of the same drives' inversions) to the proofs' fixed point (a few ``2^-12`` m), with every point counted
   by all 4 vehicles; segments no vehicle covered whole get no estimate;
 - the service's store holds no vehicle's inversion (every contribution body is sealed);
-- the helper's release log holds one release per session and phase.
+- each helper's release log holds one release per session and phase.
 """
 
 import sqlite3
@@ -55,13 +56,14 @@ def test_validated_fleet_equals_estimate_on_the_segments_covered_whole(world, tm
         broker = start_mosquitto(fleet, port, tmp_path / "mosq", tmp_path / "broker.log")
         serve = start_serve(fleet, tmp_path / "s.sqlite", tmp_path / "serve.log", broker=url,
                             extra=("--round-timeout", 30))
-    helper = start(PY, "-m", "roadcollab.cli.main", "helper", "--folder", fleet / "helper", "--broker", url,
-                   log=tmp_path / "helper.log")
+    helpers = {name: start(PY, "-m", "roadcollab.cli.main", "helper", "--folder", fleet / name, "--broker", url,
+                           log=tmp_path / f"{name}.log") for name in ("helper", "helper-c")}
     try:
         out = rc("fleet", "--fleet", fleet, *sum((["--drive", d] for d in drives), []), "--broker", url,
                  "--timeout", 400, timeout=600)
     finally:
-        assert stop(helper) == 0, (tmp_path / "helper.log").read_text()
+        for name, helper in helpers.items():
+            assert stop(helper) == 0, (tmp_path / f"{name}.log").read_text()
         assert stop(serve) == 0, (tmp_path / "serve.log").read_text()
         if broker is not None:
             stop(broker)
@@ -74,8 +76,9 @@ def test_validated_fleet_equals_estimate_on_the_segments_covered_whole(world, tm
         st.close()
     finished = sorted(r["segment"] for r in rounds if r["phase"] == "finished")
     assert finished and all(sorted(r["used"]) == ["v1", "v2", "v3", "v4"] for r in rounds), rounds
-    with sqlite3.connect(fleet / "helper" / "releases.sqlite") as db:
-        assert db.execute("SELECT COUNT(*) FROM prio_releases").fetchone()[0] == 3 * len(finished)
+    for name in ("helper", "helper-c"):
+        with sqlite3.connect(fleet / name / "releases.sqlite") as db:
+            assert db.execute("SELECT COUNT(*) FROM prio_releases").fetchone()[0] == 3 * len(finished)
     rc("export", "--store", tmp_path / "s.sqlite", "--out", tmp_path / "x")
     hv, v = read_csv(tmp_path / "x" / "final_estimate.csv")
     he, e = read_csv(root / "estimate" / "final_estimate.csv")

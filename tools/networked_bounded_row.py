@@ -3,7 +3,7 @@
 The fusion-poisoning study's ``secagg_bounded`` node computes what the phased protocol reveals (centred
 clipping of :mod:`roadcollab.experiments.security.secagg_bounded`, no proofs). This script runs the same
 run's honest session and one attacked session through the protocol as messages between the leader, the
-helper and the ten vehicles (:mod:`roadcollab.network.prioround`, in-memory transport; the same code the
+two helpers and the ten vehicles (:mod:`roadcollab.network.prioround`, in-memory transport; the same code the
 processes of ``python -m roadcollab.network.prio_mqtt`` run), with every proof made and checked, and
 compares the result and the row's MSE ratio with the study node's.
 
@@ -61,16 +61,16 @@ def networked(run, first, raw, phases, grow, attacker=None):
     auth = FleetAuthority.generate("study")
     trust = auth.trust()
     ka = AggregatorKeys(VehicleIdentity.enroll(auth, params.leader_id), RelayKey.generate())
-    kb = AggregatorKeys(VehicleIdentity.enroll(auth, params.helper_id), RelayKey.generate())
+    kh = [AggregatorKeys(VehicleIdentity.enroll(auth, h), RelayKey.generate()) for h in params.helper_ids]
     agents = {}
     for i, u in enumerate(raw):
         cls, kw = (RawAgent, {"raw": u}) if i == attacker else (PrioAgent, {})
         v = f"v{i + 1}"
         agents[v] = cls(VehicleIdentity.enroll(auth, v), trust, params, SessionLedger(), PREFIX, {0: u},
                         rng=np.random.default_rng(i), **kw)
-    leader = PrioLeader(PREFIX, 0, 0, params, trust, ka, kb.advert(PREFIX), ReleaseLog())
-    helper = PrioHelperService(PREFIX, params, trust, kb, ka.advert(PREFIX), ReleaseLog())
-    broker = run_prio_session(leader, helper, agents, list(agents))
+    leader = PrioLeader(PREFIX, 0, 0, params, trust, ka, [k.advert(PREFIX) for k in kh], ReleaseLog())
+    helpers = [PrioHelperService(PREFIX, params, trust, k, ReleaseLog()) for k in kh]
+    broker = run_prio_session(leader, helpers, agents, list(agents))
     return leader, broker
 
 

@@ -15,6 +15,7 @@ _MIN_SPEED = ranged("slowest speed", 0.5, 60, "m/s")
 _DEVIATION = ranged("deviation", 1e-6, 1e3, "m")
 _PHASES = count("phases", 0, 32)
 _RESOLUTION = ranged("resolution", 1e-9, 1.0, "m")
+_AGGREGATORS = count("number of aggregators", 2, 3)
 
 __all__ = ["NAME", "add_parser", "run"]
 
@@ -39,8 +40,8 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
              "broker's password files and topic ACL for the embedded broker and for Mosquitto. Never replaces "
              "an existing fleet.",
         writes="--fleet DIR: fleet.toml, authority/, vehicles/vK/, service/broker.toml, broker/; with --aggregation "
-               "validated also the service's aggregator identity and key in service/ and the second aggregator's "
-               "folder helper/ (hand it to its operator: 'roadcollab helper --folder DIR/helper').",
+               "validated also the service's aggregator identity and key in service/ and the helpers' folders "
+               "helper/ and helper-c/ (hand each to its operator: 'roadcollab helper --folder DIR/helper').",
         example="roadcollab enroll --fleet fleet --vehicles 4 --min-speed 12")
     p.add_argument("--fleet", required=True, metavar="DIR", help="the fleet folder (created)")
     p.add_argument("--vehicles", required=True, type=_VEHICLES, metavar="N", help=f"number of vehicles ({help_range(_VEHICLES)})")
@@ -64,9 +65,9 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
                    help="clear: the service sums the inversions it receives; secure: vehicles send the next "
                         "vehicle's message sealed to the fleet and fuse each segment by secure aggregation, so "
                         "the service learns only sums; validated: as secure, but each segment's sum comes from "
-                        "phased validated sessions with a second aggregator ('roadcollab helper'), in which every "
-                        "input is proven inside --clip and its deviations inside --deviation, so no vehicle can "
-                        "move the result far (default clear)")
+                        "phased validated sessions with helper aggregators ('roadcollab helper', see --aggregators), "
+                        "in which every input is proven inside --clip and its deviations inside --deviation, so no "
+                        "vehicle can move the result far (default clear)")
     g.add_argument("--round-size", type=_ROUND, default=None, metavar="N",
                    help=f"secure: vehicles invited to a round (default K; at most 2T-C-1; {help_range(_ROUND)})")
     g.add_argument("--min-inputs", type=_ROUND, default=5, metavar="K",
@@ -85,6 +86,11 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
                    help=f"validated: phases per session (default 0: from --clip and --deviation; {help_range(_PHASES)})")
     g.add_argument("--resolution", type=_RESOLUTION, default=2.0 ** -12, metavar="M",
                    help=f"validated: fixed-point step of the proofs, m (default 2^-12; {help_range(_RESOLUTION)})")
+    g.add_argument("--aggregators", type=_AGGREGATORS, default=3, metavar="A",
+                   help="validated: 3, the service and two helpers run by two other operators, so that one "
+                        "aggregator that deviates is caught; 2, one helper, where privacy of the later phases needs "
+                        "both aggregators to follow the protocol (docs/security-secagg.md) "
+                        f"(default 3; {help_range(_AGGREGATORS)})")
     return p
 
 
@@ -163,10 +169,11 @@ def run(args: argparse.Namespace, command_line: str) -> int:
     try:
         policy = AggregationPolicy(mode=args.aggregation, round_size=k if args.round_size is None else args.round_size,
                                    min_inputs=k, threshold=t, max_colluders=args.max_colluders, clip_m=args.clip,
-                                   deviation_m=args.deviation, phases=args.phases, resolution_m=args.resolution)
+                                   deviation_m=args.deviation, phases=args.phases, resolution_m=args.resolution,
+                                   aggregators=args.aggregators)
     except ParameterError as err:
         raise ParameterError(f"--round-size/--min-inputs/--threshold/--max-colluders/--clip/--deviation/--phases/"
-                             f"--resolution: {err}") from None
+                             f"--resolution/--aggregators: {err}") from None
     if args.tls_host and not args.tls:
         raise ParameterError("--tls-host: needs --tls")
     ids = enroll(args.fleet, args.vehicles, plan, policy, tls_hosts=args.tls_host if args.tls else None)
@@ -176,8 +183,15 @@ def run(args: argparse.Namespace, command_line: str) -> int:
     if policy.validated:
         from ..network.aggregation import validated_params, validated_schedule
 
-        how = (f"; validated aggregation, sessions of {policy.round_size} (k={k}, "
-               f"{validated_params(plan, policy).phases} phases); the helper's folder is {args.fleet}/helper")
+        from ..network.fleetdir import HELPER_FOLDERS
+
+        params = validated_params(plan, policy)
+        folders = " and ".join(f"{args.fleet}/{HELPER_FOLDERS[h]}" for h in params.helper_ids)
+        how = (f"; validated aggregation with {policy.aggregators} aggregators, sessions of {policy.round_size} "
+               f"(k={k}, {params.phases} phases); the helpers' folders: {folders}")
+        if policy.aggregators == 2:
+            how += ("; note: with 2 aggregators, privacy of the later phases needs both to follow the protocol "
+                    "(one that deviates can steer the centres the vehicles clip around)")
         need = validated_schedule(plan, policy)
         if policy.phases and policy.phases < need:
             how += (f"; note: --phases {policy.phases} is below the {need} that work off one vehicle's phase-1 shift "

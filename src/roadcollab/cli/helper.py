@@ -1,4 +1,4 @@
-"""``roadcollab helper --folder DIR --broker URL``: the second aggregator of a validated fleet."""
+"""``roadcollab helper --folder DIR --broker URL``: a helper aggregator of a validated fleet."""
 
 from __future__ import annotations
 
@@ -26,15 +26,18 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
     argparse.ArgumentParser
     """
     p = command_parser(
-        subparsers, NAME, summary="the second aggregator of a fleet enrolled with --aggregation validated",
-        does="Runs aggregator B of the fleet's validated sessions (a second operator, e.g. the road agency, "
-             "that does not collude with the service): advertises its key, checks its share of every vehicle's "
-             "proof, releases its sum share only over vehicles it accepted itself (at least k, once per session "
-             "and phase, recorded before it is sent) and signs every phase's result. Runs until SIGINT/SIGTERM.",
+        subparsers, NAME, summary="a helper aggregator of a fleet enrolled with --aggregation validated",
+        does="Runs one helper (aggregator B or C) of the fleet's validated sessions, for an operator other than "
+             "the service's (e.g. the road agency): advertises its key, takes part in the coin toss of the proofs' "
+             "randomness, checks its shares of every vehicle's proof, releases its sums only once every aggregator "
+             "announced the same accepted set (at least k, once per session and phase, recorded before they are "
+             "sent) and signs a phase's result only if every sum it holds a copy of agrees. Runs until "
+             "SIGINT/SIGTERM.",
         writes="DIR/releases.sqlite (its release log, kept across restarts); one line per event on stdout.",
         example="roadcollab helper --folder fleet/helper --broker mqtt://127.0.0.1:1883")
     p.add_argument("--folder", required=True, metavar="DIR",
-                   help="the helper folder 'roadcollab enroll --aggregation validated' writes (FLEET/helper)")
+                   help="a helper folder 'roadcollab enroll --aggregation validated' writes (FLEET/helper or "
+                        "FLEET/helper-c)")
     p.add_argument("--broker", required=True, metavar="URL", help="mqtt://HOST:PORT (or mqtts:// with --tls fleets)")
     p.add_argument("--quiet", action="store_true", help="print only the start and stop lines")
     return p
@@ -74,8 +77,9 @@ def run(args: argparse.Namespace, command_line: str) -> int:
         raise ParameterError(f"--folder {folder}: fleet.toml's aggregation mode is {policy.mode!r}, not 'validated'")
     params = validated_params(plan, policy)
     keys = AggregatorKeys(VehicleIdentity.load(folder), RelayKey.load(folder / "x25519.key"))
-    if keys.party != params.helper_id:
-        raise ParameterError(f"--folder {folder}: its certificate is {keys.party!r}, expected {params.helper_id!r}")
+    if keys.party not in params.helper_ids:
+        raise ParameterError(f"--folder {folder}: its certificate is {keys.party!r}, expected one of "
+                             f"{list(params.helper_ids)}")
     trust, login = FleetTrust.load(folder / "trust.toml"), load_login(folder / "broker.toml")
     log = ReleaseLog(folder / "releases.sqlite")
     party = HelperParty(f"rc/{plan.fleet_id}", params, trust, keys, log,

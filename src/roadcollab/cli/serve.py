@@ -218,8 +218,8 @@ def run(args: argparse.Namespace, command_line: str) -> int:
         how = (f"; secure aggregation, rounds of {policy.round_size} (k={policy.min_inputs}, t={policy.threshold})"
                if policy.secure else "")
         if policy.validated:
-            how = (f"; validated aggregation with the helper, sessions of {policy.round_size} (k={policy.min_inputs}, "
-                   f"{service.rounds.params.phases} phases)")
+            how = (f"; validated aggregation with the helpers {list(service.rounds.params.helper_ids)}, sessions of "
+                   f"{policy.round_size} (k={policy.min_inputs}, {service.rounds.params.phases} phases)")
         print(f"serving fleet {plan.fleet_id!r} on {url}: store {args.store} holds {st['contributions']} "
               f"contributions from {st['vehicles']} vehicles{how}", flush=True)
         handled = run_service(service, client, stop, republish)

@@ -17,8 +17,9 @@ so the revealed sum gives at once the total and the count of :class:`~roadcollab
 (:func:`sums_from_total`): the fused estimate of a segment is the same average of inversions as in the
 clear, to the fixed-point resolution ``2^-frac_bits`` m.
 
-Under ``mode = "validated"`` a segment's sum comes from a phased validated session with two aggregators,
-the service and a second operator (:mod:`~roadcollab.network.prioround`, :mod:`~roadcollab.network.validated_rounds`):
+Under ``mode = "validated"`` a segment's sum comes from a phased validated session with three aggregators,
+the service and two other operators (two with ``aggregators = 2``; :mod:`~roadcollab.network.prioround`,
+:mod:`~roadcollab.network.validated_rounds`):
 every input is proven inside the public box ``[-clip_m, clip_m]`` and then, phase after phase, its deviation
 from the previous result inside an l2 ball (centred clipping), so no vehicle moves the result by more than
 about ``R / (n - 1)`` (``R = deviation_m * sqrt(2 m)``). Clipping deviations would cut a coverage row, so
@@ -45,9 +46,11 @@ from .plan import RoadPlan
 from .prioround import PrioParams
 
 __all__ = ["AggregationPolicy", "segment_input", "sums_from_total", "validated_input", "validated_segments", "validated_params",
-           "validated_schedule", "validated_radii", "sums_from_mean", "MODES"]
+           "validated_schedule", "validated_radii", "sums_from_mean", "MODES", "HELPER_IDS"]
 
 MODES = ("clear", "secure", "validated")
+#: The helpers' certificate ids, in order (a fleet with two aggregators has the first only).
+HELPER_IDS = ("aggregator-b", "aggregator-c")
 #: Policy fields read as numbers (the others are integers).
 _FLOATS = ("clip_m", "deviation_m", "resolution_m")
 
@@ -84,6 +87,10 @@ class AggregationPolicy:
         ``K - 1`` balls of that schedule).
     resolution_m : float
         ``validated``: fixed-point step of the proofs, m.
+    aggregators : int
+        ``validated``: 3 (the service and two helpers; one aggregator that deviates is caught) or 2 (one
+        helper: privacy of the later phases needs both aggregators to follow the protocol). A fleet file
+        without the key was enrolled before there was a choice, with 2.
     """
 
     mode: str = "clear"
@@ -96,6 +103,7 @@ class AggregationPolicy:
     deviation_m: float = 0.01
     phases: int = 0
     resolution_m: float = 2.0 ** -12
+    aggregators: int = 3
 
     def __post_init__(self) -> None:
         if self.mode not in MODES:
@@ -106,6 +114,7 @@ class AggregationPolicy:
         check_real("deviation_m", self.deviation_m, low=0.0, low_open=True, high=self.clip_m)
         check_int("phases", self.phases, low=0, high=32)
         check_real("resolution_m", self.resolution_m, low=1e-9, high=self.clip_m / 4)
+        check_int("aggregators", self.aggregators, low=2, high=3)
         if self.validated and self.min_inputs <= 2 * self.liars:
             raise ParameterError(f"validated aggregation against {self.liars} lying vehicles (max_colluders, at least 1) "
                                  f"needs min_inputs above {2 * self.liars}, got {self.min_inputs}")
@@ -122,7 +131,7 @@ class AggregationPolicy:
 
     @property
     def validated(self) -> bool:
-        """Phased validated sessions with two aggregators (module docstring)."""
+        """Phased validated sessions with two or three aggregators (module docstring)."""
         return self.mode == "validated"
 
     @property
@@ -149,7 +158,7 @@ class AggregationPolicy:
         if extra:
             raise ParameterError(f"{where}: unknown aggregation keys {extra}; expected some of "
                                  f"{sorted(cls.__dataclass_fields__)}")
-        kw: dict = {}
+        kw: dict = {} if "aggregators" in data or data.get("mode") != "validated" else {"aggregators": 2}
         for k, v in data.items():
             if k == "mode":
                 kw[k] = v
@@ -314,7 +323,7 @@ def validated_params(plan: RoadPlan, policy: AggregationPolicy) -> PrioParams:
         radii = radii[-want:] + [radii[-1]] * max(0, want - len(radii))
     wide = ValidityEncoding(np.full(L, policy.clip_m), policy.resolution_m)
     tight = tuple(ValidityEncoding(np.full(L, r), policy.resolution_m, norm=r) for r in radii)
-    return PrioParams(wide, tight, min_inputs=policy.min_inputs)
+    return PrioParams(wide, tight, min_inputs=policy.min_inputs, helper_ids=HELPER_IDS[:policy.aggregators - 1])
 
 
 def sums_from_mean(plan: RoadPlan, mean: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:

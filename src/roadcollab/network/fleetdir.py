@@ -9,8 +9,9 @@ Layout written by :func:`enroll` (``roadcollab enroll``)::
     DIR/service/broker.toml           the service's broker login
     DIR/service/identity.key, certificate.bin, x25519.key
                                       validated aggregation: the service as the leading aggregator ``aggregator-a``
-    DIR/helper/                       validated aggregation: the second aggregator ``aggregator-b`` (identity,
-                                      x25519.key, trust.toml, broker.toml, fleet.toml), to hand to its operator
+    DIR/helper/, DIR/helper-c/        validated aggregation: the helpers ``aggregator-b`` and ``aggregator-c``
+                                      (identity, x25519.key, trust.toml, broker.toml, fleet.toml), to hand to
+                                      their operators (``helper/`` only with ``aggregators = 2``)
     DIR/broker/amqtt_passwd           user:argon2 hash (the embedded broker)
     DIR/broker/mosquitto_passwd       user:$7$ PBKDF2-SHA512 hash (Mosquitto's own format)
     DIR/broker/mosquitto_acl          Mosquitto ACL
@@ -35,16 +36,18 @@ from pathlib import Path
 
 from ..errors import FileFormatError, ParameterError
 from ..wire.identity import FleetAuthority, FleetTrust, VehicleIdentity, _read_toml, check_id
-from .aggregation import AggregationPolicy
+from .aggregation import HELPER_IDS, AggregationPolicy
 from .plan import RoadPlan
 from .prioround import PrioParams
 from .relaykey import RelayKey
 from .tls import CA_FILE, write_fleet_tls
 
 __all__ = ["Login", "enroll", "load_plan", "load_aggregation", "load_login", "load_trust", "acl_rules",
-           "write_broker", "SERVICE_USER"]
+           "write_broker", "SERVICE_USER", "HELPER_FOLDERS"]
 
 SERVICE_USER = "service"
+#: The folder of each helper in a fleet folder.
+HELPER_FOLDERS = {"aggregator-b": "helper", "aggregator-c": "helper-c"}
 
 
 @dataclass(frozen=True)
@@ -78,7 +81,7 @@ def _argon2_hash(password: str) -> str:
     return Argon2Hasher(time_cost=1, memory_cost=8192, parallelism=1).hash(password)
 
 
-def acl_rules(fleet_id: str, vehicles: list[str], helper: str | None = None, leader: str = "aggregator-a") -> dict:
+def acl_rules(fleet_id: str, vehicles: list[str], helpers=(), leader: str = "aggregator-a") -> dict:
     """``{"publish": {user: [filters]}, "subscribe": {user: [filters]}}`` of the fleet (module docstring).
 
     Parameters
@@ -86,10 +89,11 @@ def acl_rules(fleet_id: str, vehicles: list[str], helper: str | None = None, lea
     fleet_id : str
     vehicles : list of str
         Vehicle ids.
-    helper : str, optional
-        The user of a second aggregator (validated sessions, :mod:`roadcollab.network.prioround`): it
-        publishes its messages and key advert and reads the leader's and the key adverts; the service
-        and the vehicles get the session topics of their roles. Its user name is its certificate id.
+    helpers : sequence of str
+        The users of the helper aggregators (validated sessions, :mod:`roadcollab.network.prioround`): each
+        publishes its messages and key advert and reads the other aggregators' messages, the uploads
+        forwarded to it and the key adverts; the service and the vehicles get the session topics of their
+        roles. A helper's user name is its certificate id.
     leader : str
         The certificate id of the service as the leading aggregator (where it advertises its key).
     """
@@ -99,11 +103,12 @@ def acl_rules(fleet_id: str, vehicles: list[str], helper: str | None = None, lea
     for v in vehicles:
         pub[v] = [f"{root}/v/{v}/#", f"{root}/secagg/+/+/+/{v}"]
         sub[v] = [f"{root}/ack/{v}", f"{root}/seg/+/waiting", f"{root}/secagg/+/+/to/{v}"]
-    if helper is not None:
+    if helpers:
         prio = f"{root}/prio"
-        pub[SERVICE_USER] += [f"{prio}/+/+/to/+", f"{prio}/+/+/leader", f"{prio}/key/{leader}"]
-        pub[helper] = [f"{prio}/+/+/helper", f"{prio}/key/{helper}"]
-        sub[helper] = [f"{prio}/+/+/leader", f"{prio}/key/+"]
+        pub[SERVICE_USER] += [f"{prio}/+/+/to/+", f"{prio}/+/+/agg/{leader}", f"{prio}/+/+/fwd/+", f"{prio}/key/{leader}"]
+        for helper in helpers:
+            pub[helper] = [f"{prio}/+/+/agg/{helper}", f"{prio}/key/{helper}"]
+            sub[helper] = [f"{prio}/+/+/agg/+", f"{prio}/+/+/fwd/{helper}", f"{prio}/key/+"]
         for v in vehicles:
             pub[v].append(f"{prio}/+/+/up/{v}")
             sub[v] += [f"{prio}/+/+/to/{v}", f"{prio}/key/+"]
@@ -206,30 +211,33 @@ def enroll(folder, n_vehicles: int, plan: RoadPlan, aggregation: AggregationPoli
         d = folder / ("service" if user == SERVICE_USER else f"vehicles/{user}")
         ca = f'ca_file = "{CA_FILE}"\n' if tls_hosts is not None else ""
         _write_secret(d / "broker.toml", f'username = "{user}"\npassword = "{pw}"\n{ca}')
-    helper = _write_aggregators(folder, auth) if aggregation.validated else None
-    if helper is not None:
+    helpers = _write_aggregators(folder, auth, aggregation.aggregators) if aggregation.validated else []
+    for helper in helpers:
         logins[helper] = secrets.token_urlsafe(24)
         ca = f'ca_file = "{CA_FILE}"\n' if tls_hosts is not None else ""
-        _write_secret(folder / "helper" / "broker.toml", f'username = "{helper}"\npassword = "{logins[helper]}"\n{ca}')
-    write_broker(folder / "broker", logins, acl_rules(plan.fleet_id, ids, helper=helper))
+        _write_secret(folder / HELPER_FOLDERS[helper] / "broker.toml",
+                      f'username = "{helper}"\npassword = "{logins[helper]}"\n{ca}')
+    write_broker(folder / "broker", logins, acl_rules(plan.fleet_id, ids, helpers=helpers))
     if tls_hosts is not None:
-        parties = [folder / "service"] + [folder / "vehicles" / v for v in ids] + ([folder / "helper"] if helper else [])
+        parties = [folder / "service"] + [folder / "vehicles" / v for v in ids] + \
+            [folder / HELPER_FOLDERS[h] for h in helpers]
         write_fleet_tls(folder, plan.fleet_id, parties, tls_hosts)
     return ids
 
 
-def _write_aggregators(folder: Path, auth: FleetAuthority) -> str:
-    """The two aggregators of validated aggregation: the service's identity and X25519 key in ``service/``,
-    the helper's folder ``helper/`` (with a copy of ``fleet.toml``); the helper's user name."""
-    leader, helper = PrioParams.leader_id, PrioParams.helper_id       # the parameters' default ids
-    VehicleIdentity.enroll(auth, leader).save(folder / "service")
+def _write_aggregators(folder: Path, auth: FleetAuthority, count: int) -> list[str]:
+    """The aggregators of validated aggregation: the service's identity and X25519 key in ``service/``,
+    each helper's folder (:data:`HELPER_FOLDERS`, with a copy of ``fleet.toml``); the helpers' user names."""
+    VehicleIdentity.enroll(auth, PrioParams.leader_id).save(folder / "service")     # the parameters' default id
     RelayKey.generate().save(folder / "service" / "x25519.key")
-    d = folder / "helper"
-    VehicleIdentity.enroll(auth, helper).save(d)
-    RelayKey.generate().save(d / "x25519.key")
-    auth.trust().save(d / "trust.toml")
-    (d / "fleet.toml").write_text((folder / "fleet.toml").read_text())
-    return str(helper)
+    helpers = list(HELPER_IDS[:count - 1])
+    for helper in helpers:
+        d = folder / HELPER_FOLDERS[helper]
+        VehicleIdentity.enroll(auth, helper).save(d)
+        RelayKey.generate().save(d / "x25519.key")
+        auth.trust().save(d / "trust.toml")
+        (d / "fleet.toml").write_text((folder / "fleet.toml").read_text())
+    return helpers
 
 
 def _fleet_toml(folder) -> tuple[Path, dict]:

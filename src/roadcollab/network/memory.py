@@ -39,7 +39,7 @@ __all__ = ["run_in_memory", "estimate_fleet_in_memory"]
 
 
 class _Handler:
-    """A party on the transport that only answers messages (the helper)."""
+    """A party on the transport that only answers messages (a helper)."""
 
     def __init__(self, on_message) -> None:
         self.on_message = on_message
@@ -107,9 +107,9 @@ def run_in_memory(drives, plan: RoadPlan, *, store: ServiceStore | None = None, 
     store = ServiceStore(":memory:", plan) if store is None else store
     authority = FleetAuthority.generate(plan.fleet_id) if authority is None else authority
     trust = authority.trust()
-    rounds, helper = None, None
+    rounds, helpers = None, []
     if aggregation is not None and aggregation.validated:
-        rounds, helper = _validated_parties(store, authority, aggregation)
+        rounds, helpers = _validated_parties(store, authority, aggregation)
     elif aggregation is not None and aggregation.secure:
         rounds = SecureRounds(store, trust, aggregation, f"rc/{plan.fleet_id}", phase_timeout_s=0.0,
                               round_wait_s=float("inf"))
@@ -120,7 +120,7 @@ def run_in_memory(drives, plan: RoadPlan, *, store: ServiceStore | None = None, 
         svc.subscribe(f)
     if rounds is not None:
         return _run_secure(drives, plan, store, authority, service, broker, svc, aggregation, set(offline), timeouts,
-                           road, guard, helper)
+                           road, guard, helpers)
     for j, d in enumerate(drives):
         engine, extra, realign = placed_engine(d, plan, road, j, guard=guard)
         agent = VehicleAgent(engine, VehicleIdentity.enroll(authority, f"v{j + 1}"),
@@ -137,14 +137,15 @@ def run_in_memory(drives, plan: RoadPlan, *, store: ServiceStore | None = None, 
 
 
 def _validated_parties(store: ServiceStore, authority: FleetAuthority, policy: AggregationPolicy):
-    """The service's :class:`ValidatedRounds` and the helper (a second operator, here in the same process)."""
+    """The service's :class:`ValidatedRounds` and the helpers (other operators, here in the same process)."""
     prefix, trust = f"rc/{store.plan.fleet_id}", authority.trust()
     params = validated_params(store.plan, policy)
     ka = AggregatorKeys(VehicleIdentity.enroll(authority, params.leader_id), RelayKey.generate())
-    kb = AggregatorKeys(VehicleIdentity.enroll(authority, params.helper_id), RelayKey.generate())
+    kh = {h: AggregatorKeys(VehicleIdentity.enroll(authority, h), RelayKey.generate()) for h in params.helper_ids}
     rounds = ValidatedRounds(store, trust, policy, prefix, keys=ka, release_log=ReleaseLog(),
-                             helper_advert=kb.advert(prefix), phase_timeout_s=0.0, round_wait_s=float("inf"))
-    return rounds, PrioHelperService(prefix, params, trust, kb, ka.advert(prefix), ReleaseLog())
+                             helper_adverts={h: k.advert(prefix) for h, k in kh.items()}, phase_timeout_s=0.0,
+                             round_wait_s=float("inf"))
+    return rounds, [PrioHelperService(prefix, params, trust, k, ReleaseLog()) for k in kh.values()]
 
 
 def _round_agent(ident: VehicleIdentity, trust, policy: AggregationPolicy, prefix: str, plan: RoadPlan):
@@ -155,14 +156,15 @@ def _round_agent(ident: VehicleIdentity, trust, policy: AggregationPolicy, prefi
 
 
 def _run_secure(drives, plan, store, authority, service, broker, svc, policy, offline, timeouts, road=None,
-                guard=GUARD_ROAD_DEFAULT, helper=None):
+                guard=GUARD_ROAD_DEFAULT, helpers=()):
     trust = authority.trust()
     relay = RelayKey.generate()
     agents, cars = {}, {}
     parties: dict = {}
-    if helper is not None:       # the second aggregator: one more party on the transport
+    for helper in helpers:       # the other aggregators: one more party each on the transport
         hc = broker.client()
-        hc.subscribe(helper.subscription)
+        for filt in helper.subscriptions:
+            hc.subscribe(filt)
         cars[helper.keys.party], parties[helper.keys.party] = hc, _Handler(helper.handle)
     for j, d in enumerate(drives):
         ident = VehicleIdentity.enroll(authority, f"v{j + 1}")

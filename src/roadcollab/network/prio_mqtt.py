@@ -3,8 +3,8 @@
 ``python -m roadcollab.network.prio_mqtt ROLE --folder DIR --broker URL --params FILE --segment S --epoch E``
 with ``ROLE`` one of ``leader`` (``--roster v1,v2,..``), ``helper`` or ``vehicle``. Each party connects with
 its own login; the aggregators advertise their X25519 keys as retained messages signed by their
-identities and read the other's advert from the broker (:func:`~.priowire.open_advert`); the vehicles
-get the helper's advert with each invite. The process ends when the session closes (or after
+identities; the leader reads the helpers' adverts from the broker (:func:`~.priowire.open_advert`) and
+the vehicles get every aggregator's advert with each invite. The process ends when the session closes (or after
 ``--timeout`` seconds: return code 3).
 
 A party's folder holds ``certificate.bin`` and ``identity.key`` (:class:`~roadcollab.wire.identity.VehicleIdentity`),
@@ -56,7 +56,7 @@ def params_to_dict(params: PrioParams, prefix: str) -> dict:
         Topic prefix (``rc/{fleet_id}``).
     """
     return {"prefix": prefix, "wide": _encoding_dict(params.wide), "tight": [_encoding_dict(e) for e in params.tight],
-            "min_inputs": params.min_inputs, "leader_id": params.leader_id, "helper_id": params.helper_id}
+            "min_inputs": params.min_inputs, "leader_id": params.leader_id, "helper_ids": list(params.helper_ids)}
 
 
 def params_from_dict(d: dict, where: str) -> tuple[PrioParams, str]:
@@ -71,8 +71,11 @@ def params_from_dict(d: dict, where: str) -> tuple[PrioParams, str]:
     try:
         enc = [ValidityEncoding(np.asarray(e["bounds"], float), float(e["resolution"]), norm=float(e.get("norm", 0.0)))
                for e in [d["wide"], *d["tight"]]]
-        return (PrioParams(enc[0], tuple(enc[1:]), int(d["min_inputs"]), str(d["leader_id"]), str(d["helper_id"])),
-                str(d["prefix"]))
+        helpers = d["helper_ids"]
+        if not isinstance(helpers, list):
+            raise TypeError("helper_ids must be a list")
+        return (PrioParams(enc[0], tuple(enc[1:]), int(d["min_inputs"]), str(d["leader_id"]),
+                           tuple(str(h) for h in helpers)), str(d["prefix"]))
     except (KeyError, TypeError, ValueError) as err:
         raise ParameterError(f"{where}: not validated-session parameters ({err!r})") from None
 
@@ -99,7 +102,7 @@ def _loop(client: MqttClient, handle: Callable[[str, bytes], list[Publish]], don
 
 
 def _advert(client: MqttClient, prefix: str, party: str, deadline: float) -> bytes:
-    """The other aggregator's retained key advert (checked by the caller)."""
+    """Aggregator ``party``'s retained key advert (checked by the caller)."""
     topic = key_topic(prefix, party)
     client.subscribe(topic)
     while time.monotonic() < deadline:
@@ -144,15 +147,17 @@ def _run(args: argparse.Namespace) -> int:
         client.publish(key_topic(prefix, keys.party), keys.advert(prefix), retain=True)
         log = ReleaseLog(folder / "releases.sqlite")
         if args.role == "helper":
-            svc = PrioHelperService(prefix, params, trust, keys, _advert(client, prefix, params.leader_id, deadline), log)
-            client.subscribe(svc.subscription)
+            svc = PrioHelperService(prefix, params, trust, keys, log)
+            for filt in svc.subscriptions:
+                client.subscribe(filt)
             key = (args.segment, args.epoch)
             ok = _loop(client, svc.handle, lambda: key in svc.finished, deadline)
             return 0 if ok else 3
         leader = PrioLeader(prefix, args.segment, args.epoch, params, trust, keys,
-                            _advert(client, prefix, params.helper_id, deadline), log)
+                            [_advert(client, prefix, h, deadline) for h in params.helper_ids], log)
         client.subscribe(f"{leader.topics.base}/up/+")
-        client.subscribe(leader.topics.helper)
+        for h in params.helper_ids:
+            client.subscribe(leader.topics.agg(h))
         time.sleep(args.settle)           # the others subscribe (their sessions are persistent after that)
         for p in leader.open(args.roster.split(",")):
             client.publish(p.topic, p.payload)

@@ -2,29 +2,30 @@
 
 :class:`PrioAgent` answers the leader's invites: phase 1 records the measurement in the vehicle's
 :class:`~roadcollab.privacy.secagg_store.SessionLedger` (one session per (segment, epoch), across
-restarts) and proves its input clipped into the wide box; phase ``k > 1`` first checks the helper's
+restarts) and proves its input clipped into the wide box; phase ``k > 1`` first checks every aggregator's
 signature on the previous result and records phase 1's set (a later phase over another set gets
-nothing), then proves its deviation from the result scaled onto the public ball. The helper's part is
-sealed to the helper's advertised X25519 key (the leader relays it unread). :func:`run_prio_session`
+nothing), then proves its deviation from the result scaled onto the public ball. Each helper's share is
+sealed to that helper's advertised X25519 key (the leader relays it unread). :func:`run_prio_session`
 runs one session over a :class:`~roadcollab.network.transport.MemoryBroker`.
 """
 
 from __future__ import annotations
+
+from collections.abc import Callable
+from typing import Any
 
 import numpy as np
 
 from ..errors import MessageError, ParameterError
 from ..privacy.secagg_messages import AggregationRefused, session_id
 from ..privacy.secagg_phased import phase_session
+from ..privacy.secagg_replicated import submit
 from ..privacy.secagg_store import SessionLedger, segment_key
-from ..privacy.secagg_validity import submit
-from ..wire.certificate import verify_signature
 from ..wire.identity import FleetTrust, VehicleIdentity
 from .aggregation import validated_input, validated_segments
 from .messages import seal
-from .priohelper import PrioHelperService
-from .prioround import PrioLeader, PrioParams
-from .priowire import PrioTopics, ids_field, int_field, open_advert, pack, result_bytes, unpack
+from .prioround import PrioLeader, PrioParams, open_result
+from .priowire import PrioTopics, commitments_blob, ids_field, int_field, open_advert, pack, share_blob, unpack
 from .relaykey import seal_to
 from .service import Publish
 from .transport import MemoryBroker
@@ -145,30 +146,28 @@ class PrioAgent:
         return u
 
     def _answer(self, key: tuple[int, int], k: int, h: dict, blobs: list[bytes]) -> list[Publish]:
-        topics, session = PrioTopics(self.prefix, *key), session_id(*key)
-        if len(blobs) != 2:
-            raise MessageError("invite: expected the helper's key advert and the previous result")
-        cert, helper_pub = open_advert(blobs[0], self.trust, self.prefix, self.params.helper_id)
+        topics, session, p = PrioTopics(self.prefix, *key), session_id(*key), self.params
+        if len(blobs) != len(p.aggregators) + 1:
+            raise MessageError(f"invite: expected {len(p.aggregators)} key adverts and the previous result")
+        certs, keys = {}, {}
+        for party, advert in zip(p.aggregators, blobs):
+            certs[party], keys[party] = open_advert(advert, self.trust, self.prefix, party)
         pid = int_field(h, "id", "invite", 1)
-        enc = self.params.encoding(k)
+        enc = p.encoding(k)
         try:
             if k == 1:
                 u, roster = self._input(key), ids_field(h, "roster", "invite")
                 if key not in self.inputs:   # a measurement of the segment: one session in any epoch
                     self.ledger.record_contribution(segment_key(key[0]), roster)
                 self.ledger.record_contribution(session, roster)
-                self._u[key], _ = self.params.wide.clip(u)
+                self._u[key], _ = p.wide.clip(u)
                 x = self._u[key]
             else:
                 if key not in self._u:
                     raise MessageError(f"phase {k} of session {key} without its phase 1 here")
-                rh, rb = unpack(blobs[1], "previous result")
-                acc = ids_field(rh, "accepted", "previous result")
-                if int_field(rh, "phase", "previous result", 1) != k - 1 or len(rb) != 2 or pid not in acc:
-                    raise MessageError(f"phase {k}: the previous result is not phase {k - 1}'s over this vehicle")
-                verify_signature(cert.public_key, result_bytes(session, k - 1, acc, rb[0]), rb[1],
-                                 "the helper's result")
-                m = np.frombuffer(rb[0], dtype="<f8")
+                acc, m = open_result(blobs[-1], self.trust, p, session, k - 1, certs)
+                if pid not in acc:
+                    raise MessageError(f"phase {k}: the previous result is not over this vehicle")
                 if m.shape != self._u[key].shape or not np.all(np.isfinite(m)):
                     raise MessageError(f"phase {k}: the previous result has the wrong length or is not finite")
                 self.ledger.record_view(session, acc)
@@ -177,30 +176,33 @@ class PrioAgent:
                 x = np.clip(d, -enc.bounds, enc.bounds)
         except AggregationRefused as err:
             raise MessageError(f"sends nothing in phase {k}: {err}") from None
-        sub = submit(enc, x, phase_session(session, k), pid, self.rng, identity=self.identity)
+        up = submit(enc, x, phase_session(session, k), pid, self.rng, aggregators=len(p.aggregators),
+                    identity=self.identity)
         f = enc.field
-        sealed = seal_to(helper_pub, topics.sealed_part(pid, k), sub.helper.seed + sub.helper.blind + sub.helper.peer_part)
-        body = pack({"t": "upload", "phase": k, "id": pid}, f.to_bytes(sub.leader.x), f.to_bytes(sub.leader.proof.elements),
-                    sub.leader.blind, sub.leader.peer_part, sealed, sub.signature)
+        sealed = [seal_to(keys[party], topics.sealed_part(pid, k, party), share_blob(sh, f))
+                  for party, sh in zip(p.helper_ids, up.shares[1:])]
+        body = pack({"t": "upload", "phase": k, "id": pid}, commitments_blob(up.commitments),
+                    share_blob(up.shares[0], f), *sealed)
         topic = topics.up(self.vid)
         return [Publish(topic, seal(self.identity, topic, body))]
 
 
-def run_prio_session(leader: PrioLeader, helper: PrioHelperService, agents: dict, roster: list[str], *,
+def run_prio_session(leader: PrioLeader, helpers, agents: dict, roster: list[str], *,
                      offline=(), timeouts: int = 3, limit: int = 1000) -> MemoryBroker:
     """One session over a fresh :class:`~roadcollab.network.transport.MemoryBroker`, to its end.
 
     Parameters
     ----------
     leader : PrioLeader
-    helper : PrioHelperService
+    helpers : PrioHelperService or list of them
+        One per helper of ``leader.params``.
     agents : dict of str to PrioAgent
         Vehicles that answer (others of ``roster`` never do).
     roster : list of str
     offline : iterable of str
         Vehicles gone: they receive nothing.
     timeouts : int
-        Leader timeouts at most (each closes the current phase with what was decided).
+        Leader timeouts at most (each closes the current phase's uploads, then gives up).
     limit : int
         Delivery passes at most per timeout.
 
@@ -210,15 +212,20 @@ def run_prio_session(leader: PrioLeader, helper: PrioHelperService, agents: dict
         Its ``bytes_published``.
     """
     broker = MemoryBroker()
-    a, b = broker.client(), broker.client()
+    a = broker.client()
     a.subscribe(f"{leader.topics.base}/up/+")
-    a.subscribe(leader.topics.helper)
-    b.subscribe(helper.subscription)
+    for party in leader.params.helper_ids:
+        a.subscribe(leader.topics.agg(party))
+    parties: list[tuple[Any, Callable[[str, bytes], list[Publish]]]] = [(a, leader.handle)]
+    for helper in (helpers if isinstance(helpers, (list, tuple)) else [helpers]):
+        c = broker.client()
+        for filt in helper.subscriptions:
+            c.subscribe(filt)
+        parties.append((c, helper.handle))
     clients = {v: broker.client() for v in agents}
     for v, c in clients.items():
         c.subscribe(agents[v].subscription)
-    parties = [(a, leader.handle), (b, helper.handle)] + [
-        (c, (lambda t, p: []) if v in set(offline) else agents[v].on_message) for v, c in clients.items()]
+    parties += [(c, (lambda t, p: []) if v in set(offline) else agents[v].on_message) for v, c in clients.items()]
     for p in leader.open(list(roster)):
         a.publish(p.topic, p.payload)
     for _ in range(timeouts + 1):

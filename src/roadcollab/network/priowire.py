@@ -2,21 +2,22 @@
 
 Topics of the session on measurement ``(segment, epoch)``, under ``{prefix}/prio/{segment}/{epoch}``:
 
-- ``.../to/{vid}``: leader -> vehicle, unsigned framing (what it carries is signed by the helper):
-  ``invite`` (phase, protocol id, roster; the helper's key advert; from phase 2 the helper-signed result
-  of the previous phase) and ``closed``;
-- ``.../up/{vid}``: vehicle -> leader, an envelope signed by the vehicle for that topic: its leader share
-  of the input and of the proof, its joint-randomness material, the helper's part sealed to the helper's
-  X25519 key (the leader relays it unread) and the submission signature the helper checks;
-- ``.../leader``: leader -> helper and ``.../helper``: helper -> leader, envelopes signed by each
-  aggregator's certified identity: ``open`` (roster), ``fwd`` (a vehicle's sealed part), ``vshare``
-  (verifier shares), ``reject``, ``accept`` (the accepted set and the leader's sum share), ``result``
-  (the helper's sum share and its signed result), ``refuse``, ``closed``.
+- ``.../to/{vid}``: leader -> vehicle, unsigned framing (what it carries is signed by the aggregators):
+  ``invite`` (phase, protocol id, roster; the helpers' key adverts; from phase 2 the previous phase's
+  result signed by every aggregator) and ``closed``;
+- ``.../up/{vid}``: vehicle -> leader, an envelope signed by the vehicle for that topic: its commitments
+  (:func:`commitments_blob`), the leader's share in the clear and each helper's share sealed to that
+  helper's X25519 key (the leader relays it unread);
+- ``.../fwd/{party}``: leader -> helper ``party``: a vehicle's commitments, its certificate and the share
+  sealed to ``party``;
+- ``.../agg/{party}``: aggregator ``party`` -> the others, envelopes signed by its certified identity:
+  ``open`` (roster; the leader), ``commit`` and ``reveal`` (the coin toss of the query randomness),
+  ``close`` (the uploads of the phase; the leader), ``vshares`` (verifier shares), ``set`` (the accepted
+  set), ``sums`` (component sums), ``result`` (the signed ``m_k``), ``abort``, ``closed`` (the leader).
 
 Each aggregator advertises its X25519 key signed by its identity on ``{prefix}/prio/key/{id}``
-(:func:`open_advert`); the query randomness of the proofs is keyed by their X25519 agreement
-(:func:`verify_key`), which no vehicle can compute. A framed message is a 4-byte header length, a JSON
-header (at most :data:`MAX_HEADER` bytes) naming the lengths of the binary parts, then the parts.
+(:func:`open_advert`). A framed message is a 4-byte header length, a JSON header (at most
+:data:`MAX_HEADER` bytes) naming the lengths of the binary parts, then the parts.
 """
 
 from __future__ import annotations
@@ -28,21 +29,21 @@ import struct
 import numpy as np
 
 from ..errors import MessageError
-from ..privacy.secagg_flp import Field
+from ..privacy.secagg_flp import Field, ValidityEncoding
+from ..privacy.secagg_replicated import AggregatorShare, Commitments
 from ..privacy.secagg_store import view_digest
-from ..privacy.secagg_validity import VerifierShare
 from ..wire.certificate import Certificate
 from ..wire.envelope import open_envelope
 from ..wire.identity import FleetTrust, VehicleIdentity
-from .messages import b64, seal, unb64
+from .messages import seal
 from .relaykey import RelayKey
 
-__all__ = ["MAX_HEADER", "PrioTopics", "AggregatorKeys", "pack", "unpack", "key_topic", "open_advert", "verify_key",
-           "result_bytes", "elements", "ids_field", "int_field", "vshare_message", "read_vshare"]
+__all__ = ["MAX_HEADER", "PrioTopics", "AggregatorKeys", "pack", "unpack", "key_topic", "open_advert",
+           "result_bytes", "elements", "ids_field", "int_field", "commitments_blob", "read_commitments", "share_blob",
+           "read_share"]
 
 MAX_HEADER = 64 * 1024
-_VERIFY_INFO = b"roadcollab/prio/verify/v1|"
-_RESULT = b"roadcollab/prio/result/v1|"
+_RESULT = b"roadcollab/prio/result/v2|"
 
 
 def pack(header: dict, *blobs: bytes) -> bytes:
@@ -151,37 +152,84 @@ def elements(f: Field, blob: bytes, what: str, n: int | None = None) -> np.ndarr
     return f.from_bytes(blob, n, what)
 
 
-def vshare_message(share: VerifierShare, f: Field) -> tuple[dict, bytes]:
-    """``(header, part)`` of an aggregator's ``vshare`` message carrying ``share``.
+def commitments_blob(c: Commitments) -> bytes:
+    """A vehicle's commitments as one part: its joint-randomness parts, its proof digest and its signature.
 
     Parameters
     ----------
-    share : VerifierShare
-    f : Field
+    c : Commitments
     """
-    return {"t": "vshare", "id": share.vehicle, "joint": b64(share.joint)}, f.to_bytes(share.values)
+    return b"".join(c.parts) + c.proof_digest + c.signature
 
 
-def read_vshare(h: dict, blobs: list[bytes], f: Field) -> VerifierShare:
-    """The peer's verifier share of an untrusted ``vshare`` message.
+def read_commitments(blob: bytes, vehicle: int, aggregators: int) -> Commitments:
+    """The commitments of :func:`commitments_blob` from an untrusted part.
 
     Parameters
     ----------
-    h : dict
-        Header.
-    blobs : list of bytes
-        Its parts (one: the values).
-    f : Field
+    blob : bytes
+    vehicle : int
+        The protocol id they belong to.
+    aggregators : int
 
     Raises
     ------
     MessageError
-        A malformed id, joint randomness or values, or not exactly one part.
+        Not ``aggregators`` 32-byte parts, a 32-byte digest and a 64-byte signature.
     """
-    if len(blobs) != 1:
-        raise MessageError("vshare: expected one part (the verifier share)")
-    return VerifierShare(int_field(h, "id", "vshare", 1), unb64(h.get("joint"), "vshare joint"),
-                         elements(f, blobs[0], "verifier share"))
+    blob = bytes(blob)
+    if len(blob) != 32 * aggregators + 32 + 64:
+        raise MessageError(f"vehicle {vehicle}: commitments of {len(blob)} bytes, expected {32 * aggregators + 96}")
+    parts = tuple(blob[32 * j:32 * (j + 1)] for j in range(aggregators))
+    return Commitments(vehicle, parts, blob[32 * aggregators:32 * aggregators + 32], blob[32 * aggregators + 32:])
+
+
+def share_blob(share: AggregatorShare, f: Field) -> bytes:
+    """One aggregator's share of a vehicle's input as one part (component 0 in full, seeds, blinds).
+
+    Parameters
+    ----------
+    share : AggregatorShare
+    f : Field
+    """
+    blobs = [] if share.x0 is None or share.proof0 is None else [f.to_bytes(share.x0), f.to_bytes(share.proof0)]
+    blobs += [share.seeds[j] for j in share.comps if j] + [share.blinds[j] for j in share.comps]
+    return pack({"comps": list(share.comps)}, *blobs)
+
+
+def read_share(blob: bytes, comps: tuple[int, ...], enc: ValidityEncoding, what: str) -> AggregatorShare:
+    """An aggregator's share of :func:`share_blob` from an untrusted part.
+
+    Parameters
+    ----------
+    blob : bytes
+    comps : tuple of int
+        The components the reading aggregator holds.
+    enc : ValidityEncoding
+        The phase's.
+    what : str
+        Named in the error.
+
+    Raises
+    ------
+    MessageError
+        Other components, parts of the wrong size, or elements outside the field.
+    """
+    h, blobs = unpack(blob, what)
+    if h.get("comps") != list(comps):
+        raise MessageError(f"{what}: the share of components {h.get('comps')!r}, expected {list(comps)}")
+    x0 = proof0 = None
+    if 0 in comps:
+        if len(blobs) < 2:
+            raise MessageError(f"{what}: component 0 missing")
+        f = enc.field
+        x0 = elements(f, blobs[0], f"{what}: x share", enc.length + enc.n_bits)
+        proof0 = elements(f, blobs[1], f"{what}: proof share", enc.proof_length)
+        blobs = blobs[2:]
+    seeded = [j for j in comps if j]
+    if len(blobs) != len(seeded) + len(comps) or any(len(b) != 16 for b in blobs):
+        raise MessageError(f"{what}: expected {len(seeded)} seeds and {len(comps)} blinds of 16 bytes")
+    return AggregatorShare(tuple(comps), x0, proof0, dict(zip(seeded, blobs)), dict(zip(comps, blobs[len(seeded):])))
 
 
 class PrioTopics:
@@ -197,8 +245,6 @@ class PrioTopics:
     def __init__(self, prefix: str, segment: int, epoch: int) -> None:
         self.prefix, self.segment, self.epoch = prefix, int(segment), int(epoch)
         self.base = f"{prefix}/prio/{self.segment}/{self.epoch}"
-        self.leader = f"{self.base}/leader"
-        self.helper = f"{self.base}/helper"
 
     def to(self, vid: str) -> str:
         return f"{self.base}/to/{vid}"
@@ -206,16 +252,36 @@ class PrioTopics:
     def up(self, vid: str) -> str:
         return f"{self.base}/up/{vid}"
 
-    def sealed_part(self, pid: int, phase: int) -> str:
-        """The associated data of a vehicle's part sealed to the helper (not a topic anything is sent on).
+    def agg(self, party: str) -> str:
+        """Where aggregator ``party`` publishes its messages to the others.
+
+        Parameters
+        ----------
+        party : str
+        """
+        return f"{self.base}/agg/{party}"
+
+    def fwd(self, party: str) -> str:
+        """Where the leader forwards the vehicles' sealed shares to helper ``party``.
+
+        Parameters
+        ----------
+        party : str
+        """
+        return f"{self.base}/fwd/{party}"
+
+    def sealed_part(self, pid: int, phase: int, party: str) -> str:
+        """The associated data of a vehicle's share sealed to ``party`` (not a topic anything is sent on).
 
         Parameters
         ----------
         pid : int
             Protocol id.
         phase : int
+        party : str
+            The helper it is sealed to.
         """
-        return f"{self.base}/part/{int(pid)}/{int(phase)}"
+        return f"{self.base}/part/{int(pid)}/{int(phase)}/{party}"
 
     @staticmethod
     def parse(prefix: str, topic: str) -> tuple[int, int, list[str]]:
@@ -299,22 +365,8 @@ def open_advert(data: bytes, trust: FleetTrust, prefix: str, party: str) -> tupl
     return cert, pub
 
 
-def verify_key(own: RelayKey, peer_public: bytes, session: bytes) -> bytes:
-    """The aggregators' shared key of the proofs' query randomness for ``session`` (no vehicle knows it).
-
-    Parameters
-    ----------
-    own : RelayKey
-        This aggregator's X25519 key.
-    peer_public : bytes
-        The other aggregator's (from its checked advert).
-    session : bytes
-    """
-    return own.agree(peer_public, _VERIFY_INFO + bytes(session))
-
-
 def result_bytes(session: bytes, phase: int, accepted, m: bytes) -> bytes:
-    """What the helper signs of a phase's result: session, phase, accepted set and the result's float64 bytes.
+    """What every aggregator signs of a phase's result: session, phase, accepted set and the result's float64 bytes.
 
     Parameters
     ----------

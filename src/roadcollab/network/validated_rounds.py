@@ -1,10 +1,11 @@
-"""The service's validated sessions: each segment's sum from a phased session with a second aggregator.
+"""The service's validated sessions: each segment's sum from a phased session with the helper aggregators.
 
 Under ``[aggregation] mode = "validated"`` (:class:`~roadcollab.network.aggregation.AggregationPolicy`) the
-service is the leader ``A`` of :mod:`~roadcollab.network.prioround` and a second operator runs the helper
-``B`` (``roadcollab helper``): every vehicle proves its input inside the public box, then its deviations
-from the previous results inside an l2 ball (centred clipping), so no vehicle of a session moves its result
-by more than about ``R / (n - 1)``; neither aggregator alone learns an input.
+service is the leader ``A`` of :mod:`~roadcollab.network.prioround` and other operators run the helpers
+``B`` and ``C`` (``roadcollab helper``; one helper in a fleet enrolled with ``--aggregators 2``): every
+vehicle proves its input inside the public box, then its deviations from the previous results inside an l2
+ball (centred clipping), so no vehicle of a session moves its result by more than about ``R / (n - 1)``; no
+aggregator alone learns an input, and with three aggregators one that deviates is caught.
 
 The rounds keep :class:`~roadcollab.network.rounds.SecureRounds`' rules and store: one open session per
 segment, claimed in the store; a vehicle gives one measurement of a segment to one session (its
@@ -19,7 +20,7 @@ rules differ:
   have spent that measurement (privacy before liveness). Sessions therefore do not move between services:
   ``serve --shared`` is refused with validated aggregation.
 
-The helper's key advert (retained on ``{prefix}/prio/key/{helper_id}``, signed by its certified identity)
+Every helper's key advert (retained on ``{prefix}/prio/key/{helper_id}``, signed by its certified identity)
 must have arrived before a session opens; the service's own advert is published (retained) on connect.
 """
 
@@ -57,14 +58,14 @@ class ValidatedRounds(SecureRounds):
         The service's identity as the leader (certificate id ``aggregator-a``) and its X25519 key.
     release_log : ReleaseLog
         The leader's persistent record of released sum shares.
-    helper_advert : bytes, optional
-        The helper's signed key advert, if known; otherwise it is read from its retained topic.
+    helper_adverts : dict, optional
+        Helper id to its signed key advert, where known; the others are read from their retained topics.
     log, on_fused, phase_timeout_s, round_wait_s, clock, owner, lease_s
         As :class:`~roadcollab.network.rounds.SecureRounds`.
     """
 
     def __init__(self, store: ServiceStore, trust: FleetTrust, policy: AggregationPolicy, prefix: str, *,
-                 keys: AggregatorKeys, release_log: ReleaseLog, helper_advert: bytes | None = None,
+                 keys: AggregatorKeys, release_log: ReleaseLog, helper_adverts: dict[str, bytes] | None = None,
                  log: Callable[[str], None] | None = None, on_fused=None, phase_timeout_s: float = 20.0,
                  round_wait_s: float = 60.0, clock: Callable[[], float] = time.time, owner: str = "serve",
                  lease_s: float = 10.0) -> None:
@@ -75,14 +76,18 @@ class ValidatedRounds(SecureRounds):
             raise ParameterError(f"the service leads as {self.params.leader_id!r}, got the keys of {keys.party!r}")
         self.keys, self.release_log = keys, release_log
         # Set before the base class adopts (and may reopen) this service's rounds.
-        self.helper_advert = None if helper_advert is None else self._helper(helper_advert, trust, prefix)
+        self.helper_adverts: dict[str, bytes] = {}
+        for party, advert in (helper_adverts or {}).items():
+            self.helper_adverts[party] = self._helper(party, advert, trust, prefix)
         super().__init__(store, trust, policy, prefix, log=log, on_fused=on_fused, phase_timeout_s=phase_timeout_s,
                          round_wait_s=round_wait_s, clock=clock, owner=owner, lease_s=lease_s)
         self.resend.insert(0, Publish(key_topic(prefix, keys.party), keys.advert(prefix), retain=True))
 
-    def _helper(self, advert: bytes, trust: FleetTrust, prefix: str) -> bytes:
-        """``advert`` if it is the helper's key advert (MessageError otherwise)."""
-        open_advert(advert, trust, prefix, self.params.helper_id)
+    def _helper(self, party: str, advert: bytes, trust: FleetTrust, prefix: str) -> bytes:
+        """``advert`` if it is helper ``party``'s key advert (MessageError otherwise)."""
+        if party not in self.params.helper_ids:
+            raise MessageError(f"{party!r} is not a helper of this fleet")
+        open_advert(advert, trust, prefix, party)
         return bytes(advert)
 
     def _adopt(self) -> list[Publish]:
@@ -95,7 +100,7 @@ class ValidatedRounds(SecureRounds):
                 continue
             row = next(r for r in self.store.rounds(key[0]) if r["epoch"] == key[1])
             reason = "the leader restarted during the session"
-            # nobody waits for it: the helper and the roster are told it closed
+            # nobody waits for it: the helpers and the roster are told it closed
             out += closed_notices(PrioTopics(self.prefix, *key), self.keys, list(row["roster"]), "aborted", reason)
             out += self._closed(key, "aborted", list(row["roster"]), [], reason,
                                 "aborted (the leader restarted during the session; its vehicles' measurement is spent)")
@@ -123,16 +128,17 @@ class ValidatedRounds(SecureRounds):
         return out
 
     def open_round(self, key: tuple[int, int], roster: list[str]) -> list[Publish]:
-        """Open session ``key`` with ``roster`` once the helper's advert is known.
+        """Open session ``key`` with ``roster`` once every helper's advert is known.
 
         Parameters
         ----------
         key : (int, int)
         roster : list of str
         """
-        if self.helper_advert is None:
+        if len(self.helper_adverts) < len(self.params.helper_ids):
             return []
-        co = PrioLeader(self.prefix, *key, self.params, self.trust, self.keys, self.helper_advert, self.release_log)
+        adverts = [self.helper_adverts[h] for h in self.params.helper_ids]
+        co = PrioLeader(self.prefix, *key, self.params, self.trust, self.keys, adverts, self.release_log)
         out = co.open(roster)
         if not self.store.open_round(*key, roster, owner=self.owner, lease_s=self.clock() + self.lease_s):
             return []
@@ -143,20 +149,21 @@ class ValidatedRounds(SecureRounds):
         return out
 
     def handle(self, topic: str, payload: bytes) -> list[Publish]:
-        """Apply one session message (a vehicle's upload, the helper's message or key advert).
+        """Apply one session message (a vehicle's upload, a helper's message or key advert).
 
         Parameters
         ----------
         topic : str
         payload : bytes
         """
-        if topic == key_topic(self.prefix, self.params.helper_id):
+        party = next((h for h in self.params.helper_ids if topic == key_topic(self.prefix, h)), None)
+        if party is not None:
             try:
-                self.helper_advert = self._helper(bytes(payload), self.trust, self.prefix)
+                self.helper_adverts[party] = self._helper(party, bytes(payload), self.trust, self.prefix)
             except MessageError as err:
                 self.store.log("refused", f"{topic}: {err}", topic=topic)
                 return []
-            self._log("the helper's key advert arrived")
+            self._log(f"the key advert of helper {party} arrived")
             return [p for s in self._waiting_segments() for p in self.maybe_open(s)]
         if topic.startswith(f"{self.prefix}/prio/key/"):
             return []
@@ -165,7 +172,7 @@ class ValidatedRounds(SecureRounds):
         except MessageError as err:
             self.store.log("refused", str(err), topic=topic)
             return []
-        if rest[:1] == ["to"] or rest == ["leader"]:
+        if rest[:1] in (["to"], ["fwd"]) or rest == ["agg", self.params.leader_id]:
             return []                                 # the service's own messages
         co = self.active.get((s, e))
         if co is None:

@@ -38,14 +38,16 @@ from numpy.typing import ArrayLike
 from .._validation import check_int
 from ..errors import ParameterError
 from .secagg_flp import ValidityEncoding
+from . import secagg_replicated, secagg_replicated_run
 from .secagg_messages import AggregationRefused
-from .secagg_validity import Submission, ValidatedAggregate, run_validated_aggregation, submit
+from .secagg_validity import ValidatedAggregate, run_validated_aggregation, submit
 
 __all__ = ["PhasedResult", "check_encodings", "phase_session", "public_schedule", "radius_schedule", "colluder_schedule",
            "run_phased_session"]
 
-#: ``tamper(phase, vehicle, submission) -> submission``: a malicious vehicle's change to what it sends.
-Tamper = Callable[[int, int, Submission], Submission]
+#: ``tamper(phase, vehicle, submission) -> submission``: a malicious vehicle's change to what it sends
+#: (a :class:`~.secagg_replicated.Upload` with three aggregators).
+Tamper = Callable[[int, int, Any], Any]
 
 
 @dataclass(frozen=True)
@@ -194,15 +196,34 @@ def check_encodings(wide: ValidityEncoding, tight: ValidityEncoding | Sequence[V
     return encs
 
 
-def _aggregate(fleet: Any, enc: ValidityEncoding, subs: dict[int, Submission], session: bytes,
-               verify_key: bytes) -> ValidatedAggregate:
-    certs = {i: fleet.vehicles[i].identity.certificate for i in subs}
-    return run_validated_aggregation(enc, subs, session, verify_key=verify_key, min_inputs=fleet.spec.min_inputs,
-                                     trust=fleet.trust, certificates=certs)
+@dataclass(frozen=True)
+class _Aggregators:
+    """How a phase is validated: two aggregators with a shared key (:mod:`.secagg_validity`) or three with
+    replicated shares and coin-tossed query randomness (:mod:`.secagg_replicated`)."""
+
+    count: int
+    verify_key: bytes
+    gen: np.random.Generator
+
+    def submit(self, enc: ValidityEncoding, u: np.ndarray, session: bytes, vehicle: int, identity: Any) -> Any:
+        if self.count == 3:
+            return secagg_replicated.submit(enc, u, session, vehicle, self.gen, aggregators=3, identity=identity)
+        return submit(enc, u, session, vehicle, self.gen, identity=identity)
+
+    def aggregate(self, fleet: Any, enc: ValidityEncoding, subs: dict[int, Any], session: bytes) -> ValidatedAggregate:
+        if not subs:
+            return ValidatedAggregate(None, (), {})
+        certs = {i: fleet.vehicles[i].identity.certificate for i in subs}
+        if self.count == 3:
+            return secagg_replicated_run.run_replicated_aggregation(
+                enc, subs, session, aggregators=3, min_inputs=fleet.spec.min_inputs, trust=fleet.trust,
+                certificates=certs, rng=self.gen)
+        return run_validated_aggregation(enc, subs, session, verify_key=self.verify_key,
+                                         min_inputs=fleet.spec.min_inputs, trust=fleet.trust, certificates=certs)
 
 
 def _later_phase(fleet: Any, us: dict[int, np.ndarray], m: np.ndarray, k: int, session: bytes,
-                 announced: tuple[int, ...], tight: ValidityEncoding, verify_key: bytes, gen: np.random.Generator,
+                 announced: tuple[int, ...], tight: ValidityEncoding, aggs: _Aggregators,
                  tamper: Tamper | None) -> tuple[ValidatedAggregate, dict[int, str], int]:
     """Phase ``k``: every vehicle of ``announced`` checks the set against its ledger and sends its clipped ``d``."""
     subs, refused, clipped = {}, {}, 0
@@ -217,18 +238,18 @@ def _later_phase(fleet: Any, us: dict[int, np.ndarray], m: np.ndarray, k: int, s
             continue
         d, c = tight.onto_ball(us[i] - m)
         clipped += c
-        sub = submit(tight, np.clip(d, -tight.bounds, tight.bounds), phase_session(session, k), i, gen,
-                     identity=fleet.vehicles[i].identity)
+        sub = aggs.submit(tight, np.clip(d, -tight.bounds, tight.bounds), phase_session(session, k), i,
+                          fleet.vehicles[i].identity)
         subs[i] = sub if tamper is None else tamper(k, i, sub)
-    out = _aggregate(fleet, tight, subs, phase_session(session, k), verify_key) if subs else \
-        ValidatedAggregate(None, (), {})
+    out = aggs.aggregate(fleet, tight, subs, phase_session(session, k))
     return out, {**refused, **out.refused}, clipped
 
 
 def run_phased_session(fleet: Any, inputs: dict[int, ArrayLike], session: bytes, wide: ValidityEncoding,
                        tight: ValidityEncoding | Sequence[ValidityEncoding], *, phases: int, verify_key: bytes, rng: Any = None,
                        tamper: Tamper | None = None,
-                       announce: Callable[[int, tuple[int, ...]], tuple[int, ...]] | None = None) -> PhasedResult:
+                       announce: Callable[[int, tuple[int, ...]], tuple[int, ...]] | None = None,
+                       aggregators: int = 2) -> PhasedResult:
     """A phased session among the certified vehicles of ``fleet`` (module docstring), both aggregators in-process.
 
     Parameters
@@ -252,14 +273,21 @@ def run_phased_session(fleet: Any, inputs: dict[int, ArrayLike], session: bytes,
         ``tamper(phase, vehicle, submission) -> submission``.
     announce : callable, optional
         ``announce(phase, accepted) -> set``: what a deviating aggregator announces for phase ``k > 1``.
+    aggregators : int
+        2: the two aggregators of :mod:`.secagg_validity` (``verify_key`` shared); 3: three aggregators with
+        replicated shares (:mod:`.secagg_replicated`, coin-tossed query randomness; ``verify_key`` unused),
+        which keeps privacy and soundness when one of them deviates. The result is the same.
 
     Returns
     -------
     PhasedResult
     """
     encs = check_encodings(wide, tight, phases)
+    if aggregators not in (2, 3):
+        raise ParameterError(f"aggregators must be 2 or 3, got {aggregators!r}")
     gen = np.random.default_rng(rng)
-    subs: dict[int, Submission] = {}
+    aggs = _Aggregators(aggregators, verify_key, gen)
+    subs: dict[int, Any] = {}
     refused: dict[int, str] = {}
     us = {}
     for i, z in sorted(inputs.items()):
@@ -269,10 +297,9 @@ def run_phased_session(fleet: Any, inputs: dict[int, ArrayLike], session: bytes,
             refused[i] = f"vehicle {i} sends nothing: {e}"
             continue
         us[i], _ = wide.clip(np.asarray(z, float).ravel())
-        sub = submit(wide, us[i], phase_session(session, 1), i, gen, identity=fleet.vehicles[i].identity)
+        sub = aggs.submit(wide, us[i], phase_session(session, 1), i, fleet.vehicles[i].identity)
         subs[i] = sub if tamper is None else tamper(1, i, sub)
-    first = _aggregate(fleet, wide, subs, phase_session(session, 1), verify_key) if subs else \
-        ValidatedAggregate(None, (), {})
+    first = aggs.aggregate(fleet, wide, subs, phase_session(session, 1))
     refused.update(first.refused)
     if first.average is None:
         return PhasedResult(None, first.accepted, refused, 0, 0)
@@ -281,7 +308,7 @@ def run_phased_session(fleet: Any, inputs: dict[int, ArrayLike], session: bytes,
         fleet.vehicles[i].ledger.record_view(session, accepted)
     for k, enc in enumerate(encs, start=2):
         announced = tuple(accepted) if announce is None else tuple(announce(k, accepted))
-        out, why, c = _later_phase(fleet, us, m, k, session, announced, enc, verify_key, gen, tamper)
+        out, why, c = _later_phase(fleet, us, m, k, session, announced, enc, aggs, tamper)
         clipped += c
         if out.average is None or out.accepted != accepted:
             missing = {i: why.get(i, f"vehicle {i}: no input in phase {k}") for i in accepted if i not in out.accepted}

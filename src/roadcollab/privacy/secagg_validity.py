@@ -29,7 +29,7 @@ from .secagg_flp import Field, Proof, ValidityEncoding, decide, prove, query
 from .secagg_messages import AggregationRefused
 
 __all__ = ["Submission", "LeaderUpload", "HelperUpload", "VerifierShare", "ValidityAggregator", "submit",
-           "signed_bytes", "ValidatedAggregate", "run_validated_aggregation", "run_validated_session"]
+           "signed_bytes", "query_randomness", "ValidatedAggregate", "run_validated_aggregation", "run_validated_session"]
 
 
 
@@ -101,6 +101,34 @@ def _parts(session: bytes, vehicle: int, x_a: np.ndarray, blind_a: bytes, seed: 
 def _joint(enc: ValidityEncoding, part_a: bytes, part_b: bytes) -> tuple[bytes, np.ndarray]:
     jr = _h(b"joint", part_a, part_b)
     return jr, enc.field.elements(jr, b"rho", max(enc.n_rho, 1))[:enc.n_rho]
+
+
+def query_randomness(enc: ValidityEncoding, key: bytes, session: bytes, vehicle: int,
+                     jr: bytes) -> tuple[int, np.ndarray]:
+    """The query point ``r`` (outside the FLP's domain) and the sum check's coefficients ``s`` of one vehicle.
+
+    Parameters
+    ----------
+    enc : ValidityEncoding
+    key : bytes
+        Known to the aggregators only (no vehicle may know ``r`` before its upload is fixed).
+    session : bytes
+    vehicle : int
+    jr : bytes
+        The vehicle's joint-randomness seed.
+
+    Returns
+    -------
+    r : int
+    s : (L,) object ndarray
+    """
+    f, P = enc.field, enc.domain
+    seed = _h(b"query", key, session, _id(vehicle), jr)
+    for k in range(64):
+        r = int(f.elements(seed, b"r%d" % k, 1)[0])
+        if pow(r, P, f.p) != 1:
+            break
+    return r, f.elements(seed, b"s", enc.length)
 
 
 def signed_bytes(session: bytes, vehicle: int, part_a: bytes, part_b: bytes) -> bytes:
@@ -228,13 +256,7 @@ class ValidityAggregator:
         return VerifierShare(sub.vehicle, jr, query(self.enc, x, proof, rho, r, s, self.leader))
 
     def _query_randomness(self, session: bytes, vehicle: int, jr: bytes) -> tuple[int, np.ndarray]:
-        f, P = self.enc.field, self.enc.domain
-        seed = _h(b"query", self.verify_key, session, _id(vehicle), jr)
-        for k in range(64):
-            r = int(f.elements(seed, b"r%d" % k, 1)[0])
-            if pow(r, P, f.p) != 1:
-                break
-        return r, f.elements(seed, b"s", self.enc.length)
+        return query_randomness(self.enc, self.verify_key, session, vehicle, jr)
 
     def check(self, own: VerifierShare, other: VerifierShare) -> str:
         """``""`` if the vehicle's input is valid, else why not (both aggregators reach the same answer).
