@@ -153,7 +153,10 @@ def test_a_second_session_on_the_measurement_gets_nothing_from_the_vehicles():
     assert all(any("already contributed" in r for r in w["agents"][v].refusals) for v in ["v1", "v2", "v3", "v4"])
 
 
-def test_a_helper_releases_once_per_phase_also_after_a_restart(tmp_path):
+def test_a_helper_tosses_one_coin_and_releases_once_per_phase_also_after_a_restart(tmp_path):
+    """A replay of the vehicles' uploads to a helper restarted on its release log (found by a red team: the
+    coin toss gave the replay a second query point of every proof, and two points give the input away) gets
+    no coin, no verifier share and no sum."""
     path = tmp_path / "helper_releases.sqlite"
     w = _world(logs={"aggregator-b": ReleaseLog(path)})
     run_prio_session(_leader(w), w["helpers"], w["agents"], list(w["agents"]))
@@ -171,7 +174,14 @@ def test_a_helper_releases_once_per_phase_also_after_a_restart(tmp_path):
     assert leader.state == "aborted" and leader.result is None
     done = again["helpers"][0].session((7, 0))
     assert not any(k == "released" for k, _ in done.events)
-    assert any(k == "aborted" and "already released" in r for k, r in done.events), done.events
+    assert any(k == "aborted" and "coin of phase 1 of this session was already revealed" in r
+               for k, r in done.events), done.events
+    log = ReleaseLog(path)
+    with pytest.raises(Exception, match="already released"):
+        log.release(session_id(7, 0), 1, (1, 2, 3, 4, 5))
+    with pytest.raises(Exception, match="already revealed"):
+        log.coin(session_id(7, 0), 2)
+    log.coin(session_id(7, 1), 1)                         # another measurement: its own coins
 
 
 def test_a_leader_cannot_substitute_a_helpers_key_or_show_vehicles_another_set():

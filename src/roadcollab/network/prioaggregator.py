@@ -34,8 +34,9 @@ party receives raises out of ``handle``: a refused message is recorded in ``even
 
 from __future__ import annotations
 
+import hashlib
+import json
 import os
-from typing import Any
 
 import numpy as np
 
@@ -68,6 +69,8 @@ class _Phase:
         self.sets: dict[str, tuple[int, ...]] = {}
         self.sums: dict[str, dict[int, np.ndarray]] = {}
         self.results: dict[str, tuple[bytes, bytes]] = {}
+        self.views: dict[str, bytes] = {}
+        self.raw: dict[int, bytes] = {}
         self.rejected: dict[int, str] = {}
         self.accepted: tuple[int, ...] | None = None
         self.m: np.ndarray | None = None
@@ -124,6 +127,7 @@ class PrioAggregator:
         self.finished = False
         self.aborted = False
         self._m: np.ndarray | None = None
+        self._seen: dict[tuple[int, str, str], bytes] = {}
         self._phases = {1: self._new_phase(1)}
 
     # -- the phase's state -------------------------------------------------------------------------------
@@ -177,6 +181,15 @@ class PrioAggregator:
             return []         # a helper moves on once it has signed: the others' results are the leader's to check
         if not self.phase <= k <= min(self.phase + 1, self.params.phases):
             raise MessageError(f"a message of phase {k} in phase {self.phase}")
+        # One message of each kind per party and phase: a second, different one is equivocation (a party
+        # that shows two views, e.g. two coins, could get a proof queried at two points), a copy is a redelivery.
+        digest = hashlib.sha256(body).digest()
+        seen = self._seen.setdefault((k, party, str(kind)), digest)
+        if seen != digest:
+            return self._abort(f"phase {k}: {party} sent two different {kind!r} messages")
+        if seen is not digest:
+            self.events.append(("duplicate", f"{party}'s {kind} of phase {k} again (applied once)"))
+            return []
         ph = self._phases.setdefault(k, self._new_phase(k))
         if kind == "open":
             self._on_open(party, h)
@@ -184,31 +197,25 @@ class PrioAggregator:
             if party != self.params.leader_id or ph.closed is not None:
                 raise MessageError("a close that is not the leader's first of the phase")
             ph.closed = ids_field(h, "ids", "close")
-        elif kind in ("commit", "reveal"):
-            store = ph.commits if kind == "commit" else ph.reveals
+        elif kind in ("commit", "reveal", "view"):
+            store = {"commit": ph.commits, "reveal": ph.reveals, "view": ph.views}[kind]
             if len(blobs) != 1 or len(blobs[0]) != 32:
                 raise MessageError(f"{kind}: expected 32 bytes")
-            self._first(store, party, bytes(blobs[0]), kind, k)
+            store[party] = bytes(blobs[0])
         elif kind == "vshares":
-            self._first(ph.reports, party, self._read_vshares(party, h, blobs, k), kind, k)
+            ph.reports[party] = self._read_vshares(party, h, blobs, k)
         elif kind == "set":
-            self._first(ph.sets, party, ids_field(h, "accepted", "set"), kind, k)
+            ph.sets[party] = ids_field(h, "accepted", "set")
         elif kind == "sums":
-            self._first(ph.sums, party, self._read_sums(party, h, blobs, k), kind, k)
+            ph.sums[party] = self._read_sums(party, h, blobs, k)
         elif kind == "result":
             if len(blobs) != 2:
                 raise MessageError("result: expected m and the signature")
             ids_field(h, "accepted", "result")
-            self._first(ph.results, party, (bytes(blobs[0]), bytes(blobs[1])), kind, k)
+            ph.results[party] = (bytes(blobs[0]), bytes(blobs[1]))
         else:
             raise MessageError(f"unknown message {kind!r}")
         return self._progress()
-
-    def _first(self, store: dict, party: str, value: Any, kind: str, k: int) -> None:
-        if party in store:
-            self.events.append(("duplicate", f"{party}'s {kind} of phase {k} again (the first is kept)"))
-            return
-        store[party] = value
 
     def _on_open(self, party: str, h: dict) -> None:
         raise MessageError("open is the leader's")
@@ -224,7 +231,7 @@ class PrioAggregator:
         why = h.get("refused")
         if not isinstance(why, dict) or not all(isinstance(v, str) for v in why.values()):
             raise MessageError("vshares: 'refused' must map ids to reasons")
-        refused = {int(i): str(v)[:300] for i, v in why.items() if str(i).isascii() and str(i).isdigit()}
+        refused = {int(i): str(v)[:300] for i, v in why.items() if i.isascii() and i.isdigit() and len(i) <= 9}
         comps = holdings(self.count)[self.params.aggregators.index(party)]
         enc = self.params.encoding(k)
         width = 2 * enc.chunk + 3
@@ -251,14 +258,16 @@ class PrioAggregator:
     def _receive(self, i: int, cert: Certificate, commitments_b: bytes, share: bytes, k: int) -> None:
         """Check and keep this aggregator's share of vehicle ``i``'s upload (a failure is its refusal)."""
         ph = self._phases[k]
+        ph.raw[i] = bytes(commitments_b)          # what this aggregator saw, in its view of the phase
         try:
             if cert.vehicle_id != self.roster.get(i):
                 raise MessageError(f"the certificate is {cert.vehicle_id}'s, not {self.roster.get(i)}'s")
             c = read_commitments(commitments_b, i, self.count)
             sh = read_share(share, self.comps, self.params.encoding(k), f"vehicle {i}'s share")
             ph.agg.receive(c, sh, self._psession(k), self.trust, cert)
-        except MessageError as err:
-            ph.rejected[i] = str(err)[:300]
+        except (MessageError, ValueError, TypeError) as err:      # the vehicle's own fault: it is refused
+            ph.rejected[i] = f"vehicle {i}: {err}"[:300] if isinstance(err, MessageError) else \
+                f"vehicle {i}: a malformed share ({type(err).__name__})"
 
     # -- this aggregator's steps ---------------------------------------------------------------------------
 
@@ -285,14 +294,26 @@ class PrioAggregator:
         if me not in ph.reveals:
             if ph.closed is None or len(ph.commits) < n or not self._ready_to_reveal(ph):
                 return None
+            try:      # one coin per (session, phase), ever: no proof gets a second query point
+                self.log.coin(self.session, k)
+            except AggregationRefused as err:
+                return self._abort(f"phase {k}: {err}")
             ph.reveals[me] = ph.coin
             return [self._send("reveal", k, {}, ph.coin)]
-        if me not in ph.reports:
+        if me not in ph.views:
             if len(ph.reveals) < n:
                 return None
             for party in self.params.aggregators:
                 if coin_commitment(self._psession(k), party, ph.reveals[party]) != ph.commits[party]:
                     return self._abort(f"phase {k}: {party}'s coin does not open its commitment")
+            ph.views[me] = self._view(ph)
+            return [self._send("view", k, {}, ph.views[me])]
+        if me not in ph.reports:
+            if len(ph.views) < n:
+                return None
+            other = next((p for p in self.params.aggregators if ph.views[p] != ph.views[me]), None)
+            if other is not None:
+                return self._abort(f"phase {k}: {other} saw another phase (roster, uploads, commitments or coins)")
             return self._vshares(ph)
         if ph.accepted is None:
             if len(ph.reports) < n:
@@ -307,6 +328,19 @@ class PrioAggregator:
                 return None
             return self._result(ph)
         return self._after_result(ph)
+
+    def _view(self, ph: _Phase) -> bytes:
+        """The digest of what this aggregator's verifier shares rest on: the roster, the closed uploads'
+        commitments and every coin's commitment and opening. The aggregators send verifier shares only once
+        all three digests agree, so the honest ones query every proof at one and the same point."""
+        assert ph.closed is not None
+        m = hashlib.sha256(b"roadcollab/prio/view/v1|" + self._psession(ph.k))
+        m.update(json.dumps(sorted(self.roster.items())).encode())
+        for i in ph.closed:
+            m.update(i.to_bytes(4, "little") + hashlib.sha256(ph.raw.get(i, b"")).digest())
+        for party in self.params.aggregators:
+            m.update(ph.commits[party] + ph.reveals[party])
+        return m.digest()
 
     def _vshares(self, ph: _Phase) -> list[Publish]:
         k = ph.k

@@ -38,6 +38,8 @@ __all__ = ["PrioHelper", "PrioHelperService", "HelperParty"]
 
 #: Leader messages a helper keeps for a session it has not been told the roster of yet.
 MAX_EARLY = 4096
+#: Another helper's messages kept for a session the leader has not opened yet: per session, and sessions.
+MAX_EARLY_PEER, MAX_EARLY_SESSIONS = 16, 1024
 
 
 class PrioHelper(PrioAggregator):
@@ -177,10 +179,11 @@ class PrioHelperService:
     released, or closed by the leader) or that heard no valid aggregator message for ``max_idle_s`` leaves
     the open sessions, its per-vehicle state and roster are dropped (:meth:`PrioHelper.forget`), and its key
     and first :data:`MAX_EVENTS` events are kept among the last ``max_finished`` finished sessions; a
-    later message for it is dropped. A session is created only for a message signed by an aggregator on
-    its own topic of that session (the other helper's first message may arrive before the leader's). Whatever
-    is forgotten, the persisted :class:`~roadcollab.privacy.secagg_store.ReleaseLog` still refuses a second
-    release of any (session, phase).
+    later message for it is dropped. A session is created only for a message the leader signed on its own
+    topic of that session; the other helper's messages that arrive first (its commitment may) are kept,
+    a few per session, until then. Whatever is forgotten, the persisted
+    :class:`~roadcollab.privacy.secagg_store.ReleaseLog` still refuses a second coin toss or release of any
+    (session, phase).
 
     How many sessions are open at once is the leader's to decide (one per segment with vehicles): by
     default the helper refuses none, since a session it drops aborts and spends its vehicles'
@@ -232,6 +235,7 @@ class PrioHelperService:
         self._heard: dict[tuple[int, int], float] = {}
         self.finished: OrderedDict[tuple[int, int], tuple[str, PrioHelper]] = OrderedDict()
         self.refused: list[str] = []
+        self._early: OrderedDict[tuple[int, int], list[tuple[str, bytes]]] = OrderedDict()
 
     @property
     def subscriptions(self) -> list[str]:
@@ -278,9 +282,16 @@ class PrioHelperService:
             return []
         h = self.sessions.get(key)
         if h is None:
-            try:     # only an aggregator's own signed message on its canonical topic opens a session here
+            try:     # only the leader's own signed message on its canonical topic opens a session here
                 open_signed(payload, self.trust, topic, sender)
             except (MessageError, ParameterError):
+                return []
+            if sender != self.params.leader_id:       # another helper's, early: kept until the leader opens it
+                early = self._early.setdefault(key, [])
+                if len(early) < MAX_EARLY_PEER:
+                    early.append((topic, bytes(payload)))
+                while len(self._early) > MAX_EARLY_SESSIONS:
+                    self._early.popitem(last=False)
                 return []
             if self.max_open is not None and len(self.sessions) >= self.max_open:
                 if len(self.refused) < 1000:       # the first ones tell the operator enough
@@ -291,6 +302,8 @@ class PrioHelperService:
             self._heard[key] = self._clock()
         before = len(h.events)
         out = h.handle(topic, payload)
+        for t, p in self._early.pop(key, []):
+            out += h.handle(t, p)
         if not any(kind == "refused" for kind, _ in h.events[before:]):
             self._heard[key] = self._clock()          # a refused message keeps no session alive
         del h.events[MAX_EVENTS:]

@@ -83,8 +83,8 @@ def unpack(data: bytes, what: str) -> tuple[dict, list[bytes]]:
         raise MessageError(f"{what}: header of {n} bytes (at most {MAX_HEADER}, within the message)")
     try:
         h = json.loads(data[4:4 + n].decode())
-    except (UnicodeDecodeError, ValueError) as err:
-        raise MessageError(f"{what}: header is not JSON ({err})") from None
+    except (UnicodeDecodeError, ValueError, RecursionError) as err:     # RecursionError: nested too deep
+        raise MessageError(f"{what}: header is not JSON ({type(err).__name__})") from None
     sizes = h.get("blobs") if isinstance(h, dict) else None
     if not isinstance(sizes, list) or not all(isinstance(k, int) and not isinstance(k, bool) and k >= 0
                                               for k in sizes):

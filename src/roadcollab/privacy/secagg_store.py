@@ -31,6 +31,8 @@ _SCHEMA = ("CREATE TABLE IF NOT EXISTS secagg_sessions (session BLOB PRIMARY KEY
 _MAGIC_TABLE = "secagg_sessions"
 _RELEASE_SCHEMA = ("CREATE TABLE IF NOT EXISTS prio_releases (session BLOB NOT NULL, phase INTEGER NOT NULL, "
                    "accepted TEXT NOT NULL, PRIMARY KEY (session, phase))")
+_QUERY_SCHEMA = ("CREATE TABLE IF NOT EXISTS prio_queries (session BLOB NOT NULL, phase INTEGER NOT NULL, "
+                 "PRIMARY KEY (session, phase))")
 
 
 def segment_key(segment: int) -> bytes:
@@ -223,10 +225,36 @@ class ReleaseLog:
     def __init__(self, path: StrPath | None = None) -> None:
         self.path = None if path is None else Path(path)
         self._db = _open_db(self.path, "prio_releases", _RELEASE_SCHEMA, "validated-aggregation release log")
+        self._db.execute(_QUERY_SCHEMA)        # added later: an older log gets the table on opening
 
     def close(self) -> None:
         """Close the database."""
         self._db.close()
+
+    def coin(self, session: bytes, phase: int) -> None:
+        """Record, before this aggregator reveals its coin of ``(session, phase)``, that it does so (once, ever).
+
+        With three aggregators (:mod:`.secagg_replicated`) the proofs' query point is a hash of the coins. A
+        proof whose joint verifier is known at two points gives its input away, so an aggregator takes part
+        in one coin toss per (session, phase) only: an aggregator that replays the uploads (also after a
+        restart, or after the session was forgotten) gets no second query point.
+
+        Parameters
+        ----------
+        session : bytes
+            The measurement's ``session_id(segment, epoch)``.
+        phase : int
+
+        Raises
+        ------
+        AggregationRefused
+            This aggregator revealed a coin of ``(session, phase)`` before.
+        """
+        try:
+            self._db.execute("INSERT INTO prio_queries (session, phase) VALUES (?, ?)", (bytes(session), int(phase)))
+        except sqlite3.IntegrityError:
+            raise AggregationRefused(f"a coin of phase {phase} of this session was already revealed: its proofs "
+                                     "get no second query point") from None
 
     def released(self, session: bytes, phase: int) -> tuple[int, ...] | None:
         """The accepted set of the sum share released for ``(session, phase)``, or None.
