@@ -47,7 +47,7 @@ from ..errors import MessageError, ParameterError
 from ..wire.certificate import verify_signature
 from .secagg_flp import Proof, ValidityEncoding, prove, query
 from .secagg_messages import AggregationRefused
-from .secagg_validity import query_randomness
+from .secagg_validity import _h, _id, query_randomness  # the same length-prefixed hash and id bytes
 
 __all__ = ["holdings", "AggregatorShare", "Commitments", "Upload", "Verification", "ReplicatedAggregator", "submit",
            "signed_bytes", "coin_commitment", "coin_key"]
@@ -67,17 +67,6 @@ def holdings(aggregators: int) -> tuple[tuple[int, ...], ...]:
     if aggregators not in _HOLDINGS:
         raise ParameterError(f"aggregators must be 2 or 3, got {aggregators!r}")
     return _HOLDINGS[aggregators]
-
-
-def _h(*parts: bytes) -> bytes:
-    m = hashlib.sha256()
-    for x in parts:
-        m.update(len(x).to_bytes(8, "little") + x)
-    return m.digest()
-
-
-def _id(vehicle: int) -> bytes:
-    return int(vehicle).to_bytes(4, "little")
 
 
 def _part(j: int, blind: bytes, session: bytes, vehicle: int, data: bytes) -> bytes:
