@@ -144,15 +144,17 @@ def _run(args: argparse.Namespace) -> int:
                 print(f"refused: {r}", file=sys.stderr)
             return 0 if ok else 3
         keys = AggregatorKeys(identity, RelayKey.load(folder / "x25519.key"))
-        client.publish(key_topic(prefix, keys.party), keys.advert(prefix), retain=True)
         log = ReleaseLog(folder / "releases.sqlite")
         if args.role == "helper":
             svc = PrioHelperService(prefix, params, trust, keys, log)
-            for filt in svc.subscriptions:
+            for filt in svc.subscriptions:      # before the advert: once the leader sees it, this helper listens
                 client.subscribe(filt)
+            client.publish(key_topic(prefix, keys.party), keys.advert(prefix), retain=True)
             key = (args.segment, args.epoch)
             ok = _loop(client, svc.handle, lambda: key in svc.finished, deadline)
+            time.sleep(1.0)                   # its last messages (the result) leave before the client does
             return 0 if ok else 3
+        client.publish(key_topic(prefix, keys.party), keys.advert(prefix), retain=True)
         leader = PrioLeader(prefix, args.segment, args.epoch, params, trust, keys,
                             [_advert(client, prefix, h, deadline) for h in params.helper_ids], log)
         client.subscribe(f"{leader.topics.base}/up/+")
