@@ -231,3 +231,52 @@ def test_nothing_malformed_raises_out_of_a_party_and_a_vehicle_that_sends_it_is_
     Router(w, lead).session()
     assert lead.state == "finished" and lead.accepted == (1, 2, 4, 5) and set(lead.refused) == {3}
     assert "malformed share" in lead.refused[3] or "not JSON" in lead.refused[3]
+
+
+def test_a_protocol_id_of_two_to_the_32_raises_nowhere():
+    """Round 2: a deviating leader put 2**32 as a protocol id in an invite, a roster and a close list; it reached
+    ``int.to_bytes(4)`` and raised OverflowError out of a vehicle's and both helpers' ``handle`` (the vehicle had
+    already spent its measurement). Ids and phases are now refused outside 1 to 2**31 - 1 wherever they are read."""
+    from roadcollab.network.priowire import PrioTopics, share_blob
+    from roadcollab.network.relaykey import seal_to
+    from roadcollab.privacy.secagg_replicated import AggregatorShare
+
+    big = 2 ** 32
+    w = _world(n=3)
+    t = PrioTopics(PREFIX, 7, 0)
+    v1 = w["agents"]["v1"]
+    invite = pack({"t": "invite", "phase": 1, "id": big, "roster": [1, 2, big]}, w["ka"].advert(PREFIX),
+                  *[w["keys"][h].advert(PREFIX) for h in (B, C)], b"")
+    assert v1.on_message(t.to("v1"), invite) == [] and "from 1 to 2147483647" in v1.refusals[-1]
+    assert not v1.ledger.contributed(session_id(7, 0))                     # refused before anything is spent
+    ka, svc = w["ka"], w["helpers"][0]
+    at = t.agg(ka.party)
+    svc.handle(at, seal(ka.identity, at, pack({"t": "open", "phase": 1, "roster": {"v2": big}})))
+    share = AggregatorShare((1, 2), None, None, {1: b"s" * 16, 2: b"t" * 16}, {1: b"b" * 16, 2: b"c" * 16})
+    sealed = seal_to(w["keys"][B].key.public, t.sealed_part(big, 1, B), share_blob(share, w["params"].wide.field))
+    ft = t.fwd(B)
+    body = pack({"t": "fwd", "phase": 1, "id": big}, sealed, b"\x00" * 192, w["agents"]["v2"].identity.certificate.to_bytes())
+    assert svc.handle(ft, seal(ka.identity, ft, body)) == []
+    events = svc.session((7, 0)).events
+    assert any("protocol ids must be distinct integers from 1 to" in why for k, why in events if k == "refused")
+    # the whole session, the roster and the close list carrying 2**32 to the helpers
+    w = _world(n=3)
+    lead = _leader(w)
+    A = w["params"].leader_id
+
+    def hook(topic, payload, rcpt):
+        if topic.endswith(f"/agg/{A}") and rcpt[0] == "helper":
+            h, blobs = _kind(w, topic, payload, A)
+            head = {k: v for k, v in h.items() if k != "blobs"}
+            if h["t"] == "open":
+                head["roster"] = dict(head["roster"], v9=big)
+            elif h["t"] == "close":
+                head["ids"] = sorted(head["ids"] + [big])
+            else:
+                return [payload]
+            return [seal(w["ka"].identity, topic, pack(head, *blobs))]
+        return [payload]
+
+    r = Router(w, lead, hook)
+    r.session()                                   # nothing raises: the helpers refuse the open
+    assert lead.state == "aborted" and lead.result is None

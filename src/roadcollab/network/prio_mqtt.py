@@ -17,6 +17,7 @@ The parameters file is :func:`params_to_dict`'s JSON, the same for every party.
 from __future__ import annotations
 
 import argparse
+import functools
 import json
 import os
 import sys
@@ -32,6 +33,7 @@ from ..privacy.secagg_store import ReleaseLog, SessionLedger
 from ..wire.identity import FleetTrust, VehicleIdentity
 from .fleetdir import load_login
 from .mqtt_client import MqttClient
+from .mqtt_run import _guarded
 from .prioagent import PrioAgent
 from .priohelper import PrioHelperService
 from .prioround import PrioLeader, PrioParams
@@ -96,7 +98,7 @@ def _loop(client: MqttClient, handle: Callable[[str, bytes], list[Publish]], don
                 last = time.monotonic()
             continue
         last = time.monotonic()
-        for p in handle(*m):
+        for p in _guarded(functools.partial(handle, *m), f"a message on {m[0][:200]!r}", None):
             client.publish(p.topic, p.payload, p.retain)
     return True
 

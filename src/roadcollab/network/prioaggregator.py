@@ -265,7 +265,7 @@ class PrioAggregator:
             c = read_commitments(commitments_b, i, self.count)
             sh = read_share(share, self.comps, self.params.encoding(k), f"vehicle {i}'s share")
             ph.agg.receive(c, sh, self._psession(k), self.trust, cert)
-        except (MessageError, ValueError, TypeError) as err:      # the vehicle's own fault: it is refused
+        except (MessageError, ValueError, TypeError, ArithmeticError) as err:     # the vehicle's fault: refused
             ph.rejected[i] = f"vehicle {i}: {err}"[:300] if isinstance(err, MessageError) else \
                 f"vehicle {i}: a malformed share ({type(err).__name__})"
 

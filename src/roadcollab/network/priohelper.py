@@ -31,7 +31,7 @@ from ..wire.identity import FleetTrust
 from .messages import open_signed
 from .prioaggregator import PrioAggregator
 from .prioparams import MAX_EVENTS, PrioParams
-from .priowire import AggregatorKeys, PrioTopics, int_field, key_topic, unpack
+from .priowire import MAX_ID, AggregatorKeys, PrioTopics, int_field, key_topic, unpack
 from .service import Publish
 
 __all__ = ["PrioHelper", "PrioHelperService", "HelperParty"]
@@ -109,8 +109,8 @@ class PrioHelper(PrioAggregator):
             raise MessageError("open: once, by the leader, with a roster of vehicle ids to protocol ids")
         ids = {}
         for vid, i in roster.items():
-            if isinstance(i, bool) or not isinstance(i, int) or i < 1 or i in ids:
-                raise MessageError("open: protocol ids must be distinct positive integers")
+            if isinstance(i, bool) or not isinstance(i, int) or not 0 < i < MAX_ID or i in ids:
+                raise MessageError(f"open: protocol ids must be distinct integers from 1 to {MAX_ID - 1}")
             if str(vid) in self.params.aggregators:
                 # An aggregator's certificate as a "vehicle": a Sybil whose input the leader knows.
                 raise MessageError(f"open: the roster holds the aggregator id {vid!r}")

@@ -38,7 +38,7 @@ from ..wire.identity import FleetTrust, VehicleIdentity
 from .messages import seal
 from .relaykey import RelayKey
 
-__all__ = ["MAX_HEADER", "PrioTopics", "AggregatorKeys", "pack", "unpack", "key_topic", "open_advert",
+__all__ = ["MAX_HEADER", "MAX_ID", "PrioTopics", "AggregatorKeys", "pack", "unpack", "key_topic", "open_advert",
            "result_bytes", "elements", "ids_field", "int_field", "commitments_blob", "read_commitments", "share_blob",
            "read_share"]
 
@@ -98,8 +98,12 @@ def unpack(data: bytes, what: str) -> tuple[dict, list[bytes]]:
     return h, blobs
 
 
+#: Protocol ids and phases are below this (they travel as 4 bytes).
+MAX_ID = 2 ** 31
+
+
 def int_field(h: dict, key: str, what: str, low: int = 0) -> int:
-    """An integer ``>= low`` of a header (MessageError otherwise).
+    """An integer in ``[low, MAX_ID)`` of a header (MessageError otherwise).
 
     Parameters
     ----------
@@ -111,8 +115,8 @@ def int_field(h: dict, key: str, what: str, low: int = 0) -> int:
     low : int
     """
     v = h.get(key)
-    if isinstance(v, bool) or not isinstance(v, int) or v < low:
-        raise MessageError(f"{what}: {key!r} must be an integer >= {low}, got {v!r}")
+    if isinstance(v, bool) or not isinstance(v, int) or not low <= v < MAX_ID:
+        raise MessageError(f"{what}: {key!r} must be an integer from {low} to {MAX_ID - 1}, got {str(v)[:40]}")
     return v
 
 
@@ -128,7 +132,7 @@ def ids_field(h: dict, key: str, what: str) -> tuple[int, ...]:
         Named in the error.
     """
     v = h.get(key)
-    if not isinstance(v, list) or not all(isinstance(i, int) and not isinstance(i, bool) and i > 0 for i in v) \
+    if not isinstance(v, list) or not all(isinstance(i, int) and not isinstance(i, bool) and 0 < i < MAX_ID for i in v) \
             or len(set(v)) != len(v):
         raise MessageError(f"{what}: {key!r} must be a list of distinct positive protocol ids")
     return tuple(sorted(v))
