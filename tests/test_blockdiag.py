@@ -106,6 +106,52 @@ def test_compiled_block_diagonalisation_equals_the_lapack_pass():
         assert _rel(H_got, H_ref) < 1e-12
 
 
+@pytest.mark.slow  # the compiled path: it compiles the kernels on a fresh install
+@pytest.mark.skipif(not compiled_available(), reason="numba not importable")
+@pytest.mark.parametrize("max_coupling", [1e2, 1.0, 0.05])
+def test_the_compiled_loop_is_the_python_loop_over_compiled_passes(max_coupling):
+    """block_schur on the compiled path is one call (clusters, passes, merges: _blockdiag_kernel.block_form);
+    it gives exactly what the Python loop over the compiled clusters and passes gives (the route it
+    replaced), bit for bit, with the merges that tighter coupling bounds force (bench segment 133's S~
+    and obfuscated T~, S~)."""
+    from roadcollab.experiments.bench.study import _config_for
+    from roadcollab.experiments.pipeline import FleetPipeline
+    from roadcollab.lti import blockdiag
+    from roadcollab.models.vehicle import sample_fleet
+    from roadcollab.privacy.obfuscation import ObfuscationChannel
+
+    cfg = _config_for(4000)
+    rng = np.random.default_rng(11)
+    pipe = FleetPipeline(cfg, sample_fleet(2, cfg.fleet, rng=rng))
+    est = pipe.estimators[1]
+    d = np.load(Path(__file__).parent / "data" / "bench_segment133_S.npz")
+    systems = [StateSpaceData(d["A"], d["B"], d["C"], d["D"], 0.005)]
+    for _ in range(3):
+        ch = ObfuscationChannel.draw(est.T_ss, est.S_ss, pipe.grid, cfg.obfuscation, rng=rng)
+        systems += [ch.T, ch.S]
+    merges = 0
+    with use_kernels("compiled"):
+        for sys in systems:
+            T0, U0 = scipy.linalg.schur(sys.A, output="complex")
+            got = block_schur(sys.A, sys.B, sys.C, schur=(T0, U0), max_coupling=max_coupling)
+            lam = np.diag(T0)
+            clusters = blockdiag._compiled_clusters(lam, blockdiag.CLUSTER_TOL, blockdiag.CLUSTER_REL)
+            first = len(clusters)
+            while True:                         # the loop of block_schur before it was compiled
+                ref = blockdiag._decouple(T0, U0, sys.B, sys.C, clusters, max_coupling)
+                if isinstance(ref, blockdiag.BlockSchur):
+                    break
+                rest = clusters[ref + 1:]
+                dist = [np.min(np.abs(lam[clusters[ref]][:, None] - lam[c][None, :])) for c in rest]
+                near = rest[int(np.argmin(dist))]
+                clusters = [sorted(c + near) if k == ref else c for k, c in enumerate(clusters) if c is not near]
+            merges += first - len(ref.blocks)
+            assert got.blocks == ref.blocks
+            for a, b in ((got.R, ref.R), (got.Bw, ref.Bw), (got.Cw, ref.Cw)):
+                assert a.tobytes() == b.tobytes()
+    assert merges > 0
+
+
 def test_schur_certificate_agrees_with_the_eigen_one():
     rng = np.random.default_rng(5)
     A = _hidden(np.diag([0.99, 0.9, 0.5, -0.4]) + np.diag([2.0, 0.0, 1.0], 1), np.zeros((4, 2)),

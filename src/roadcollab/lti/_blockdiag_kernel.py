@@ -21,12 +21,12 @@ import numpy as np
 
 from .kernels import compiled_available, jit_options, read_only
 
-__all__ = ["decouple", "clusters"]
+__all__ = ["decouple", "clusters", "block_form"]
 
 _KERNEL: dict[str, Any] = {}
 
 #: The functions compiled by :func:`_build` (rebound in place, so compiled callers find compiled callees).
-_COMPILED_NAMES = ("_swap", "_sylvester", "_decouple_pass", "_cluster_labels")
+_COMPILED_NAMES = ("_swap", "_sylvester", "_decouple_pass", "_cluster_labels", "_block_form")
 
 
 def _build() -> dict[str, Any]:
@@ -34,14 +34,15 @@ def _build() -> dict[str, Any]:
     if _KERNEL:
         return _KERNEL
     if not compiled_available():
-        _KERNEL.update(decouple=None, labels=None)
+        _KERNEL.update(decouple=None, labels=None, form=None)
         return _KERNEL
     import numba
 
     jit = numba.njit(**jit_options())
     for name in _COMPILED_NAMES:
         globals()[name] = jit(globals()[name])
-    _KERNEL.update(decouple=globals()["_decouple_pass"], labels=globals()["_cluster_labels"])
+    _KERNEL.update(decouple=globals()["_decouple_pass"], labels=globals()["_cluster_labels"],
+                   form=globals()["_block_form"])
     return _KERNEL
 
 
@@ -195,6 +196,125 @@ def _decouple_pass(T: np.ndarray, U: np.ndarray, B: np.ndarray, C: np.ndarray, o
                 T[i, j] = 0.0
         start = stop
     return -1
+
+
+def _block_form(T0: np.ndarray, U0: np.ndarray, B: np.ndarray, C: np.ndarray, tol: float, rel: float,
+                max_coupling: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:   # pragma: no cover - compiled
+    """The whole of :func:`~roadcollab.lti.blockdiag.block_schur` after the Schur form, in one call: the
+    clusters of :func:`_cluster_labels` (ordered by their first index, each ascending, as
+    :func:`clusters`), then :func:`_decouple_pass` until it succeeds, a failed cluster merged with the
+    nearest cluster after it (the smallest ``|lam_i - lam_k|``, the first on a tie, NaN first as
+    ``numpy.argmin``) as the Python loop does. Returns the pass's ``R``, ``Bw``, ``Cw`` and the cluster
+    sizes."""
+    n = T0.shape[0]
+    lam = np.empty(n, dtype=np.complex128)
+    for i in range(n):
+        lam[i] = T0[i, i]
+    label = _cluster_labels(lam, tol, rel)
+    order = np.empty(n, dtype=np.int64)         # the clusters' indices, concatenated
+    sizes = np.empty(n, dtype=np.int64)
+    nc = 0
+    pos = 0
+    for lab in range(n):                        # a label is its cluster's first index
+        cnt = 0
+        for i in range(n):
+            if label[i] == lab:
+                order[pos] = i
+                pos += 1
+                cnt += 1
+        if cnt:
+            sizes[nc] = cnt
+            nc += 1
+    Bw = np.empty((n, B.shape[1]), dtype=np.complex128)
+    Cw = np.empty((C.shape[0], n), dtype=np.complex128)
+    while True:
+        T = T0.copy()
+        U = U0.copy()
+        out = _decouple_pass(T, U, B, C, order, sizes[:nc].copy(), max_coupling, Bw, Cw)
+        if out < 0:
+            return T, Bw, Cw, sizes[:nc].copy()
+        starts = np.empty(nc + 1, dtype=np.int64)
+        starts[0] = 0
+        for c in range(nc):
+            starts[c + 1] = starts[c] + sizes[c]
+        near = -1
+        best = np.inf
+        for c in range(out + 1, nc):            # np.min over the pairs, then np.argmin over the clusters
+            d = np.inf
+            nan = False
+            for a in range(starts[out], starts[out + 1]):
+                for b in range(starts[c], starts[c + 1]):
+                    v = abs(lam[order[a]] - lam[order[b]])
+                    if np.isnan(v):
+                        nan = True
+                    elif v < d:
+                        d = v
+            if nan:
+                near = c
+                break
+            if near < 0 or d < best:
+                near = c
+                best = d
+        merged = np.empty(sizes[out] + sizes[near], dtype=np.int64)
+        a, b = starts[out], starts[near]        # sorted(c + near): a merge of two ascending runs (no
+        for k in range(merged.size):            # sort: numba's quicksort cost 1.9 s of compilation)
+            if b == starts[near + 1] or (a < starts[out + 1] and order[a] < order[b]):
+                merged[k] = order[a]
+                a += 1
+            else:
+                merged[k] = order[b]
+                b += 1
+        new = np.empty(n, dtype=np.int64)
+        k = 0
+        for c in range(nc):
+            if c == out:
+                for v in merged:
+                    new[k] = v
+                    k += 1
+            elif c != near:
+                for a in range(starts[c], starts[c + 1]):
+                    new[k] = order[a]
+                    k += 1
+        order = new
+        sizes[out] += sizes[near]
+        for c in range(near, nc - 1):
+            sizes[c] = sizes[c + 1]
+        nc -= 1
+
+
+def block_form(T0: np.ndarray, U0: np.ndarray, B: np.ndarray, C: np.ndarray, tol: float, rel: float,
+               max_coupling: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, list[tuple[int, int]]]:
+    """:func:`~roadcollab.lti.blockdiag.block_schur` from a complex Schur form, compiled in one call
+    (clustering, decoupling passes and merges; :func:`_block_form`): the same clusters, merges and
+    arithmetic as :func:`clusters` and :func:`decouple` in the Python loop, so the same output bit for
+    bit, without that loop's glue (about 30 us per obfuscated system, docs/speed.md, "Eleventh pass").
+
+    Parameters
+    ----------
+    T0, U0 : (n, n) complex ndarray
+        ``A = U0 T0 U0^H``, ``n >= 1`` (not modified).
+    B : (n, m) real ndarray
+    C : (p, n) real ndarray
+    tol, rel, max_coupling : float
+        As :func:`~roadcollab.lti.blockdiag.block_schur`'s ``cluster_tol``, ``cluster_rel``,
+        ``max_coupling``.
+
+    Returns
+    -------
+    R, Bw, Cw : ndarray
+        As :class:`~roadcollab.lti.blockdiag.BlockSchur`.
+    blocks : list of (int, int)
+        ``[start, stop)`` of each diagonal block.
+    """
+    c = np.ascontiguousarray
+    T, Bw, Cw, sizes = _build()["form"](read_only(c(T0, dtype=np.complex128)), read_only(c(U0, dtype=np.complex128)),
+                                        read_only(c(B, dtype=float)), read_only(c(C, dtype=float)), float(tol),
+                                        float(rel), float(max_coupling))
+    blocks, start = [], 0
+    for size in sizes.tolist():
+        blocks.append((start, start + size))
+        start += size
+    return T, Bw, Cw, blocks
 
 
 def decouple(T0: np.ndarray, U0: np.ndarray, B: np.ndarray, C: np.ndarray, clusters: list[list[int]],

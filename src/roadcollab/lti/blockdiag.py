@@ -24,7 +24,8 @@ from scipy.linalg import lapack
 
 from ._eval_kernel import block_eval
 from .kernels import kernel_path
-from ._blockdiag_kernel import clusters as _compiled_clusters, decouple as _compiled_decouple
+from ._blockdiag_kernel import block_form as _compiled_block_form, clusters as _compiled_clusters
+from ._blockdiag_kernel import decouple as _compiled_decouple
 
 __all__ = ["MAX_COUPLING", "CLUSTER_TOL", "CLUSTER_REL", "SMALL_BLOCK", "BlockSchur", "block_schur", "block_response"]
 
@@ -132,6 +133,11 @@ def block_schur(A: np.ndarray, B: np.ndarray, C: np.ndarray, *, schur: tuple[np.
     """
     A = np.asarray(A, dtype=float)
     T0, U0 = scipy.linalg.schur(A, output="complex") if schur is None else schur
+    if kernel_path() == "compiled" and T0.shape[0] > 0:
+        # The loop below in one compiled call, the same clusters, merges and bits (_blockdiag_kernel.block_form):
+        # its Python glue cost about 30 of 50 us per obfuscated T~, S~ (docs/speed.md, "Eleventh pass").
+        R, Bw, Cw, blocks = _compiled_block_form(T0, U0, B, C, cluster_tol, cluster_rel, max_coupling)
+        return BlockSchur(R, Bw, Cw, blocks, (T0, U0))
     lam = np.diag(T0)
     if kernel_path() == "compiled":
         clusters = _compiled_clusters(lam, cluster_tol, cluster_rel)
