@@ -23,7 +23,7 @@ import scipy.linalg
 
 from .kernels import compiled_available, jit_options, read_only
 
-__all__ = ["schur_lyapunov", "schur_certificate", "certificate_figures", "hidden_figures", "complex_schur"]
+__all__ = ["schur_lyapunov", "schur_certificate", "certificate_figures", "hidden_figures", "hidden_parts", "complex_schur"]
 
 _KERNEL: dict[str, Any] = {}
 
@@ -409,8 +409,27 @@ def hidden_figures(R: np.ndarray, U: np.ndarray, scale: np.ndarray, Q: np.ndarra
     radius, resid, scale, lo, hi : float
         As :func:`certificate_figures`.
     """
-    c = np.ascontiguousarray
-    kernel = _build()
-    W, H = kernel["hidden"](c(U, complex), read_only(c(scale, float)), read_only(c(Q, float)))
-    out = kernel["figures"](c(R, complex), W, read_only(c(A, float)), H, True)
+    W, H = hidden_parts(U, scale, Q)
+    out = _build()["figures"](np.ascontiguousarray(R, complex), W, read_only(np.ascontiguousarray(A, float)), H, True)
     return float(out[0]), float(out[1]), float(out[2]), float(out[3]), float(out[4])
+
+
+def hidden_parts(U: np.ndarray, scale: np.ndarray, Q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``W = Q^T D U`` and ``H = U^H D^-2 U`` of :func:`hidden_figures` (compiled).
+
+    Parameters
+    ----------
+    U : (n, n) complex ndarray
+        Unitary.
+    scale : (n,) ndarray
+        ``diag(D)``, positive.
+    Q : (n, n) ndarray
+        Orthogonal.
+
+    Returns
+    -------
+    W, H : (n, n) complex ndarray
+    """
+    c = np.ascontiguousarray
+    W, H = _build()["hidden"](c(U, complex), read_only(c(scale, float)), read_only(c(Q, float)))
+    return W, H
