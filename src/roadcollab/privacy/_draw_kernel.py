@@ -169,9 +169,10 @@ def zeros_ok(num: np.ndarray, n: int, min_zero_distance: float) -> bool:   # pra
     return True
 
 
-def axis_ratios(num: np.ndarray, den: np.ndarray, n: int, powers: np.ndarray) -> tuple[float, float]:
-    # pragma: no cover - compiled
-    K = powers.shape[1]
+def axis_ratios(num: np.ndarray, den: np.ndarray, n: int, powers: np.ndarray, q0: int, q1: int
+                ) -> tuple[float, float]:   # pragma: no cover - compiled
+    # The maxima over the bins q0..q1 - 1 of `powers` (each bin's figures the same bits whatever the range).
+    K = q1 - q0
     # Condition number and gain range on the warped axis (obfuscator_design's closed forms):
     # N_e(j w) = sum_k num[e, n - k] j^k w^k, d(j w) likewise.
     r_cond = 0.0
@@ -190,11 +191,12 @@ def axis_ratios(num: np.ndarray, den: np.ndarray, n: int, powers: np.ndarray) ->
     # did not). The maxima of the same values, so the same decisions.
     acc = np.zeros((10, K))
     for k in range(n + 1):
+        pk = powers[k, q0:q1]
         for j in range(5):
             a, b = cre[k, j], cim[k, j]
             ra, ia = acc[j], acc[5 + j]
             for q in range(K):
-                wk = powers[k, q]
+                wk = pk[q]
                 ra[q] += a * wk
                 ia[q] += b * wk
     r0, r1, r2, r3, rd = acc[0], acc[1], acc[2], acc[3], acc[4]
@@ -271,18 +273,34 @@ def loop(rng: Any, lo: int, hi: int, plf0: float, plf1: float, pd0: float, pd1: 
         if not zeros_ok(num, n, min_zero_distance):
             continue
         poly_into(poles, n, den)
-        r_cond, r_gain = axis_ratios(num, den, n, powers)
-        if not r_cond < np.inf:
-            continue
-        if r_cond + np.sqrt(max(r_cond * r_cond - 1.0, 0.0)) > max_condition:
-            continue
         # ||N_lead||_2 (2x2, real): sqrt((F + sqrt(F^2 - 4 det^2)) / 2).
         a, b, c, d = num[0, 0], num[1, 0], num[2, 0], num[3, 0]
         F = a * a + b * b + c * c + d * d
         dl = a * d - b * c
         lead = np.sqrt((F + np.sqrt(max(F * F - 4 * dl * dl, 0.0))) / 2)
+        # The lowest bins first: a candidate that fails there fails on the grid (its maxima over every bin are
+        # at least these, and the tests below are monotone in them), and every rejected candidate measured
+        # failed within the first three bins: the other bins are computed only for the rest (docs/speed.md,
+        # "Eleventh pass"). The maxima over all bins, and so the decisions, are those of one pass.
+        K = powers.shape[1]
+        head = min(K, 32)
+        r_cond, r_gain = axis_ratios(num, den, n, powers, 0, head)
+        if not r_cond < np.inf:
+            continue
+        if r_cond + np.sqrt(max(r_cond * r_cond - 1.0, 0.0)) > max_condition:
+            continue
         if lead * r_gain > max_gain_range:
             continue
+        if head < K:
+            c2, g2 = axis_ratios(num, den, n, powers, head, K)
+            r_cond = c2 if c2 > r_cond else r_cond
+            r_gain = g2 if g2 > r_gain else r_gain
+            if not r_cond < np.inf:
+                continue
+            if r_cond + np.sqrt(max(r_cond * r_cond - 1.0, 0.0)) > max_condition:
+                continue
+            if lead * r_gain > max_gain_range:
+                continue
         return attempt, n
     return max_attempts, -1
 
