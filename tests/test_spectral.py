@@ -27,6 +27,25 @@ def test_band_limit_is_zero_phase_and_removes_a_constant():
     assert np.abs(out[500:1500, 1]).max() < 0.05
 
 
+def test_the_grids_transforms_are_scipy_ffts_bit_for_bit():
+    """rfft and irfft call pocketfft's binding without scipy.fft's dispatch: the same bits as scipy.fft.rfft /
+    irfft with n = nfft along the samples, padded or not, and the same results where they fall back to it."""
+    import scipy.fft
+
+    g = SegmentGrid(4000, 200.0)
+    rng = np.random.default_rng(3)
+    for rows in (4000, g.nfft, 1, 0):
+        x = rng.standard_normal((rows, 2))
+        assert g.rfft(x).tobytes() == scipy.fft.rfft(x, n=g.nfft, axis=0).tobytes()
+    assert g.rfft(np.arange(10, dtype=np.float32)[:, None]).tobytes() == scipy.fft.rfft(
+        np.arange(10.0)[:, None], n=g.nfft, axis=0).tobytes()
+    X = rng.standard_normal((g.n_bins, 3)) + 1j * rng.standard_normal((g.n_bins, 3))
+    assert g.irfft(X).tobytes() == scipy.fft.irfft(X, n=g.nfft, axis=0).tobytes()
+    assert g.irfft(X, n=4000).tobytes() == scipy.fft.irfft(X, n=g.nfft, axis=0)[:4000].tobytes()
+    for other in (X.real, X[:-5], X.astype(np.complex64), X[:, :1].T.T):       # the fallback, or the same layout
+        assert g.irfft(other).tobytes() == scipy.fft.irfft(other, n=g.nfft, axis=0).tobytes()
+
+
 def test_closed_form_2x2_inverse():
     rng = np.random.default_rng(0)
     M = rng.standard_normal((50, 2, 2)) + 1j * rng.standard_normal((50, 2, 2))
