@@ -226,6 +226,11 @@ def _hidden_parts(U: np.ndarray, scale: np.ndarray, Q: np.ndarray
     for k in range(n):                              # H = sum_k conj(U_k.)^T U_k. / scale_k^2
         f = 1.0 / (scale[k] * scale[k])
         for i in range(n):
+            if U[k, i] == 0:
+                # Its terms are signed zeros (U is finite), and a sum that starts at +0 is never -0: adding
+                # them changes no bit. U of a series connection is two thirds zeros (the composed form's
+                # [[0, U1], [U2, 0]], Psi's pairs): 25 % of this kernel (docs/speed.md, "Eleventh pass").
+                continue
             c = np.conj(U[k, i]) * f
             for j in range(n):
                 H[i, j] += c * U[k, j]
