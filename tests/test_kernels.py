@@ -74,6 +74,26 @@ def test_compiled_pole_residue_equals_reference():
     assert _rel(got, _direct(A, B, C, D, z)) < 1e-12
 
 
+def test_the_parts_of_a_unit_circle_vector_are_split_once_while_it_stays_frozen():
+    from roadcollab.lti.response import unit_circle
+
+    w = np.exp(1j * np.linspace(0.0, 3.0, 50))
+    w.flags.writeable = False
+    re, im = kernels.complex_parts(w)
+    assert np.array_equal(re, w.real) and np.array_equal(im, w.imag)
+    assert not re.flags.writeable and not im.flags.writeable and re.flags.c_contiguous
+    assert kernels.complex_parts(w)[0] is not re              # not one of unit_circle's: split every time
+    z = unit_circle(np.linspace(0.0, 3.0, 47))
+    re, im = kernels.complex_parts(z)
+    assert np.array_equal(re, z.real) and np.array_equal(im, z.imag)
+    assert kernels.complex_parts(z)[0] is re                  # unit_circle's, frozen: found by identity
+    z.flags.writeable = True
+    try:
+        assert kernels.complex_parts(z)[0] is not re          # thawed: split again
+    finally:
+        z.flags.writeable = False                             # unit_circle's, as it was
+
+
 def test_kernel_choice():
     with kernels.use_kernels("reference"):
         assert kernels.kernel_path() == "reference"

@@ -17,7 +17,7 @@ from typing import Any
 
 import numpy as np
 
-from .kernels import TILE, compiled_available, jit_options, read_only
+from .kernels import TILE, compiled_available, complex_parts, jit_options, read_only
 
 __all__ = ["block_eval"]
 
@@ -237,7 +237,7 @@ def block_eval(R: np.ndarray, Bw: np.ndarray, Cw: np.ndarray, D: np.ndarray, blo
     stops = np.array([b[1] for b in blocks], dtype=np.int64)
     z = np.asarray(z, dtype=complex)
     out = np.empty((z.size, D.shape[0], D.shape[1]), complex)
+    zr, zi = complex_parts(z)
     k(np.ascontiguousarray(R, complex), np.ascontiguousarray(Bw, complex), np.ascontiguousarray(Cw, complex),
-      read_only(np.ascontiguousarray(D, float)), starts, stops, np.ascontiguousarray(z.real),
-      np.ascontiguousarray(z.imag), out.reshape(z.size, -1))
+      read_only(np.ascontiguousarray(D, float)), starts, stops, zr, zi, out.reshape(z.size, -1))
     return out

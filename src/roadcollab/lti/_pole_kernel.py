@@ -13,7 +13,7 @@ from typing import Any
 
 import numpy as np
 
-from .kernels import TILE, compiled_available, jit_options, read_only
+from .kernels import TILE, compiled_available, complex_parts, jit_options, read_only
 
 __all__ = ["pole_residue_eval", "pole_residue_apply"]
 
@@ -150,8 +150,9 @@ def _pole_arrays(lam: np.ndarray, Res: np.ndarray, D: np.ndarray, z: np.ndarray)
     Res = np.asarray(Res, dtype=complex)
     Dc = np.asarray(D, dtype=complex)
     c = np.ascontiguousarray
+    zr, zi = complex_parts(z)
     return (c(lam.real), c(lam.imag), c(Res.real), c(Res.imag), c(Dc.real).reshape(-1), c(Dc.imag).reshape(-1),
-            c(z.real), c(z.imag))
+            zr, zi)
 
 
 def pole_residue_apply(lam: np.ndarray, Res: np.ndarray, D: np.ndarray, z: np.ndarray, x: np.ndarray, *,

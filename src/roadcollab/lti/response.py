@@ -13,7 +13,7 @@ from .._validation import is_frozen
 from .batch2x2 import inv2x2
 from .blockdiag import block_response, block_schur
 from ._pole_kernel import pole_residue_eval
-from .kernels import kernel_path
+from .kernels import keep_parts, kernel_path
 
 __all__ = ["dlti_frequency_response", "unit_circle", "ss_response", "content_key", "FrequencyResponseCache"]
 
@@ -90,6 +90,7 @@ def unit_circle(omega_dt: ArrayLike) -> np.ndarray:
     else:
         z = np.exp(1j * om)
         z.flags.writeable = False
+        keep_parts(z)             # its real and imaginary parts, as the compiled kernels take them
         key = om.copy()
         key.flags.writeable = False
         _UNIT_CIRCLE.insert(0, (key, z))
@@ -135,7 +136,8 @@ def ss_response(A: ArrayLike, B: ArrayLike, C: ArrayLike, D: ArrayLike, points: 
     # (:mod:`~roadcollab.lti.blockdiag`): as accurate as the full back substitution (obfuscated
     # T~, S~ of order 12-22 against a 40-digit reference: the same 1e-12..2e-11 relative per bin),
     # at 0.4-0.6 ms instead of 1.1-4 ms (measured on the loaded 2-core machine).
-    x = np.asarray(points, dtype=complex).reshape(-1)
+    x = np.asarray(points, dtype=complex)
+    x = x if x.ndim == 1 else x.reshape(-1)      # a 1-D vector itself: the kernels find its parts by identity
     Af, Bf, Cf, Df = (np.asarray(a, dtype=float) for a in (A, B, C, D))
     p, m = Df.shape
     if Af.shape[0] == 0:
