@@ -199,6 +199,34 @@ def test_compiled_psi_draw_is_the_reference_draw_and_leaves_the_same_generator_s
             draw_obfuscator(strict, grid, rng=np.random.default_rng(0), max_attempts=5)
 
 
+@needs_numba
+@pytest.mark.parametrize("path", kernels.KERNELS)
+def test_a_pair_of_psi_draws_is_two_draws_in_turn(path):
+    """draw_obfuscator_pair (one compiled call for both rejection loops) draws what two draw_obfuscator calls
+    draw, bit for bit, and leaves the generator where they leave it; with a spec nothing satisfies, the first
+    draw fails and the second is not drawn, as with two calls."""
+    from roadcollab.estimation.grid import SegmentGrid
+    from roadcollab.privacy.obfuscator_design import ObfuscationSpec, draw_obfuscator, draw_obfuscator_pair
+
+    grid = SegmentGrid(n_samples=1000, sample_rate=200.0)
+    ra, rb = np.random.default_rng(21), np.random.default_rng(21)
+    with kernels.use_kernels(path):
+        for _ in range(15):
+            pair = draw_obfuscator_pair(ObfuscationSpec(), grid, rng=ra)
+            one = (draw_obfuscator(ObfuscationSpec(), grid, rng=rb), draw_obfuscator(ObfuscationSpec(), grid, rng=rb))
+            assert ra.bit_generator.state == rb.bit_generator.state
+            for a, b in zip(pair, one):
+                assert a.poles.tobytes() == b.poles.tobytes() and a.numerators.tobytes() == b.numerators.tobytes()
+                assert a.system.A.tobytes() == b.system.A.tobytes() and a.system.C.tobytes() == b.system.C.tobytes()
+        strict = ObfuscationSpec(max_condition=1.0000001)
+        ra, rb = np.random.default_rng(0), np.random.default_rng(0)
+        with pytest.raises(ParameterError, match="max_attempts=5"):
+            draw_obfuscator_pair(strict, grid, rng=ra, max_attempts=5)
+        with pytest.raises(ParameterError, match="max_attempts=5"):
+            draw_obfuscator(strict, grid, rng=rb, max_attempts=5)
+        assert ra.bit_generator.state == rb.bit_generator.state
+
+
 @pytest.mark.parametrize("path", [COMPILED, "reference"])
 def test_psi_response_from_its_poles_and_residues_is_the_realisation_response(path):
     # Obfuscator.frequency_response (the design's poles and residues through the bilinear map) against

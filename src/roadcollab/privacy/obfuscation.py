@@ -39,7 +39,7 @@ from ..lti.batch2x2 import inv2x2, matvec, receiver_z
 from ..lti._pole_kernel import pole_residue_apply
 from ..lti.kernels import kernel_path
 from ..lti.response import unit_circle
-from .obfuscator_design import ObfuscationSpec, Obfuscator, draw_obfuscator
+from .obfuscator_design import ObfuscationSpec, Obfuscator, draw_obfuscator, draw_obfuscator_pair
 
 __all__ = ["ObfuscationSpec", "Obfuscator", "ObfuscationChannel", "draw_obfuscator", "obfuscate", "obfuscate_spectra",
            "theorem1_errors"]
@@ -100,8 +100,7 @@ class ObfuscationChannel:
         ObfuscationChannel
         """
         rng = np.random.default_rng(rng)
-        psi1 = draw_obfuscator(spec, grid, rng=rng)
-        psi2 = draw_obfuscator(spec, grid, rng=rng)
+        psi1, psi2 = draw_obfuscator_pair(spec, grid, rng=rng)     # draw_obfuscator twice, from rng in turn
         T_t = series(T, psi1.system)                        # Psi1 T
         S_in = series(psi2.system, S)
         S_t = series(S_in, psi1.system)                     # Psi1 S Psi2

@@ -25,9 +25,9 @@ from ..lti.kernels import kernel_path
 from ..lti.response import unit_circle
 from ..lti.realisation import StateSpaceData
 from ..estimation.grid import SegmentGrid
-from ._draw_kernel import draw_loop, pole_residues as _compiled_residues
+from ._draw_kernel import draw_loop, draw_loops, pole_residues as _compiled_residues
 
-__all__ = ["ObfuscationSpec", "Obfuscator", "draw_obfuscator"]
+__all__ = ["ObfuscationSpec", "Obfuscator", "draw_obfuscator", "draw_obfuscator_pair"]
 
 
 @dataclass(frozen=True)
@@ -378,6 +378,54 @@ def _obfuscator(poles: np.ndarray, num: np.ndarray, dt: float) -> "Obfuscator":
     return Obfuscator(poles=poles, numerators=num, system=StateSpaceData(Ad, Bd, Cd, Dd, dt))
 
 
+def _compiled_obfuscator(drawn: tuple[np.ndarray, np.ndarray, tuple[np.ndarray, ...], tuple[np.ndarray, np.ndarray]] | None,
+                         max_attempts: int, dt: float) -> Obfuscator:
+    """The :class:`Obfuscator` of what the compiled loop drew (:func:`~._draw_kernel.draw_loop`)."""
+    if drawn is None:
+        raise ParameterError(f"no obfuscator satisfying spec was found in max_attempts={max_attempts} draws")
+    poles, num, (Ad, Bd, Cd, Dd), form = drawn
+    freeze(Ad, Bd, Cd, Dd)
+    system = StateSpaceData(Ad, Bd, Cd, Dd, dt)
+    # The realisation's Schur form in closed form (modal blocks), memoised as StateSpaceData.schur
+    # would keep dgees's: 6-7 us less per Psi (the sender composes the forms of T~, S~ from it).
+    system.seed_schur(*form)
+    return Obfuscator(poles=poles, numerators=num, system=system)
+
+
+def draw_obfuscator_pair(spec: ObfuscationSpec, grid: SegmentGrid, *, rng: np.random.Generator | int | None = None,
+                         max_attempts: int = 200) -> tuple[Obfuscator, Obfuscator]:
+    """Two draws of :func:`draw_obfuscator` in a row, from one generator (a ``paper`` send's ``Psi1``, ``Psi2``).
+
+    The same draws as two calls, the same generator state after them. On the compiled path both rejection
+    loops run in one compiled call (:func:`~._draw_kernel.draw_loops`): numba takes the generator apart on
+    every call, 7 us (docs/speed.md, "Eleventh pass").
+
+    Parameters
+    ----------
+    spec, grid, rng, max_attempts
+        As :func:`draw_obfuscator`.
+
+    Returns
+    -------
+    (Obfuscator, Obfuscator)
+
+    Raises
+    ------
+    ParameterError
+        As :func:`draw_obfuscator`, for the first draw that finds nothing (the second is not drawn then).
+    """
+    if not isinstance(spec, ObfuscationSpec):
+        raise ParameterError(f"spec must be an ObfuscationSpec, got {type(spec).__name__}")
+    rng = np.random.default_rng(rng)
+    if kernel_path() != "compiled":
+        first = draw_obfuscator(spec, grid, rng=rng, max_attempts=max_attempts)
+        return first, draw_obfuscator(spec, grid, rng=rng, max_attempts=max_attempts)
+    dt = grid.dt
+    drawn = draw_loops(spec, _warped_powers(grid, spec.order_range[1]), rng, max_attempts, dt, 2)
+    first = _compiled_obfuscator(drawn[0], max_attempts, dt)
+    return first, _compiled_obfuscator(drawn[1], max_attempts, dt)
+
+
 def draw_obfuscator(spec: ObfuscationSpec, grid: SegmentGrid, *, rng: np.random.Generator | int | None = None,
                     max_attempts: int = 200) -> Obfuscator:
     """Draw one ``Psi`` from ``spec``, discretised for ``grid``.
@@ -416,16 +464,7 @@ def draw_obfuscator(spec: ObfuscationSpec, grid: SegmentGrid, *, rng: np.random.
         # The same loop compiled, drawing from this generator (the same numbers, the same state after
         # it), and the accepted candidate realised there too (equal to _realise + bilinear_discretize
         # up to round-off).
-        drawn = draw_loop(spec, powers, rng, max_attempts, dt)
-        if drawn is None:
-            raise ParameterError(f"no obfuscator satisfying spec was found in max_attempts={max_attempts} draws")
-        poles, num, (Ad, Bd, Cd, Dd), form = drawn
-        freeze(Ad, Bd, Cd, Dd)
-        system = StateSpaceData(Ad, Bd, Cd, Dd, dt)
-        # The realisation's Schur form in closed form (modal blocks), memoised as StateSpaceData.schur
-        # would keep dgees's: 6-7 us less per Psi (the sender composes the forms of T~, S~ from it).
-        system.seed_schur(*form)
-        return Obfuscator(poles=poles, numerators=num, system=system)
+        return _compiled_obfuscator(draw_loop(spec, powers, rng, max_attempts, dt), max_attempts, dt)
     for _ in range(max_attempts):
         cand = _candidate(spec, rng)
         if cand is None:

@@ -53,7 +53,8 @@ def sender_kernels_cached() -> bool:
     """
     if not compiled_available():
         return True
-    loop = _draw_kernel._build()
+    _draw_kernel._build()
+    loop = _draw_kernel._KERNEL["loop_pair"]           # the two draws of a paper send, in one call
     try:
         index = loop._cache._cache_file._index_path     # numba's FunctionCache (private, 0.60-0.68)
     except AttributeError:
