@@ -17,14 +17,13 @@ import json
 from roadcollab.experiments.bench import warm
 from roadcollab.experiments.bench.study import bench_segment
 from roadcollab.privacy import _draw_kernel
-from roadcollab.lti import _cert_kernel, _eval_kernel, _hide_kernel, _pole_kernel
+from roadcollab.lti import _cert_kernel, _hide_kernel, _pole_kernel
 cached = warm.sender_kernels_cached()
 bench_segment(512, mechanism="paper", repeats=1, kernels="compiled")
 stats = {name: (sum(d.stats.cache_hits.values()), sum(d.stats.cache_misses.values()))
          for name, d in (("loop", _draw_kernel._KERNEL["loop_pair"]), ("realise", _draw_kernel._KERNEL["realise"]),
                          ("hide", _hide_kernel._KERNEL["hide"]), ("residues", _draw_kernel._KERNEL["residues"]),
-                         ("pole_apply", _pole_kernel._KERNEL["pole_apply"]), ("hidden", _cert_kernel._KERNEL["hidden"]),
-                         ("block", _eval_kernel._KERNEL["block"]), ("rsf2csf", _cert_kernel._KERNEL["rsf2csf"]))}
+                         ("pole_apply", _pole_kernel._KERNEL["pole_apply"]), ("hidden", _cert_kernel._KERNEL["hidden"]))}
 print(json.dumps({"cached": cached, "stats": stats}))
 """
 

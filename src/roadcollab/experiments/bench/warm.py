@@ -7,9 +7,7 @@ process has compiled in the meantime is loaded instead (0.01-0.02 s). A ``paper`
 evaluation) during the fleet's setup, then the sender's (the ``Psi`` draw loop and realisation, the pole
 residues and responses, the hiding similarity). :func:`start_background_compile` starts a process that
 compiles the sender's kernels at once, while the command itself compiles the receiver's: each half is
-about 10 s (docs/speed.md, "Seventh pass"). The second process starts with one of the receiver's, the
-evaluation over the bins, which the command needs only after its block diagonalisation (docs/speed.md,
-"Eleventh pass").
+about 10 s (docs/speed.md, "Seventh pass").
 
 The second process runs the library's own sender path on a small segment (512 samples), so it compiles
 exactly the specialisations the command will ask for, and nothing else: it builds no output, reads no
@@ -30,9 +28,7 @@ from ...collaboration.algorithm1 import CollaborativeEstimator
 from ...lti.kernels import compiled_available, use_kernels
 from ...models.vehicle import sample_fleet
 from ...privacy import _draw_kernel
-from ...lti._cert_kernel import complex_schur, hidden_parts
-from ...lti._eval_kernel import block_eval
-from ...lti.response import unit_circle
+from ...lti._cert_kernel import hidden_parts
 from ...privacy.obfuscation import ObfuscationChannel, _apply_fresh
 from ..config import ExperimentConfig
 
@@ -80,16 +76,6 @@ def compile_sender_kernels(n_samples: int = 512, seed: int = 0) -> None:
     with use_kernels("reference"):
         est = CollaborativeEstimator(vehicle, cfg.noise_model(), cfg.grid(), gamma=cfg.gamma)
     with use_kernels("compiled"):
-        # First the receiver's evaluation over the bins: the command needs it about 6 s into its first run,
-        # after the block diagonalisation, and compiled it itself for 2.3 s (docs/speed.md, "Eleventh pass").
-        # The types of block_response's call (a block form's complex arrays, a grid's unit circle).
-        R = np.diag(np.array([0.5 + 0.2j, 0.3 + 0.0j, 0.3 + 0.0j, 0.2 + 0.0j, 0.1 + 0.0j, -0.1 + 0.0j, 0.6j]))
-        R[3:7, 3:7] += np.triu(np.full((4, 4), 0.1 + 0.0j), 1)
-        block_eval(R, np.ones((7, 2), complex), np.ones((2, 7), complex), np.zeros((2, 2)),
-                   [(0, 1), (1, 3), (3, 7)], unit_circle(est.grid.omega_active))
-        # Then the rotations of the receiver's Schur form, which the draw below would reach only after the
-        # draw loop: the command needs them at its first decode.
-        complex_schur(np.array([[0.5, 0.2, 0.1], [-0.3, 0.5, 0.0], [0.0, 0.1, 0.2]]))
         ch = ObfuscationChannel.draw(est.T_ss, est.S_ss, est.grid, cfg.obfuscation, rng=rng)
         # What a paper send runs after the draw, up to the certificate (the command compiles that one first,
         # for its receiver): Psi's residues and its product with a spectrum, the hidden form's W and H. The
