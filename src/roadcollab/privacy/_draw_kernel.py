@@ -317,7 +317,8 @@ def loop(rng: Any, lo: int, hi: int, plf0: float, plf1: float, pd0: float, pd1: 
         # "Eleventh pass"). The maxima over all bins, and so the decisions, are those of one pass.
         K = powers.shape[1]
         head = min(K, 32)
-        r_cond, r_gain = axis_ratios(num, den, n, powers, 0, head)
+        # q0 as an int64 like the second call's: a literal 0 compiled axis_ratios a second time (1.2-1.7 s).
+        r_cond, r_gain = axis_ratios(num, den, n, powers, head - head, head)
         if not r_cond < np.inf:
             continue
         if r_cond + np.sqrt(max(r_cond * r_cond - 1.0, 0.0)) > max_condition:
