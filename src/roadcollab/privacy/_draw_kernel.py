@@ -344,13 +344,19 @@ def loop_pair(rng: Any, lo: int, hi: int, plf0: float, plf1: float, pd0: float, 
               powers: np.ndarray, max_attempts: int, rec: np.ndarray, poles: np.ndarray, num: np.ndarray,
               poles2: np.ndarray, num2: np.ndarray) -> tuple[int, int]:   # pragma: no cover - compiled
     # Two draws of `loop` in a row (the second only after the first accepted a candidate): (n1, n2), -1 for none.
-    _, n1 = loop(rng, lo, hi, plf0, plf1, pd0, pd1, zlf0, zlf1, zd0, zd1, cf, gl0, gl1, coupling, min_sep,
-                 min_zero_distance, max_condition, max_gain_range, powers, max_attempts, rec, poles, num)
-    if n1 < 0:
-        return n1, -1
-    _, n2 = loop(rng, lo, hi, plf0, plf1, pd0, pd1, zlf0, zlf1, zd0, zd1, cf, gl0, gl1, coupling, min_sep,
-                 min_zero_distance, max_condition, max_gain_range, powers, max_attempts, rec, poles2, num2)
-    return n1, n2
+    # One call site in a loop over the two draws: two call sites compiled loop's body into this kernel twice
+    # (about 1 s of a fresh installation's first run).
+    n1 = -1
+    for d in range(2):
+        _, n = loop(rng, lo, hi, plf0, plf1, pd0, pd1, zlf0, zlf1, zd0, zd1, cf, gl0, gl1, coupling, min_sep,
+                    min_zero_distance, max_condition, max_gain_range, powers, max_attempts, rec,
+                    poles if d == 0 else poles2, num if d == 0 else num2)
+        if d == 1:
+            return n1, n
+        if n < 0:
+            return n, -1
+        n1 = n
+    return n1, -1
 
 def realise(poles: np.ndarray, num: np.ndarray, n: int, dt: float) -> tuple[np.ndarray, np.ndarray,
                                                                             np.ndarray, np.ndarray,
