@@ -11,7 +11,8 @@ from roadcollab.lti import kernels
 _SLOW = [pytest.mark.slow, pytest.mark.skipif(not kernels.compiled_available(), reason="numba not importable")]
 
 #: In a fresh process: is the draw loop cached; then a bench segment on the compiled path, and which of the
-#: sender's kernels it loaded from disk and which it compiled.
+#: sender's kernels and of the receiver's (those the second process compiles by signature) it loaded from disk
+#: and which it compiled.
 _PROBE = """
 import json
 from roadcollab.experiments.bench import warm
@@ -24,6 +25,8 @@ stats = {name: (sum(d.stats.cache_hits.values()), sum(d.stats.cache_misses.value
          for name, d in (("loop", _draw_kernel._KERNEL["loop_pair"]), ("realise", _draw_kernel._KERNEL["realise"]),
                          ("hide", _hide_kernel._KERNEL["hide"]), ("residues", _draw_kernel._KERNEL["residues"]),
                          ("pole_apply", _pole_kernel._KERNEL["pole_apply"]), ("hidden", _cert_kernel._KERNEL["hidden"]))}
+stats.update({kernel.py_func.__name__: (sum(kernel.stats.cache_hits.values()), sum(kernel.stats.cache_misses.values()))
+              for kernel, _ in warm.receiver_kernels()})
 print(json.dumps({"cached": cached, "stats": stats}))
 """
 
@@ -45,6 +48,40 @@ def test_the_second_process_compiles_the_specialisations_the_command_then_loads(
     warm = _probe(env)
     assert warm["cached"] is True
     assert all(hits == 1 and misses == 0 for hits, misses in warm["stats"].values())   # loaded, not compiled
+
+
+class _Kernel:
+    """A stand-in for a dispatcher: what compile_receiver_tail reads and calls."""
+
+    def __init__(self, name, log):
+        self.name, self.log, self.overloads = name, log, {}
+
+    def compile(self, sig):
+        self.log.append(self.name)
+        self.overloads[sig] = True
+
+
+@pytest.mark.parametrize("on_disk, own, compiled", [
+    ((), (), ["h", "g", "f", "e", "d", "c", "b", "a"]),           # nothing on disk: all of them, last first
+    (("a", "b", "c"), (), ["h", "g", "f", "e"]),                  # the command has compiled a-c, is at d
+    (("a", "b", "c", "d", "e", "f", "g"), (), []),                # the command is at the last one
+    (("a", "b", "c", "d", "e", "f", "g", "h"), (), []),
+    (("a", "b", "f"), ("f",), ["h", "g", "f", "e", "d"]),          # f its own (the sender's path): not a sign
+])
+def test_the_receiver_tail_stops_where_the_command_has_been(monkeypatch, on_disk, own, compiled):
+    """The second process compiles the receiver's kernels from the last one backwards and leaves a kernel to
+    the command once the one before it is on disk, not counting those it compiled or loaded itself."""
+    from roadcollab.experiments.bench import warm
+
+    log = []
+    kernels = [_Kernel(name, log) for name in "abcdefgh"]
+    for k in kernels:
+        if k.name in own:
+            k.overloads["sig"] = True
+    monkeypatch.setattr(warm, "receiver_kernels", lambda: [(k, "sig") for k in kernels])
+    monkeypatch.setattr(warm, "_on_disk", lambda k: k.name in on_disk)
+    assert warm.compile_receiver_tail() == len(compiled)
+    assert log == compiled
 
 
 @pytest.mark.parametrize("command, option, env, kernels, started, scale", [

@@ -2,17 +2,19 @@
 
 numba compiles a kernel on its first call and keeps the machine code on disk (``cache=True``,
 :mod:`~roadcollab.lti.kernels`); before it compiles, a process looks on disk, so a kernel another
-process has compiled in the meantime is loaded instead (0.01-0.02 s). A ``paper`` run compiles about
-21 s of kernels one after the other: the receiver's (certificate, Schur form, decoupling, clustering, block
-evaluation) during the fleet's setup, then the sender's (the ``Psi`` draw loop and realisation, the pole
-residues and responses, the hiding similarity). :func:`start_background_compile` starts a process that
-compiles the sender's kernels at once, while the command itself compiles the receiver's: each half is
-about 10 s (docs/speed.md, "Seventh pass").
+process has compiled in the meantime is loaded instead (0.01-0.02 s). A ``paper`` run compiles its kernels
+one after the other: the receiver's (pole residues, block diagonalisation, block evaluation, Schur form,
+certificate, per-bin solve) during the fleet's setup and its first decode and estimate, then the sender's
+(the ``Psi`` draw loop and realisation, the pole residues and responses, the hiding similarity).
+:func:`start_background_compile` starts a process that compiles the sender's kernels at once, while the
+command itself compiles the receiver's (docs/speed.md, "Seventh pass"); then, as long as the command has
+not reached them, the receiver's from the last one backwards (:func:`compile_receiver_tail`), so that the
+two processes meet in the middle (docs/speed.md, "Twelfth pass").
 
 The second process runs the library's own sender path on a small segment (512 samples), so it compiles
-exactly the specialisations the command will ask for, and nothing else: it builds no output, reads no
-file and stops by itself when the draw is done. If it fails, or is slower, the command compiles what is
-missing itself, as without it.
+exactly the specialisations the command will ask for; the receiver's kernels it compiles by their
+signatures (:func:`receiver_kernels`). It builds no output, reads no file and stops by itself. If it fails,
+or is slower, the command compiles what is missing itself, as without it.
 """
 
 from __future__ import annotations
@@ -21,10 +23,12 @@ import dataclasses
 import os
 import subprocess
 import sys
+from typing import Any
 
 import numpy as np
 
 from ...collaboration.algorithm1 import CollaborativeEstimator
+from ...lti import _bin_kernel, _blockdiag_kernel, _cert_kernel, _eval_kernel, _pole_kernel
 from ...lti.kernels import compiled_available, use_kernels
 from ...models.vehicle import sample_fleet
 from ...privacy import _draw_kernel
@@ -32,7 +36,8 @@ from ...lti._cert_kernel import hidden_parts
 from ...privacy.obfuscation import ObfuscationChannel, _apply_fresh
 from ..config import ExperimentConfig
 
-__all__ = ["sender_kernels_cached", "compile_sender_kernels", "start_background_compile"]
+__all__ = ["sender_kernels_cached", "compile_sender_kernels", "receiver_kernels", "compile_receiver_tail",
+           "start_background_compile"]
 
 #: The processes started by :func:`start_background_compile` in this process.
 _STARTED: list[subprocess.Popen] = []
@@ -86,6 +91,78 @@ def compile_sender_kernels(n_samples: int = 512, seed: int = 0) -> None:
             hidden_parts(form[1][1], form[1][2], form[1][3])
 
 
+def receiver_kernels() -> list[tuple[Any, tuple]]:
+    """The receiver's kernels in the order a command's first ``paper`` run reaches them, each with the one
+    specialisation it compiles (the wrappers hand every kernel C-ordered arrays, read-only where the kernel
+    only reads them: :func:`~roadcollab.lti.kernels.read_only`): the pole-residue evaluation and the 2x2
+    inverse (the fleet's setup), the block diagonalisation, the block evaluation, the 2x2 product, the
+    Schur form's rotations, the certificate and the receiver's per-bin solve (decode and estimate).
+
+    Returns
+    -------
+    list of (dispatcher, tuple of numba types)
+        Empty without numba.
+    """
+    if not compiled_available():
+        return []
+    from numba import types
+
+    def arr(dtype: Any, ndim: int, readonly: bool = False) -> Any:
+        return types.Array(dtype, ndim, "C", readonly=readonly)
+
+    f8, c16, i8 = types.float64, types.complex128, types.int64
+    pole, bins, form = _pole_kernel._build(), _bin_kernel._build(), _blockdiag_kernel._build()
+    block, cert = _eval_kernel._build(), _cert_kernel._build()
+    return [
+        (pole["pole"], (arr(f8, 1), arr(f8, 1), arr(f8, 2), arr(f8, 2), arr(f8, 1), arr(f8, 1), arr(f8, 1, True),
+                        arr(f8, 1, True), arr(c16, 2))),
+        (bins["inv"], (arr(c16, 3, True), arr(c16, 3))),
+        (form["form"], (arr(c16, 2, True), arr(c16, 2, True), arr(f8, 2, True), arr(f8, 2, True), f8, f8, f8)),
+        (block["block"], (arr(c16, 2), arr(c16, 2), arr(c16, 2), arr(f8, 2, True), arr(i8, 1), arr(i8, 1),
+                          arr(f8, 1, True), arr(f8, 1, True), arr(c16, 2))),
+        (bins["matvec"], (arr(c16, 3, True), arr(c16, 2), arr(c16, 2))),
+        (cert["rsf2csf"], (arr(c16, 2), arr(c16, 2))),
+        (cert["figures"], (arr(c16, 2), arr(c16, 2), arr(f8, 2, True), arr(c16, 2), types.boolean)),
+        (bins["receiver_z"], (arr(c16, 3, True), arr(c16, 3, True), arr(c16, 2, True), arr(c16, 2, True),
+                              arr(f8, 1, True), arr(c16, 2))),
+    ]
+
+
+def compile_receiver_tail() -> int:
+    """Compile the receiver's kernels from the last one a command reaches backwards, while the command
+    compiles them from the first on: the two processes meet in the middle.
+
+    A kernel is left to the command once the one before it (in the command's order, of those this process
+    has not compiled or loaded itself: the sender's path reaches the Schur form's rotations too) is on disk:
+    the command is then compiling it, or past it. Compiling by signature (``dispatcher.compile``) gives the
+    same cache entry as the command's call (the probe test checks that the command loads them).
+
+    Returns
+    -------
+    int
+        How many kernels this process compiled or loaded.
+    """
+    kernels = receiver_kernels()
+    done = 0
+    for i in range(len(kernels) - 1, -1, -1):
+        before = [k for k, _ in kernels[:i] if not k.overloads]
+        if before and _on_disk(before[-1]):
+            break
+        kernel, sig = kernels[i]
+        kernel.compile(sig)
+        done += 1
+    return done
+
+
+def _on_disk(kernel: Any) -> bool:
+    """Whether a kernel's cache index file exists (numba's ``FunctionCache``, private; False if it cannot be
+    located)."""
+    try:
+        return os.path.exists(kernel._cache._cache_file._index_path)
+    except AttributeError:
+        return False
+
+
 def start_background_compile() -> subprocess.Popen | None:
     """Start a process compiling the sender's kernels if their disk cache is empty.
 
@@ -108,3 +185,4 @@ def start_background_compile() -> subprocess.Popen | None:
 
 if __name__ == "__main__":    # pragma: no cover - run in the second process
     compile_sender_kernels()
+    compile_receiver_tail()
