@@ -22,7 +22,7 @@ from roadcollab.lti import _cert_kernel, _hide_kernel, _pole_kernel
 cached = warm.sender_kernels_cached()
 bench_segment(512, mechanism="paper", repeats=1, kernels="compiled")
 stats = {name: (sum(d.stats.cache_hits.values()), sum(d.stats.cache_misses.values()))
-         for name, d in (("loop", _draw_kernel._KERNEL["loop_pair"]), ("realise", _draw_kernel._KERNEL["realise"]),
+         for name, d in (("loop", _draw_kernel._KERNEL["loop"]), ("realise", _draw_kernel._KERNEL["realise"]),
                          ("hide", _hide_kernel._KERNEL["hide"]), ("residues", _draw_kernel._KERNEL["residues"]),
                          ("pole_apply", _pole_kernel._KERNEL["pole_apply"]), ("hidden", _cert_kernel._KERNEL["hidden"]))}
 stats.update({kernel.py_func.__name__: (sum(kernel.stats.cache_hits.values()), sum(kernel.stats.cache_misses.values()))

@@ -26,7 +26,7 @@ _KERNEL: dict[str, Any] = {}
 
 
 #: The functions compiled by :func:`_build`, which rebinds each module-level name to its compiled version.
-_COMPILED_NAMES = ("roots_into", "poly_into", "zeros_ok", "axis_ratios", "loop", "loop_pair", "realise", "_residues")
+_COMPILED_NAMES = ("roots_into", "poly_into", "zeros_ok", "axis_ratios", "loop", "realise", "_residues")
 
 
 def _build() -> Any:
@@ -48,8 +48,7 @@ def _build() -> Any:
     jit = numba.njit(**jit_options())
     for name in _COMPILED_NAMES:
         globals()[name] = jit(globals()[name])
-    _KERNEL.update(loop=globals()["loop"], loop_pair=globals()["loop_pair"], realise=globals()["realise"],
-                   residues=globals()["_residues"])
+    _KERNEL.update(loop=globals()["loop"], realise=globals()["realise"], residues=globals()["_residues"])
     return _KERNEL["loop"]
 
 
@@ -103,20 +102,17 @@ def draw_loops(spec: Any, powers: np.ndarray, rng: np.random.Generator, max_atte
     zlf = np.log(spec.zero_frequency_range)
     lo, hi = spec.order_range
     rec = np.empty(1 + 6 * 3 * hi + 8)      # the values the last candidate drew, in order (kept for inspection)
-    poles = [np.empty(hi, complex) for _ in range(count)]
-    num = [np.empty((4, hi + 1)) for _ in range(count)]
+    if count not in (1, 2):
+        raise ValueError(f"count must be 1 or 2, got {count}")
+    poles = np.empty((count, hi), complex)
+    num = np.empty((count, 4, hi + 1))
     args = (rng, int(lo), int(hi), float(plf[0]), float(plf[1]), float(spec.pole_damping_range[0]),
             float(spec.pole_damping_range[1]), float(zlf[0]), float(zlf[1]),
             float(spec.zero_damping_range[0]), float(spec.zero_damping_range[1]),
             float(spec.complex_fraction), float(np.log(0.5)), float(np.log(2.0)), float(spec.coupling),
             float(spec.min_pole_separation), float(spec.min_zero_distance), float(spec.max_condition),
             float(spec.max_gain_range), np.ascontiguousarray(powers), int(max_attempts), rec)
-    if count == 2:
-        ns = _KERNEL["loop_pair"](*args, poles[0], num[0], poles[1], num[1])
-    elif count == 1:
-        ns = (_KERNEL["loop"](*args, poles[0], num[0])[1],)
-    else:
-        raise ValueError(f"count must be 1 or 2, got {count}")
+    ns = _KERNEL["loop"](*args, poles, num)[:count]
     out: list[tuple[np.ndarray, np.ndarray, tuple[np.ndarray, ...], tuple[np.ndarray, np.ndarray]] | None] = []
     for n, p, c in zip(ns, poles, num):
         if n < 0:
@@ -262,101 +258,97 @@ def loop(rng: Any, lo: int, hi: int, plf0: float, plf1: float, pd0: float, pd1: 
          min_sep: float, min_zero_distance: float, max_condition: float, max_gain_range: float,
          powers: np.ndarray, max_attempts: int, rec: np.ndarray, poles: np.ndarray,
          num: np.ndarray) -> tuple[int, int]:   # pragma: no cover
-    # poles (hi,) complex and num (4, hi + 1) receive the accepted candidate (its first n, n + 1).
+    # count = poles.shape[0] (1 or 2) draws in a row, the second only after the first accepted a candidate, from
+    # the generator as the first left it: row j of poles (count, hi) complex and num (count, 4, hi + 1) receives
+    # draw j's accepted candidate (its first n, n + 1). Returns (n_0, n_1), -1 for a draw that found nothing or
+    # was not made. The draws in this kernel itself, not in a kernel it calls: a caller recompiles its callees'
+    # code (a pair kernel calling a one-draw kernel cost 0.7 s more of a fresh installation's first run).
     nmax = hi
     zeros = np.empty(nmax, np.complex128)
     cz = np.empty(nmax + 1, np.complex128)
     den = np.empty(nmax + 1, np.complex128)
-    for attempt in range(max_attempts):
-        nrec = 0
-        n = rng.integers(lo, hi + 1)
-        rec[nrec] = n
-        nrec += 1
-        nrec = roots_into(rng, n, plf0, plf1, pd0, pd1, cf, poles, rec, nrec)
-        sep = np.inf
-        for i in range(n):
-            for k in range(n):
-                if i != k:
-                    a, b = abs(poles[i]), abs(poles[k])
-                    d = abs(poles[i] - poles[k]) / max(a, b)
-                    if d < sep:
-                        sep = d
-        if sep < min_sep:
-            continue
-        g0 = rng.uniform(gl0, gl1)
-        g1 = rng.uniform(gl0, gl1)
-        rec[nrec] = g0
-        rec[nrec + 1] = g1
-        nrec += 2
-        dg0, dg1 = np.exp(g0), np.exp(g1)
-        for e in range(4):
-            nrec = roots_into(rng, n, zlf0, zlf1, zd0, zd1, cf, zeros, rec, nrec)
-            if e == 0:
-                gain = dg0
-            elif e == 3:
-                gain = dg1
-            else:
-                u = rng.uniform(-1.0, 1.0)
-                rec[nrec] = u
-                nrec += 1
-                gain = coupling * u * np.sqrt(dg0 * dg1)
-            poly_into(zeros, n, cz)
-            for k in range(n + 1):
-                num[e, k] = gain * cz[k].real
-        if not zeros_ok(num, n, min_zero_distance):
-            continue
-        poly_into(poles, n, den)
-        # ||N_lead||_2 (2x2, real): sqrt((F + sqrt(F^2 - 4 det^2)) / 2).
-        a, b, c, d = num[0, 0], num[1, 0], num[2, 0], num[3, 0]
-        F = a * a + b * b + c * c + d * d
-        dl = a * d - b * c
-        lead = np.sqrt((F + np.sqrt(max(F * F - 4 * dl * dl, 0.0))) / 2)
-        # The lowest bins first: a candidate that fails there fails on the grid (its maxima over every bin are
-        # at least these, and the tests below are monotone in them), and every rejected candidate measured
-        # failed within the first three bins: the other bins are computed only for the rest (docs/speed.md,
-        # "Eleventh pass"). The maxima over all bins, and so the decisions, are those of one pass.
-        K = powers.shape[1]
-        head = min(K, 32)
-        # q0 as an int64 like the second call's: a literal 0 compiled axis_ratios a second time (1.2-1.7 s).
-        r_cond, r_gain = axis_ratios(num, den, n, powers, head - head, head)
-        if not r_cond < np.inf:
-            continue
-        if r_cond + np.sqrt(max(r_cond * r_cond - 1.0, 0.0)) > max_condition:
-            continue
-        if lead * r_gain > max_gain_range:
-            continue
-        if head < K:
-            c2, g2 = axis_ratios(num, den, n, powers, head, K)
-            r_cond = c2 if c2 > r_cond else r_cond
-            r_gain = g2 if g2 > r_gain else r_gain
+    first = -1
+    for j in range(poles.shape[0]):
+        pz = poles[j]
+        nm = num[j]
+        accepted = -1
+        for attempt in range(max_attempts):
+            nrec = 0
+            n = rng.integers(lo, hi + 1)
+            rec[nrec] = n
+            nrec += 1
+            nrec = roots_into(rng, n, plf0, plf1, pd0, pd1, cf, pz, rec, nrec)
+            sep = np.inf
+            for i in range(n):
+                for k in range(n):
+                    if i != k:
+                        a, b = abs(pz[i]), abs(pz[k])
+                        d = abs(pz[i] - pz[k]) / max(a, b)
+                        if d < sep:
+                            sep = d
+            if sep < min_sep:
+                continue
+            g0 = rng.uniform(gl0, gl1)
+            g1 = rng.uniform(gl0, gl1)
+            rec[nrec] = g0
+            rec[nrec + 1] = g1
+            nrec += 2
+            dg0, dg1 = np.exp(g0), np.exp(g1)
+            for e in range(4):
+                nrec = roots_into(rng, n, zlf0, zlf1, zd0, zd1, cf, zeros, rec, nrec)
+                if e == 0:
+                    gain = dg0
+                elif e == 3:
+                    gain = dg1
+                else:
+                    u = rng.uniform(-1.0, 1.0)
+                    rec[nrec] = u
+                    nrec += 1
+                    gain = coupling * u * np.sqrt(dg0 * dg1)
+                poly_into(zeros, n, cz)
+                for k in range(n + 1):
+                    nm[e, k] = gain * cz[k].real
+            if not zeros_ok(nm, n, min_zero_distance):
+                continue
+            poly_into(pz, n, den)
+            # ||N_lead||_2 (2x2, real): sqrt((F + sqrt(F^2 - 4 det^2)) / 2).
+            a, b, c, d = nm[0, 0], nm[1, 0], nm[2, 0], nm[3, 0]
+            F = a * a + b * b + c * c + d * d
+            dl = a * d - b * c
+            lead = np.sqrt((F + np.sqrt(max(F * F - 4 * dl * dl, 0.0))) / 2)
+            # The lowest bins first: a candidate that fails there fails on the grid (its maxima over every bin are
+            # at least these, and the tests below are monotone in them), and every rejected candidate measured
+            # failed within the first three bins: the other bins are computed only for the rest (docs/speed.md,
+            # "Eleventh pass"). The maxima over all bins, and so the decisions, are those of one pass.
+            K = powers.shape[1]
+            head = min(K, 32)
+            # q0 as an int64 like the second call's: a literal 0 compiled axis_ratios a second time (1.2-1.7 s).
+            r_cond, r_gain = axis_ratios(nm, den, n, powers, head - head, head)
             if not r_cond < np.inf:
                 continue
             if r_cond + np.sqrt(max(r_cond * r_cond - 1.0, 0.0)) > max_condition:
                 continue
             if lead * r_gain > max_gain_range:
                 continue
-        return attempt, n
-    return max_attempts, -1
-
-def loop_pair(rng: Any, lo: int, hi: int, plf0: float, plf1: float, pd0: float, pd1: float, zlf0: float,
-              zlf1: float, zd0: float, zd1: float, cf: float, gl0: float, gl1: float, coupling: float,
-              min_sep: float, min_zero_distance: float, max_condition: float, max_gain_range: float,
-              powers: np.ndarray, max_attempts: int, rec: np.ndarray, poles: np.ndarray, num: np.ndarray,
-              poles2: np.ndarray, num2: np.ndarray) -> tuple[int, int]:   # pragma: no cover - compiled
-    # Two draws of `loop` in a row (the second only after the first accepted a candidate): (n1, n2), -1 for none.
-    # One call site in a loop over the two draws: two call sites compiled loop's body into this kernel twice
-    # (about 1 s of a fresh installation's first run).
-    n1 = -1
-    for d in range(2):
-        _, n = loop(rng, lo, hi, plf0, plf1, pd0, pd1, zlf0, zlf1, zd0, zd1, cf, gl0, gl1, coupling, min_sep,
-                    min_zero_distance, max_condition, max_gain_range, powers, max_attempts, rec,
-                    poles if d == 0 else poles2, num if d == 0 else num2)
-        if d == 1:
-            return n1, n
-        if n < 0:
-            return n, -1
-        n1 = n
-    return n1, -1
+            if head < K:
+                c2, g2 = axis_ratios(nm, den, n, powers, head, K)
+                r_cond = c2 if c2 > r_cond else r_cond
+                r_gain = g2 if g2 > r_gain else r_gain
+                if not r_cond < np.inf:
+                    continue
+                if r_cond + np.sqrt(max(r_cond * r_cond - 1.0, 0.0)) > max_condition:
+                    continue
+                if lead * r_gain > max_gain_range:
+                    continue
+            accepted = n
+            break
+        if j == 0:
+            first = accepted
+            if accepted < 0:
+                return -1, -1
+        else:
+            return first, accepted
+    return first, -1
 
 def realise(poles: np.ndarray, num: np.ndarray, n: int, dt: float) -> tuple[np.ndarray, np.ndarray,
                                                                             np.ndarray, np.ndarray,

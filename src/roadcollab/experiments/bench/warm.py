@@ -55,7 +55,7 @@ def sender_kernels_cached() -> bool:
     if not compiled_available():
         return True
     _draw_kernel._build()
-    loop = _draw_kernel._KERNEL["loop_pair"]           # the two draws of a paper send, in one call
+    loop = _draw_kernel._KERNEL["loop"]                # the draws of a send, in one call
     try:
         index = loop._cache._cache_file._index_path     # numba's FunctionCache (private, 0.60-0.68)
     except AttributeError:
