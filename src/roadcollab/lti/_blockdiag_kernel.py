@@ -27,6 +27,8 @@ _KERNEL: dict[str, Any] = {}
 
 #: The functions compiled by :func:`_build` (rebound in place, so compiled callers find compiled callees).
 _COMPILED_NAMES = ("_swap", "_sylvester", "_decouple_pass", "_cluster_labels", "_block_form")
+#: Those only compiled kernels call (no entry point from Python: :func:`~roadcollab.lti.kernels.jit_options`).
+_INTERNAL_NAMES = ("_swap", "_sylvester")
 
 
 def _build() -> dict[str, Any]:
@@ -38,9 +40,8 @@ def _build() -> dict[str, Any]:
         return _KERNEL
     import numba
 
-    jit = numba.njit(**jit_options())
     for name in _COMPILED_NAMES:
-        globals()[name] = jit(globals()[name])
+        globals()[name] = numba.njit(**jit_options(internal=name in _INTERNAL_NAMES))(globals()[name])
     _KERNEL.update(decouple=globals()["_decouple_pass"], labels=globals()["_cluster_labels"],
                    form=globals()["_block_form"])
     return _KERNEL

@@ -33,6 +33,8 @@ _NO_RHS = np.zeros((1, 1), dtype=complex)
 #: The functions compiled by :func:`_build` (rebound in place, so compiled callers find compiled callees).
 _COMPILED_NAMES = ("_stein_parts", "_stein_schur", "_certificate", "_certificate_figures", "_hidden_parts",
                    "_real_to_complex")
+#: Those only compiled kernels call (no entry point from Python: :func:`~roadcollab.lti.kernels.jit_options`).
+_INTERNAL_NAMES = ("_stein_parts",)
 
 
 def _build() -> dict[str, Any]:
@@ -44,9 +46,8 @@ def _build() -> dict[str, Any]:
         return _KERNEL
     import numba
 
-    jit = numba.njit(**jit_options())
     for name in _COMPILED_NAMES:
-        globals()[name] = jit(globals()[name])
+        globals()[name] = numba.njit(**jit_options(internal=name in _INTERNAL_NAMES))(globals()[name])
     _KERNEL.update(schur=globals()["_stein_schur"], certificate=globals()["_certificate"],
                    figures=globals()["_certificate_figures"], hidden=globals()["_hidden_parts"], rsf2csf=globals()["_real_to_complex"])
     return _KERNEL

@@ -25,6 +25,8 @@ _KERNEL: dict[str, Any] = {}
 
 #: The functions compiled by :func:`_build` (rebound in place, so the compiled ``_block`` calls the compiled ``_four``).
 _COMPILED_NAMES = ("_four", "_block")
+#: Those only compiled kernels call (no entry point from Python: :func:`~roadcollab.lti.kernels.jit_options`).
+_INTERNAL_NAMES = ("_four",)
 
 
 def _build() -> dict[str, Any]:
@@ -36,9 +38,8 @@ def _build() -> dict[str, Any]:
         return _KERNEL
     import numba
 
-    jit = numba.njit(**jit_options())
     for name in _COMPILED_NAMES:
-        globals()[name] = jit(globals()[name])
+        globals()[name] = numba.njit(**jit_options(internal=name in _INTERNAL_NAMES))(globals()[name])
     _KERNEL.update(block=globals()["_block"])
     return _KERNEL
 

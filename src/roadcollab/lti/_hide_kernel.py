@@ -19,6 +19,8 @@ __all__ = ["qr_similarity"]
 
 _KERNEL: dict[str, Any] = {}
 _COMPILED_NAMES = ("_mul", "_mul_t", "_qr_similarity")   # callees first: compiled in order
+#: Those only compiled kernels call (no entry point from Python: :func:`~roadcollab.lti.kernels.jit_options`).
+_INTERNAL_NAMES = ("_mul", "_mul_t")
 
 
 def _build() -> dict[str, Any]:
@@ -30,9 +32,8 @@ def _build() -> dict[str, Any]:
         return _KERNEL
     import numba
 
-    jit = numba.njit(**jit_options())
     for name in _COMPILED_NAMES:
-        globals()[name] = jit(globals()[name])
+        globals()[name] = numba.njit(**jit_options(internal=name in _INTERNAL_NAMES))(globals()[name])
     _KERNEL.update(hide=globals()["_qr_similarity"])
     return _KERNEL
 

@@ -21,6 +21,8 @@ _KERNEL: dict[str, Any] = {}
 
 #: The functions compiled by :func:`_build` (rebound in place, so compiled callers find compiled callees).
 _COMPILED_NAMES = ("_pole_tile", "_pole", "_pole_apply")
+#: Those only compiled kernels call (no entry point from Python: :func:`~roadcollab.lti.kernels.jit_options`).
+_INTERNAL_NAMES = ("_pole_tile",)
 
 
 def _build() -> dict[str, Any]:
@@ -32,9 +34,8 @@ def _build() -> dict[str, Any]:
         return _KERNEL
     import numba
 
-    jit = numba.njit(**jit_options())
     for name in _COMPILED_NAMES:
-        globals()[name] = jit(globals()[name])
+        globals()[name] = numba.njit(**jit_options(internal=name in _INTERNAL_NAMES))(globals()[name])
     _KERNEL.update(pole=globals()["_pole"], pole_apply=globals()["_pole_apply"])
     return _KERNEL
 

@@ -63,16 +63,26 @@ TILE = 256
 _COMPILED: dict[str, Any] = {}
 
 
-def jit_options() -> dict[str, Any]:
+def jit_options(internal: bool = False) -> dict[str, Any]:
     """The options every compiled kernel of the package is built with (``numba.njit(**jit_options())``).
+
+    Parameters
+    ----------
+    internal : bool
+        For a function only compiled kernels call: without the wrappers that let Python (and C) call it
+        (``no_cpython_wrapper``, ``no_cfunc_wrapper``), which numba otherwise compiles for every function
+        (0.03-0.1 s each of a fresh installation's first run, docs/speed.md, "Twelfth pass").
 
     Returns
     -------
     dict
         ``cache=True`` (machine code kept on disk), ``error_model="numpy"`` (no zero-division branch
-        in float divisions, module docstring), ``nogil=True``.
+        in float divisions, module docstring), ``nogil=True``; with ``internal``, the two options above.
     """
-    return {"cache": True, "error_model": "numpy", "nogil": True}
+    options: dict[str, Any] = {"cache": True, "error_model": "numpy", "nogil": True}
+    if internal:
+        options.update(no_cpython_wrapper=True, no_cfunc_wrapper=True)
+    return options
 
 
 def read_only(x: np.ndarray) -> np.ndarray:

@@ -27,6 +27,8 @@ _KERNEL: dict[str, Any] = {}
 
 #: The functions compiled by :func:`_build`, which rebinds each module-level name to its compiled version.
 _COMPILED_NAMES = ("roots_into", "poly_into", "zeros_ok", "axis_ratios", "loop", "realise", "_residues")
+#: Those only compiled kernels call (no entry point from Python: :func:`~roadcollab.lti.kernels.jit_options`).
+_INTERNAL_NAMES = ("roots_into", "poly_into", "zeros_ok", "axis_ratios")
 
 
 def _build() -> Any:
@@ -45,9 +47,8 @@ def _build() -> Any:
         return None
     import numba
 
-    jit = numba.njit(**jit_options())
     for name in _COMPILED_NAMES:
-        globals()[name] = jit(globals()[name])
+        globals()[name] = numba.njit(**jit_options(internal=name in _INTERNAL_NAMES))(globals()[name])
     _KERNEL.update(loop=globals()["loop"], realise=globals()["realise"], residues=globals()["_residues"])
     return _KERNEL["loop"]
 
