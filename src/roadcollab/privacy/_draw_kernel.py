@@ -273,7 +273,7 @@ def loop(rng: Any, lo: int, hi: int, plf0: float, plf1: float, pd0: float, pd1: 
         pz = poles[j]
         nm = num[j]
         accepted = -1
-        for attempt in range(max_attempts):
+        for _attempt in range(max_attempts):
             nrec = 0
             n = rng.integers(lo, hi + 1)
             rec[nrec] = n
