@@ -259,6 +259,7 @@ def loop(rng: Any, lo: int, hi: int, plf0: float, plf1: float, pd0: float, pd1: 
          min_sep: float, min_zero_distance: float, max_condition: float, max_gain_range: float,
          powers: np.ndarray, max_attempts: int, rec: np.ndarray, poles: np.ndarray,
          num: np.ndarray) -> tuple[int, int]:   # pragma: no cover
+    # Long: the draws in this kernel itself, not in a kernel it calls (below).
     # count = poles.shape[0] (1 or 2) draws in a row, the second only after the first accepted a candidate, from
     # the generator as the first left it: row j of poles (count, hi) complex and num (count, 4, hi + 1) receives
     # draw j's accepted candidate (its first n, n + 1). Returns (n_0, n_1), -1 for a draw that found nothing or
