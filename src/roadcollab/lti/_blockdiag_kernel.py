@@ -207,6 +207,8 @@ def _block_form(T0: np.ndarray, U0: np.ndarray, B: np.ndarray, C: np.ndarray, to
     nearest cluster after it (the smallest ``|lam_i - lam_k|``, the first on a tie, NaN first as
     ``numpy.argmin``) as the Python loop does. Returns the pass's ``R``, ``Bw``, ``Cw`` and the cluster
     sizes."""
+    # Long: the clustering, the passes and the merges in one compiled body; split into callees, numba compiles
+    # each callee's code into every caller again (docs/speed.md, "Eleventh pass", "Twelfth pass").
     n = T0.shape[0]
     lam = np.empty(n, dtype=np.complex128)
     for i in range(n):
