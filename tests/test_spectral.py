@@ -46,6 +46,21 @@ def test_the_grids_transforms_are_scipy_ffts_bit_for_bit():
         assert g.irfft(other).tobytes() == scipy.fft.irfft(other, n=g.nfft, axis=0).tobytes()
 
 
+def test_band_limited_many_is_band_limited_of_each_spectrum_bit_for_bit():
+    """Side by side, one transform along rows: each column pair has the bits of its own band_limited call."""
+    g = SegmentGrid(4000, 200.0)
+    rng = np.random.default_rng(5)
+    Xs = [rng.standard_normal((g.n_bins, c)) + 1j * rng.standard_normal((g.n_bins, c)) for c in (2, 2, 1, 2)]
+    Xs[0][0] = 0.0
+    for n in (None, 4000, 1):
+        many = g.band_limited_many(Xs, n)
+        one = np.concatenate([g.band_limited(X, n) for X in Xs], axis=1)
+        assert many.shape == one.shape == ((g.nfft if n is None else n), 7)
+        assert np.ascontiguousarray(many).tobytes() == one.tobytes()
+    with pytest.raises(ParameterError, match="bins"):
+        g.band_limited_many([Xs[0][:-1]])
+
+
 def test_closed_form_2x2_inverse():
     rng = np.random.default_rng(0)
     M = rng.standard_normal((50, 2, 2)) + 1j * rng.standard_normal((50, 2, 2))

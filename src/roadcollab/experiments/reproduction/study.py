@@ -135,8 +135,9 @@ def simulate_run(pipe: FleetPipeline, rng, *, keep_traces: int = 0, privacy: boo
     n, sl = grid.n_samples, cfg.scored
     truth = grid.band_limited(grid.rfft(w), n)[sl]
 
-    def mse(X):  # X: spectrum of an estimate; band-limited like the truth
-        return float(np.mean((grid.band_limited(X, n)[sl] - truth) ** 2))
+    def mses(Xs: list) -> list:  # spectra of estimates, band-limited like the truth
+        x = grid.band_limited_many(Xs, n)[sl]
+        return [float(np.mean((x[:, 2 * i:2 * i + 2] - truth) ** 2)) for i in range(len(Xs))]
 
     ests = pipe.estimators
     plain = Relay(ests, "none", unguarded=True).run(ys, spectra=Ys)
@@ -153,9 +154,10 @@ def simulate_run(pipe: FleetPipeline, rng, *, keep_traces: int = 0, privacy: boo
     for j in range(len(ests)):
         r = plain[j].result
         spectra = _estimate_spectra(pipe, j, Ys, plain[j], priv[j], fused[j], fused_post[j], central, oracle)
-        for name, X in spectra.items():
-            out[name][j] = mse(X)
-        windowed[j] = mse(grid.rfft(grid.irfft(oracle[j], n)))     # zero in the padding, like the truth
+        scores = mses([*spectra.values(), grid.rfft(grid.irfft(oracle[j], n))])   # the last: zero in the padding,
+        for name, score in zip(spectra, scores):                                  # like the truth
+            out[name][j] = score
+        windowed[j] = scores[-1]
         scale = max(float(np.max(np.abs(r.estimate))), 1e-300)
         rel[j] = float(np.max(np.abs(priv[j].result.estimate - r.estimate))) / scale
         rel_h[j] = float(np.max(np.abs(hard[j].result.estimate - r.estimate))) / scale
