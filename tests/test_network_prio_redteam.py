@@ -280,3 +280,45 @@ def test_a_protocol_id_of_two_to_the_32_raises_nowhere():
     r = Router(w, lead, hook)
     r.session()                                   # nothing raises: the helpers refuse the open
     assert lead.state == "aborted" and lead.result is None
+
+
+def test_another_helpers_early_messages_are_held_within_a_byte_budget(monkeypatch):
+    """A deviating helper floods signed messages for sessions the leader never opens: before the byte cap,
+    16 x 1,024 of them were held whatever their size (up to MAX_MESSAGE_BYTES each, tens of MB)."""
+    import roadcollab.network.priohelper as helper_mod
+    monkeypatch.setattr(helper_mod, "MAX_EARLY_PEER_BYTES", 200_000)
+    w = _world()
+    svc = w["helpers"][0]
+    ident = w["keys"][C].identity
+    for s in range(1, 40):
+        topic = f"{PREFIX}/prio/{s}/0/agg/{C}"
+        for _ in range(3):
+            svc.handle(topic, seal(ident, topic, pack({"t": "commit", "phase": 1}, bytes(20_000))))
+    held = sum(len(p) for msgs in svc._early.values() for _, p in msgs)
+    assert held == svc._early_bytes <= 200_000 and held > 150_000          # the newest sessions kept
+    assert (39, 0) in svc._early and (1, 0) not in svc._early
+    topic = f"{PREFIX}/prio/99/0/agg/{C}"
+    svc.handle(topic, seal(ident, topic, pack({"t": "commit", "phase": 1}, bytes(300_000))))   # larger than all
+    assert (99, 0) not in svc._early and svc._early_bytes == held
+
+
+def test_a_leaders_early_forwarded_uploads_are_held_within_a_byte_budget(monkeypatch):
+    """Uploads the leader forwards before a helper has the session's roster: capped in bytes, not only count."""
+    import roadcollab.network.priohelper as helper_mod
+    from roadcollab.errors import MessageError
+    from roadcollab.network.priohelper import PrioHelper
+    monkeypatch.setattr(helper_mod, "MAX_EARLY_BYTES", 100_000)
+    w = _world()
+    h = PrioHelper(PREFIX, 7, 0, w["params"], w["trust"], w["keys"][B], w["helpers"][0].log, np.random.default_rng(0))
+    topic = f"{PREFIX}/prio/7/0/fwd/{B}"
+    ident = w["keys"]["aggregator-a"].identity
+    big = seal(ident, topic, pack({"t": "fwd", "id": 1, "phase": 1}, bytes(40_000), b"", b""))
+    h._forwarded(topic, big)
+    h._forwarded(topic, big)
+    try:
+        h._forwarded(topic, big)
+    except MessageError as err:
+        assert "bytes" in str(err)
+    else:
+        raise AssertionError("a third 40 kB forwarded upload was kept under a 100 kB budget")
+    assert len(h._early) == 2

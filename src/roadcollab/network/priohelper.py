@@ -36,10 +36,12 @@ from .service import Publish
 
 __all__ = ["PrioHelper", "PrioHelperService", "HelperParty"]
 
-#: Leader messages a helper keeps for a session it has not been told the roster of yet.
-MAX_EARLY = 4096
-#: Another helper's messages kept for a session the leader has not opened yet: per session, and sessions.
-MAX_EARLY_PEER, MAX_EARLY_SESSIONS = 16, 1024
+#: Leader messages a helper keeps for a session it has not been told the roster of yet: how many, and their
+#: bytes (a message may be up to ``MAX_MESSAGE_BYTES``, tens of MB: a count alone bounds no memory).
+MAX_EARLY, MAX_EARLY_BYTES = 4096, 64 << 20
+#: Another helper's messages kept for sessions the leader has not opened yet: per session, sessions, and
+#: their bytes in all (the oldest session's are dropped first).
+MAX_EARLY_PEER, MAX_EARLY_SESSIONS, MAX_EARLY_PEER_BYTES = 16, 1024, 64 << 20
 
 
 class PrioHelper(PrioAggregator):
@@ -142,8 +144,9 @@ class PrioHelper(PrioAggregator):
         _, body = open_signed(payload, self.trust, topic, self.params.leader_id)
         h, blobs = unpack(body, "forwarded upload")
         if not self.roster:
-            if len(self._early) >= MAX_EARLY:
-                raise MessageError("too many forwarded uploads before the session was opened")
+            if len(self._early) >= MAX_EARLY or \
+                    sum(len(p) for _, p in self._early) + len(payload) > MAX_EARLY_BYTES:
+                raise MessageError("too many forwarded uploads (or bytes) before the session was opened")
             self._early.append((topic, payload))
             return []
         i, k = int_field(h, "id", "fwd", 1), int_field(h, "phase", "fwd", 1)
@@ -236,6 +239,7 @@ class PrioHelperService:
         self.finished: OrderedDict[tuple[int, int], tuple[str, PrioHelper]] = OrderedDict()
         self.refused: list[str] = []
         self._early: OrderedDict[tuple[int, int], list[tuple[str, bytes]]] = OrderedDict()
+        self._early_bytes = 0
 
     @property
     def subscriptions(self) -> list[str]:
@@ -287,11 +291,7 @@ class PrioHelperService:
             except (MessageError, ParameterError):
                 return []
             if sender != self.params.leader_id:       # another helper's, early: kept until the leader opens it
-                early = self._early.setdefault(key, [])
-                if len(early) < MAX_EARLY_PEER:
-                    early.append((topic, bytes(payload)))
-                while len(self._early) > MAX_EARLY_SESSIONS:
-                    self._early.popitem(last=False)
+                self._keep_early(key, topic, payload)
                 return []
             if self.max_open is not None and len(self.sessions) >= self.max_open:
                 if len(self.refused) < 1000:       # the first ones tell the operator enough
@@ -302,7 +302,9 @@ class PrioHelperService:
             self._heard[key] = self._clock()
         before = len(h.events)
         out = h.handle(topic, payload)
-        for t, p in self._early.pop(key, []):
+        early = self._early.pop(key, [])
+        self._early_bytes -= sum(len(p) for _, p in early)
+        for t, p in early:
             out += h.handle(t, p)
         if not any(kind == "refused" for kind, _ in h.events[before:]):
             self._heard[key] = self._clock()          # a refused message keeps no session alive
@@ -310,6 +312,22 @@ class PrioHelperService:
         if h.done or h.closed:
             self._finish(key, "finished")
         return out
+
+    def _keep_early(self, key: tuple[int, int], topic: str, payload: bytes) -> None:
+        """Keep another helper's signed message for a session the leader has not opened yet, within
+        :data:`MAX_EARLY_PEER` per session, :data:`MAX_EARLY_SESSIONS` sessions and
+        :data:`MAX_EARLY_PEER_BYTES` in all: the oldest sessions' messages make room (a helper that floods
+        loses its own early messages, which the leader's session then waits for or aborts on)."""
+        if len(payload) > MAX_EARLY_PEER_BYTES:
+            return
+        early = self._early.setdefault(key, [])
+        if len(early) >= MAX_EARLY_PEER:
+            return
+        early.append((topic, bytes(payload)))
+        self._early_bytes += len(payload)
+        while len(self._early) > MAX_EARLY_SESSIONS or self._early_bytes > MAX_EARLY_PEER_BYTES:
+            _, dropped = self._early.popitem(last=False)
+            self._early_bytes -= sum(len(p) for _, p in dropped)
 
     def expire(self) -> list[tuple[int, int]]:
         """End the open sessions that heard nothing for ``max_idle_s`` (a leader that went away).
