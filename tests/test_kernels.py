@@ -577,3 +577,26 @@ def test_the_receivers_inversion_in_one_pass_agrees_with_its_steps():
     err = np.abs(fused[ok] - steps[ok]).max(axis=1) / np.abs(steps[ok]).max(axis=1)
     assert err.max() <= 1e-13          # seeded: the worst of 699 random bins
     assert not np.isfinite(fused[3]).all() and not np.isfinite(steps[3]).all() and np.isfinite(np.delete(fused, 3, axis=0)).all()
+
+
+@pytest.mark.skipif(not kernels.compiled_available(), reason="numba not importable")
+def test_compiled_difference_norms_are_numpys_norms_to_the_last_bit():
+    """``diff_norms`` (Theorem 1's check) in one compiled pass: the two ``np.linalg.norm`` calls to one unit
+    in the last place (numpy's complex product may fuse a multiply-add, the kernel does not), over values
+    from 1e-200 to 1e150 (squares near under- and overflow) and an exact match (zero difference)."""
+    from roadcollab.lti.batch2x2 import diff_norms
+
+    rng = np.random.default_rng(13)
+    K = 5000
+    scale = 10.0 ** rng.uniform(-200, 150, (K, 2))
+    x = (rng.standard_normal((K, 2)) + 1j * rng.standard_normal((K, 2))) * scale
+    ref = x * (1 + 1e-12 * rng.standard_normal((K, 2)))
+    ref[7] = x[7]
+    with kernels.use_kernels("reference"):
+        want = diff_norms(x, ref)
+    with kernels.use_kernels("compiled"):
+        got = diff_norms(x, ref)
+    np.testing.assert_array_equal(want[0], np.linalg.norm(x - ref, axis=1))
+    for g, w in zip(got, want):
+        np.testing.assert_allclose(g, w, rtol=2.3e-16, atol=0)
+    assert got[0][7] == 0.0

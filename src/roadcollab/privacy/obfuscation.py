@@ -35,7 +35,7 @@ from ..wire.message import ExchangeMessage
 from ..lti.composed_schur import series_schur
 from ..lti.realisation import StateSpaceData, random_similarity, series
 from ..estimation.grid import SegmentGrid, bin_index
-from ..lti.batch2x2 import inv2x2, matvec, receiver_z
+from ..lti.batch2x2 import diff_norms, inv2x2, matvec, receiver_z
 from ..lti._pole_kernel import pole_residue_apply
 from ..lti.kernels import kernel_path
 from ..lti.response import unit_circle
@@ -310,8 +310,7 @@ def theorem1_errors(clear: ExchangeMessage, sent: ExchangeMessage, psi1: Obfusca
     band = bin_index(grid.weight >= band_weight)
 
     def rel(got: np.ndarray, ref: np.ndarray) -> tuple[float, float]:
-        num = np.linalg.norm(got - ref, axis=1)
-        den = np.linalg.norm(ref, axis=1)
+        num, den = diff_norms(got, ref)
         keep = den > 1e-12 * max(float(den.max()), 1e-300)
         per_bin = float(np.max(num[keep] / den[keep])) if keep.any() else 0.0
         return per_bin, float(np.linalg.norm(num) / max(float(np.linalg.norm(den)), 1e-300))
