@@ -44,8 +44,9 @@ STUDIES_ALLOWED = {
 LAZY_OK = {"control", "slycot", "numba", "dask", "matplotlib", "phe", "cryptography", "rich", "tomllib", "tomli", "gmpy2",
            "psycopg", "paho", "amqtt", "pwdlib"}
 #: Heavy submodules of a core dependency that may be imported inside functions (SciPy's ``signal`` and
-#: ``stats`` packages take about 1 s to import; the kernels that use them import them when first called).
-LAZY_OK_SUBMODULES = {"scipy.signal", "scipy.stats"}
+#: ``stats`` packages take about 1 s to import, ``interpolate`` with ``optimize`` 0.1-0.13 s; the functions
+#: that use them import them when first called, so ``reproduce`` and ``bench`` import none of them).
+LAZY_OK_SUBMODULES = {"scipy.signal", "scipy.stats", "scipy.interpolate", "scipy.optimize"}
 #: Packages whose functions may import roadcollab modules (relative imports, still subject to the layers):
 #: the command-line entry point imports a command's study and report modules when that command runs, so
 #: ``roadcollab --help`` and small commands load only what they use.

@@ -600,3 +600,20 @@ def test_compiled_difference_norms_are_numpys_norms_to_the_last_bit():
     for g, w in zip(got, want):
         np.testing.assert_allclose(g, w, rtol=2.3e-16, atol=0)
     assert got[0][7] == 0.0
+
+
+_HEAVY = """
+import sys
+from roadcollab.cli.main import main
+main(["reproduce", "--runs", "2", "--measured-runs", "1", "--out", sys.argv[1]])
+print(sorted(m for m in ("scipy.signal", "scipy.stats", "scipy.interpolate", "scipy.optimize") if m in sys.modules))
+"""
+
+
+@needs_numba
+def test_a_compiled_reproduction_imports_no_heavy_scipy_package(tmp_path):
+    # scipy.signal (with scipy.stats) cost every process of a reproduce 0.3-0.45 s on its first run, and
+    # scipy.interpolate (with scipy.optimize) 0.1-0.13 s at start-up (docs/speed.md, "Fourteenth pass").
+    out = subprocess.run([sys.executable, "-c", _HEAVY, str(tmp_path / "out")], capture_output=True, text=True,
+                         timeout=600, check=True)
+    assert out.stdout.strip().splitlines()[-1] == "[]"

@@ -30,7 +30,6 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-from scipy.interpolate import make_interp_spline
 
 from ..errors import FileFormatError
 from .limits import MAX_ACCEL, FileLimits, check_file_size, parse_ascii_number, short_repr
@@ -181,6 +180,10 @@ def _check_clock(path: Path, linenos: list[int], t: np.ndarray) -> tuple[float, 
 
 def _resample(t: np.ndarray, data: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
     """Uniform grid at the mean rate and the cubic interpolating spline of ``data`` on it."""
+    # Imported for a log that needs resampling only: scipy.interpolate (with scipy.optimize) took 0.1-0.13 s
+    # of every command that imports the drive readers, ``reproduce`` and ``bench`` too (docs/speed.md).
+    from scipy.interpolate import make_interp_spline
+
     n = t.shape[0]
     fs = float(f"{(n - 1) / (t[-1] - t[0]):.9g}")
     grid = t[0] + np.arange(n) / fs

@@ -77,7 +77,8 @@ def diff_norms(x: np.ndarray, ref: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Per-bin 2-norms of a difference and of its reference: ``||x_k - ref_k||`` and ``||ref_k||``.
 
     On the compiled path one pass over the bins (the two ``np.linalg.norm`` calls with their temporaries
-    took about 0.2 ms on 3,359 bins, measured); the same bits on both paths.
+    took about 0.2 ms on 3,359 bins, measured); the same values to one unit in the last place (numpy's complex
+    product may fuse a multiply and an add, the kernel does not).
 
     Parameters
     ----------

@@ -35,7 +35,6 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-import scipy.optimize
 import scipy.special
 
 from ..._validation import check_matrix, check_nonnegative, check_positive, check_real
@@ -223,6 +222,8 @@ def gaussian_sigma(epsilon: float, delta: float, sensitivity: float) -> float:
     float
         Noise standard deviation per sample, units of ``sensitivity`` (0 if it is 0).
     """
+    import scipy.optimize  # 0.07 s to import, for a root: here, not with every command (docs/speed.md)
+
     eps = check_positive("epsilon", epsilon)
     delta = _check_delta(delta)
     sensitivity = check_nonnegative("sensitivity", sensitivity)
