@@ -12,6 +12,7 @@ import matplotlib
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
+from matplotlib.layout_engine import PlaceHolderLayoutEngine  # noqa: E402
 
 __all__ = ["plt", "save_figure", "legend_outside"]
 
@@ -38,6 +39,11 @@ def save_figure(fig, path, *, dpi: float = 120, tight: bool = True) -> Path:
     path = Path(path)
     if tight:
         fig.tight_layout()
+        # tight_layout leaves a placeholder layout engine behind, and savefig then draws the whole figure
+        # once more without rendering before the real draw (which a layout engine acting at draw time
+        # needs). Nothing is left to lay out: without it, the same bytes and one draw fewer (docs/speed.md).
+        if isinstance(fig.get_layout_engine(), PlaceHolderLayoutEngine):
+            fig.set_layout_engine(None)
     fig.savefig(path, dpi=dpi)
     plt.close(fig)
     return path
