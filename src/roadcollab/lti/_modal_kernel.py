@@ -14,31 +14,51 @@ from typing import Any
 
 import numpy as np
 
-from .kernels import compiled_available, jit_options
+from .kernels import compiled_available, jit_options, read_only
 
-__all__ = ["modal_kernel"]
+__all__ = ["modal_states2"]
 
 _KERNEL: dict[str, Any] = {}
 
 
-def modal_kernel() -> Any:
-    """The compiled recursion ``(lam, u, xi0, out) -> None``, or None without numba; numba is imported on first use.
+def _build() -> dict[str, Any]:
+    """The compiled function (``None`` without numba); numba is imported on first use."""
+    if _KERNEL:
+        return _KERNEL
+    if not compiled_available():
+        _KERNEL.update(modal=None)
+        return _KERNEL
+    import numba
+
+    globals()["_modal"] = numba.njit(**jit_options())(globals()["_modal"])
+    _KERNEL.update(modal=globals()["_modal"])
+    return _KERNEL
+
+
+def modal_states2(lam: np.ndarray, u: np.ndarray, xi0: np.ndarray) -> np.ndarray | None:
+    """:func:`~roadcollab.lti.modal.modal_states` compiled; None without numba.
+
+    Parameters
+    ----------
+    lam : (k,) array_like
+    u : (N, k) array_like
+    xi0 : (k,) array_like
 
     Returns
     -------
-    numba dispatcher or None
-        Called with C-ordered complex128 arrays ``lam`` (k,), ``u`` (N, k), ``xi0`` (k,), read-only, and
-        ``out`` (N + 1, k), which it fills.
+    (N + 1, k) complex ndarray or None
     """
-    if not _KERNEL:
-        if compiled_available():
-            import numba
+    k = _build()["modal"]
+    if k is None:
+        return None
 
-            globals()["_modal"] = numba.njit(**jit_options())(globals()["_modal"])
-            _KERNEL.update(modal=globals()["_modal"])
-        else:
-            _KERNEL.update(modal=None)
-    return _KERNEL["modal"]
+    def c16(x: np.ndarray) -> np.ndarray:   # one specialisation: C-ordered complex128, read-only
+        return read_only(np.ascontiguousarray(x, dtype=np.complex128))
+
+    lam, u = np.asarray(lam), np.asarray(u)
+    out = np.empty((u.shape[0] + 1, lam.size), np.complex128)
+    k(c16(lam), c16(u.reshape(u.shape[0], lam.size)), c16(xi0), out)
+    return out
 
 
 def _modal(lam: np.ndarray, u: np.ndarray, xi0: np.ndarray, out: np.ndarray) -> None:   # pragma: no cover - compiled

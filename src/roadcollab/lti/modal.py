@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from ._modal_kernel import modal_kernel
-from .kernels import kernel_path, read_only
+from ._modal_kernel import modal_states2
+from .kernels import kernel_path
 
 __all__ = ["modal_states"]
 
@@ -33,18 +33,15 @@ def modal_states(lam: np.ndarray, u: np.ndarray, xi0: np.ndarray) -> np.ndarray:
     (N + 1, k) complex ndarray
         ``xi[0] = xi0`` through ``xi[N]``.
     """
+    if kernel_path() == "compiled":
+        states = modal_states2(lam, u, xi0)
+        if states is not None:
+            return states
+    import scipy.signal  # heavy (0.3-1 s); imported when a recursion is run, not with the package
+
     lam, xi0 = np.asarray(lam), np.asarray(xi0)
     u = np.asarray(u)
     out = np.empty((u.shape[0] + 1, lam.size), complex)
-    if kernel_path() == "compiled":
-        # One specialisation: C-ordered complex128, the inputs read-only (lti.kernels.read_only).
-        def c16(x: np.ndarray) -> np.ndarray:
-            return read_only(np.ascontiguousarray(x, dtype=complex))
-
-        modal_kernel()(c16(lam), c16(u.reshape(u.shape[0], lam.size)), c16(xi0), out)
-        return out
-    import scipy.signal  # heavy (0.3-1 s); imported when a recursion is run, not with the package
-
     for i, l in enumerate(lam):
         # out[0] = zi = xi0, out[k] = lam out[k-1] + u[k-1]; the appended input only feeds out[N + 1].
         out[:, i], _ = scipy.signal.lfilter([0.0, 1.0], [1.0, -l], np.append(u[:, i], 0.0), zi=[xi0[i]])
