@@ -617,3 +617,64 @@ def test_a_compiled_reproduction_imports_no_heavy_scipy_package(tmp_path):
     out = subprocess.run([sys.executable, "-c", _HEAVY, str(tmp_path / "out")], capture_output=True, text=True,
                          timeout=600, check=True)
     assert out.stdout.strip().splitlines()[-1] == "[]"
+
+
+_OPT_PROBE = """
+import json, os
+os.environ.pop("NUMBA_OPT", None) if {unset} else os.environ.__setitem__("NUMBA_OPT", "2")
+import numba
+from numba.core import config, event
+from roadcollab.lti import kernels
+kernels.compiled_available()                       # imports numba, installs the package's listener
+seen = {{}}
+
+class Record(event.Listener):                      # registered after it: sees the level in force
+    def on_start(self, ev):
+        seen.setdefault(ev.data["dispatcher"].py_func.__name__, int(config.OPT))
+    def on_end(self, ev):
+        pass
+
+event.register("numba:compile", Record())
+
+def callee(x):
+    return x + 1.0
+
+ns = {{"__name__": "roadcollab.probe", "callee": numba.njit(callee)}}
+exec("def ours(x):\\n    return callee(x) * 2.0", ns)
+ours = numba.njit(ns["ours"])
+
+def theirs(x):
+    return x * 3.0
+
+theirs = numba.njit(theirs)
+assert ours(1.0) == 4.0 and theirs(1.0) == 3.0
+try:
+    numba.njit(lambda x: x.nope)(1.0)            # a failing compile of someone else's leaves the level alone
+except Exception:
+    pass
+bad = {{"__name__": "roadcollab.probe"}}
+exec("def broken(x):\\n    return x.nope", bad)
+try:
+    numba.njit(bad["broken"])(1.0)               # nor does a failing compile of the package's
+except Exception:
+    pass
+print(json.dumps({{"seen": seen, "after": int(config.OPT)}}))
+"""
+
+
+@_numba
+@pytest.mark.parametrize("unset", [True, False])
+def test_the_package_kernels_compile_at_their_own_llvm_level_and_nothing_else_does(unset):
+    """The package's functions (and what compiles inside them) compile at KERNEL_OPT_LEVEL, anyone else's at
+    numba's level, which is restored after every compile, failed ones too; a user's NUMBA_OPT is kept."""
+    import json
+
+    out = subprocess.run([sys.executable, "-c", _OPT_PROBE.format(unset=unset)], capture_output=True, text=True,
+                         timeout=300, check=True)
+    got = json.loads(out.stdout.strip().splitlines()[-1])
+    default = 3 if unset else 2
+    ours = kernels.KERNEL_OPT_LEVEL if unset else 2
+    assert got["seen"]["ours"] == ours and got["seen"]["callee"] == ours          # callee: compiled inside ours
+    assert got["seen"]["theirs"] == default and got["seen"]["<lambda>"] == default
+    assert got["seen"]["broken"] == ours
+    assert got["after"] == default

@@ -170,7 +170,51 @@ def _build() -> dict[str, Any]:
         _COMPILED.update(numba=None)
         return _COMPILED
     _COMPILED.update(numba=numba)
+    _lower_kernels_opt_level()
     return _COMPILED
+
+
+#: LLVM's optimisation level for the package's kernels (numba's own default, ``NUMBA_OPT``, is 3). At 1
+#: a fresh installation's first run compiled for 0.7 s less (four pairs of cold ``bench --quick``), and
+#: neither ``paper`` per segment nor ``reproduce`` was slower (same medians within noise; 0.99 of the time
+#: in five pairs), with every CSV and figure of ``reproduce`` byte-identical: without fast-math LLVM may not
+#: reorder or fuse floating-point operations at any level (docs/speed.md, "Fifteenth pass").
+KERNEL_OPT_LEVEL = 1
+#: The active compile scope: [depth of the package's kernels being compiled, numba's level before].
+_OPT_SCOPE: list[Any] = [0, None]
+
+
+def _lower_kernels_opt_level() -> None:
+    """Compile the package's kernels at :data:`KERNEL_OPT_LEVEL`, and nothing else: a listener on numba's
+    ``numba:compile`` event (numba's event API) lowers ``numba.config.OPT`` while a function of this
+    package compiles (with everything it compiles inside: its callees, numba's own overloads) and restores
+    it after. numba reads the level whenever it builds its optimisation passes, and fires the event under
+    its global compiler lock, so no other compilation sees the lowered level. A user's ``NUMBA_OPT`` is
+    left in force.
+    """
+    if "NUMBA_OPT" in os.environ:
+        return
+    from numba.core import config, event
+
+    def is_ours(ev: Any) -> bool:
+        func = getattr(ev.data.get("dispatcher"), "py_func", None)
+        return getattr(func, "__module__", "").startswith("roadcollab.")
+
+    class _Scope(event.Listener):
+        def on_start(self, ev: Any) -> None:
+            if _OPT_SCOPE[0] == 0 and is_ours(ev):
+                _OPT_SCOPE[1] = config.OPT
+                config.OPT = type(config.OPT)(KERNEL_OPT_LEVEL)
+            if _OPT_SCOPE[0] or is_ours(ev):
+                _OPT_SCOPE[0] += 1
+
+        def on_end(self, ev: Any) -> None:
+            if _OPT_SCOPE[0]:
+                _OPT_SCOPE[0] -= 1
+                if _OPT_SCOPE[0] == 0:
+                    config.OPT = _OPT_SCOPE[1]
+
+    event.register("numba:compile", _Scope())
 
 
 def compiled_available() -> bool:
