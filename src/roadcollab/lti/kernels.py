@@ -23,9 +23,9 @@ The block diagonalisation of a received system (reordering, Sylvester splits, ei
 The library's default is ``"reference"`` (numpy). The compiled path passes the 300-segment exactness test and
 makes ``paper`` about 3.5x faster per segment than the reference path (3.45-3.58x in the bench's alternating
 line, docs/speed.md, "Eleventh pass"), but every process that uses it pays numba's start-up (import, cache
-load) and about 145 MiB, and a fresh installation's first run compiles the kernels, about 18-19 s of CPU in
-all, shared between the command and a second process the command line starts (docs/speed.md, "Twelfth
-pass"). So the commands that run Algorithm 2 many times
+load) and about 145 MiB, and a fresh installation's first run compiles the kernels, about 16-17 s of CPU in
+all (at LLVM -O1, :data:`KERNEL_OPT_LEVEL`), shared between the command and a second process the command line
+starts (docs/speed.md, "Twelfth pass", "Fifteenth pass"). So the commands that run Algorithm 2 many times
 (``roadcollab reproduce``, ``attack``, ``sweep``, ``bench``) use it unless told otherwise (``--kernels``),
 and a vehicle process or a library call keeps the numpy path. The
 environment variable ``ROADCOLLAB_KERNELS=compiled`` (or ``reference``) sets the default of both, and
