@@ -678,3 +678,35 @@ def test_the_package_kernels_compile_at_their_own_llvm_level_and_nothing_else_do
     assert got["seen"]["theirs"] == default and got["seen"]["<lambda>"] == default
     assert got["seen"]["broken"] == ours
     assert got["after"] == default
+
+
+@_numba
+def test_the_certificate_eigenvalues_are_the_bits_of_eigvalsh():
+    """The certificate kernel's extreme eigenvalues (its own call of LAPACK dsyevd through numba's helper) are
+    the bits numba's np.linalg.eigvalsh gives, for symmetric and slightly asymmetric X (the triangle read and
+    the Fortran order matter then), n = 1..22; a non-finite entry raises as eigvalsh does."""
+    import numba
+
+    from roadcollab.lti import _cert_kernel
+
+    _cert_kernel._build()
+    ends = _cert_kernel._eigvalsh_ends
+
+    @numba.njit
+    def both(X):
+        lo, hi = ends(X)
+        ev = np.linalg.eigvalsh(X)
+        return lo, hi, ev[0], ev[-1]
+
+    rng = np.random.default_rng(20261206)
+    for n in range(1, 23):
+        for k in range(8):
+            M = rng.standard_normal((n, n))
+            X = M @ M.T + 0.1 * np.eye(n)
+            if k % 2:
+                X = X + 1e-9 * rng.standard_normal((n, n))
+            lo, hi, elo, ehi = both(X)
+            assert (lo, hi) == (elo, ehi), (n, k)
+            assert lo == np.linalg.eigvalsh(X)[0] or abs(lo - np.linalg.eigvalsh(X)[0]) < 1e-9 * abs(hi)
+    with pytest.raises(np.linalg.LinAlgError, match="infs or NaNs"):
+        both(np.array([[1.0, np.inf], [0.0, 1.0]]))
