@@ -21,6 +21,7 @@ from typing import Any
 import numpy as np
 import scipy.linalg
 
+from . import _evd_kernel
 from .kernels import compiled_available, jit_options, read_only
 
 __all__ = ["schur_lyapunov", "schur_certificate", "certificate_figures", "hidden_figures", "hidden_parts", "complex_schur"]
@@ -31,13 +32,12 @@ _KERNEL: dict[str, Any] = {}
 _NO_RHS = np.zeros((1, 1), dtype=complex)
 
 #: The functions compiled by :func:`_build` (rebound in place, so compiled callers find compiled callees).
-_COMPILED_NAMES = ("_stein_parts", "_eigvalsh_ends", "_stein_schur", "_certificate", "_certificate_figures",
-                   "_hidden_parts", "_real_to_complex")
+_COMPILED_NAMES = ("_stein_parts", "_stein_schur", "_certificate", "_certificate_figures", "_hidden_parts",
+                   "_real_to_complex")
 #: Those only compiled kernels call (no entry point from Python: :func:`~roadcollab.lti.kernels.jit_options`).
-_INTERNAL_NAMES = ("_stein_parts", "_eigvalsh_ends")
-#: The arguments numba's ``np.linalg.eigvalsh`` passes to LAPACK ``dsyevd`` (through its helper
-#: ``numba_ez_xxxevd``): real double, eigenvalues only, lower triangle of the Fortran-ordered matrix.
-_EVD_KIND, _EVD_JOBZ, _EVD_UPLO = ord("d"), ord("N"), ord("L")
+_INTERNAL_NAMES = ("_stein_parts",)
+#: The compiled extreme eigenvalues (:mod:`~roadcollab.lti._evd_kernel`), bound by :func:`_build`.
+_eigvalsh_ends: Any = None
 
 
 def _build() -> dict[str, Any]:
@@ -48,14 +48,8 @@ def _build() -> dict[str, Any]:
         _KERNEL.update(schur=None, certificate=None, figures=None, hidden=None, rsf2csf=None)
         return _KERNEL
     import numba
-    from numba import types
 
-    # numba's own LAPACK entry (numba.np.linalg, _LAPACK.numba_ez_xxxevd), called by its symbol: cacheable,
-    # and the call np.linalg.eigvalsh makes, without the 0.4 s its generic overload costs a first run to
-    # compile (docs/speed.md, "Fifteenth pass").
-    globals()["_xxxevd"] = types.ExternalFunction("numba_ez_xxxevd", types.intc(
-        types.char, types.char, types.char, types.intp, types.CPointer(types.float64), types.intp,
-        types.CPointer(types.float64)))
+    globals()["_eigvalsh_ends"] = _evd_kernel._build()["ends"]     # compiled callee, before its callers
     for name in _COMPILED_NAMES:
         globals()[name] = numba.njit(**jit_options(internal=name in _INTERNAL_NAMES))(globals()[name])
     _KERNEL.update(schur=globals()["_stein_schur"], certificate=globals()["_certificate"],
@@ -203,8 +197,8 @@ def _certificate_figures(R: np.ndarray, U: np.ndarray, A: np.ndarray, H: np.ndar
                          ) -> tuple[float, float, float, float, float]:   # pragma: no cover - compiled
     """``(radius, resid, scale, lambda_min(X), lambda_max(X))``: the spectral radius from ``diag(R)``
     and, when it is below 1, :func:`_certificate` and the extreme eigenvalues of its ``X`` (LAPACK
-    ``syevd`` through numba); otherwise, or when ``X`` is not finite, ``resid`` and the eigenvalues
-    are NaN. ``H``, ``general``: as :func:`_certificate`."""
+    ``dsyevd`` through numba, :mod:`~roadcollab.lti._evd_kernel`); otherwise, or when ``X`` is not
+    finite, ``resid`` and the eigenvalues are NaN. ``H``, ``general``: as :func:`_certificate`."""
     n = R.shape[0]
     radius = 0.0
     for i in range(n):
@@ -216,26 +210,6 @@ def _certificate_figures(R: np.ndarray, U: np.ndarray, A: np.ndarray, H: np.ndar
         return radius, resid, scale, np.nan, np.nan
     lo, hi = _eigvalsh_ends(X)
     return radius, resid, scale, lo, hi
-
-
-def _eigvalsh_ends(X: np.ndarray) -> tuple[float, float]:   # pragma: no cover - compiled
-    """The smallest and largest eigenvalue of a real symmetric ``X`` (n >= 1): the LAPACK ``dsyevd`` call of
-    numba's ``np.linalg.eigvalsh``, with its arguments (``X`` copied to Fortran order, lower triangle,
-    eigenvalues only), its check for non-finite entries and its error for a failed convergence, so the same
-    bits (``test_the_certificate_eigenvalues_are_the_bits_of_eigvalsh``)."""
-    n = X.shape[0]
-    F = np.empty((n, n))
-    for i in range(n):
-        for j in range(n):
-            x = X[i, j]
-            if not np.isfinite(x):
-                raise np.linalg.LinAlgError("Array must not contain infs or NaNs.")
-            F[j, i] = x                             # row-major F holds X column-major
-    w = np.empty(n)
-    r = _xxxevd(_EVD_KIND, _EVD_JOBZ, _EVD_UPLO, n, F.ctypes, n, w.ctypes)
-    if r != 0 or F.shape[0] != n:                   # F read after the call: alive until LAPACK is done
-        raise ValueError("Internal algorithm failed to converge.")
-    return w[0], w[n - 1]
 
 
 def _hidden_parts(U: np.ndarray, scale: np.ndarray, Q: np.ndarray

@@ -194,7 +194,9 @@ def _lower_kernels_opt_level() -> None:
     """
     if "NUMBA_OPT" in os.environ:
         return
-    from numba.core import config, event
+    from numba.core import config as numba_config, event
+
+    config: Any = numba_config                  # untyped module; OPT is set by numba at import
 
     def is_ours(ev: Any) -> bool:
         func = getattr(ev.data.get("dispatcher"), "py_func", None)
@@ -214,7 +216,8 @@ def _lower_kernels_opt_level() -> None:
                 if _OPT_SCOPE[0] == 0:
                     config.OPT = _OPT_SCOPE[1]
 
-    event.register("numba:compile", _Scope())
+    register: Any = event.register              # untyped in numba
+    register("numba:compile", _Scope())
 
 
 def compiled_available() -> bool:
