@@ -647,7 +647,9 @@ def theirs(x):
     return x * 3.0
 
 theirs = numba.njit(theirs)
-assert ours(1.0) == 4.0 and theirs(1.0) == 3.0
+nameless = {{}}                                    # a function made by exec without __name__: no __module__
+exec("def anon(x):\\n    return x - 1.0", nameless)
+assert ours(1.0) == 4.0 and theirs(1.0) == 3.0 and numba.njit(nameless["anon"])(1.0) == 0.0
 try:
     numba.njit(lambda x: x.nope)(1.0)            # a failing compile of someone else's leaves the level alone
 except Exception:
@@ -675,7 +677,7 @@ def test_the_package_kernels_compile_at_their_own_llvm_level_and_nothing_else_do
     default = 3 if unset else 2
     ours = kernels.KERNEL_OPT_LEVEL if unset else 2
     assert got["seen"]["ours"] == ours and got["seen"]["callee"] == ours          # callee: compiled inside ours
-    assert got["seen"]["theirs"] == default and got["seen"]["<lambda>"] == default
+    assert got["seen"]["theirs"] == default and got["seen"]["<lambda>"] == default and got["seen"]["anon"] == default
     assert got["seen"]["broken"] == ours
     assert got["after"] == default
 

@@ -200,7 +200,7 @@ def _lower_kernels_opt_level() -> None:
 
     def is_ours(ev: Any) -> bool:
         func = getattr(ev.data.get("dispatcher"), "py_func", None)
-        return getattr(func, "__module__", "").startswith("roadcollab.")
+        return (getattr(func, "__module__", None) or "").startswith("roadcollab.")    # None: made by exec
 
     class _Scope(event.Listener):
         def on_start(self, ev: Any) -> None:
