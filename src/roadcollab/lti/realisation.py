@@ -14,7 +14,7 @@ import scipy.linalg
 
 from .._validation import freeze, is_frozen
 from .response import content_key, dlti_frequency_response
-from ._cert_kernel import complex_schur as _compiled_schur
+from .blockdiag import complex_schur as _complex_schur
 from ._hide_kernel import qr_similarity as _compiled_qr_similarity
 from .kernels import kernel_path
 from .stability import hidden_radius_and_gain, spectral_radius_and_gain
@@ -24,15 +24,6 @@ if TYPE_CHECKING:
 
 _T = TypeVar("_T")
 
-
-def _complex_schur(A: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """A complex Schur form of a real ``A``: ``zgees`` (scipy) on the reference path; on the compiled path
-    ``dgees`` and compiled Givens rotations (0.37 -> 0.18 ms at n = 22, docs/speed.md, "Third pass")."""
-    if kernel_path() == "compiled" and A.shape[0] > 0 and np.isfinite(A).all():
-        T, U = _compiled_schur(A)
-    else:
-        T, U = scipy.linalg.schur(A, output="complex")
-    return np.asarray(T), np.asarray(U)
 
 __all__ = ["StateSpaceData", "SystemCache", "continuous_poles", "series", "minreal", "random_orthogonal", "similarity",
            "random_similarity"]
@@ -173,6 +164,17 @@ class StateSpaceData:
             ``T`` upper triangular, ``U`` unitary.
         """
         object.__setattr__(self, "_schur", (self._digest(), (T, U)))
+
+    def receiver_schur(self) -> tuple[np.ndarray, np.ndarray]:
+        """The Schur form a receiver of these bytes has: :meth:`schur` of a system decoded through a
+        :class:`SystemCache` (its certificate made it), else the same computation, not kept (the system of
+        a sender in the same process keeps its memos as they were).
+
+        Returns
+        -------
+        T, U : (n, n) complex ndarray
+        """
+        return self.schur() if self.__dict__.get("_received") else _complex_schur(np.asarray(self.A, dtype=float))
 
     def eig(self) -> tuple[np.ndarray, np.ndarray]:
         """``np.linalg.eig(A)``, memoised on this object (keyed by ``A``'s bytes).

@@ -15,7 +15,8 @@ from .blockdiag import block_response, block_schur
 from ._pole_kernel import pole_residue_eval
 from .kernels import keep_parts, kernel_path
 
-__all__ = ["dlti_frequency_response", "unit_circle", "ss_response", "content_key", "FrequencyResponseCache"]
+__all__ = ["dlti_frequency_response", "unit_circle", "ss_response", "content_key", "received_response",
+           "FrequencyResponseCache"]
 
 
 class HasResponse(Protocol):
@@ -31,6 +32,8 @@ class HasResponse(Protocol):
     def D(self) -> np.ndarray: ...
 
     def frequency_response(self, omega_dt: np.ndarray) -> np.ndarray: ...
+
+    def receiver_schur(self) -> tuple[np.ndarray, np.ndarray]: ...
 
 
 def dlti_frequency_response(Ad: ArrayLike, Bd: ArrayLike, Cd: ArrayLike, Dd: ArrayLike, omega_dt: np.ndarray, *,
@@ -204,8 +207,35 @@ def content_key(*arrays: ArrayLike) -> bytes:
     return b"|".join(parts)
 
 
+def received_response(system: HasResponse, omega_dt: np.ndarray) -> np.ndarray:
+    """The response a receiver computes for a sender's realisation: a function of its bytes only.
+
+    ``C (zI - A)^-1 B + D`` at ``z = exp(j omega_dt)`` through the complex Schur form of ``A``
+    (``receiver_schur``), whether the system was decoded from bytes, with or without the
+    receiver's :class:`~roadcollab.lti.realisation.SystemCache`, or handed over in memory by a sender
+    in the same process. A sender's own object would otherwise take the path its memos choose (an
+    eigendecomposition, then the pole-residue or the Schur path): the relay in memory and the
+    relay over the wire then differed by up to 5e-13 in 72 of 80 ``paper`` estimates (measured).
+
+    Parameters
+    ----------
+    system : StateSpaceData
+    omega_dt : (M,) array_like
+        Normalised frequencies, rad/sample.
+
+    Returns
+    -------
+    (M, p, m) complex ndarray
+    """
+    A = np.asarray(system.A, dtype=float)
+    if A.shape[0] == 0 or not np.isfinite(A).all():     # no Schur form: as the system itself evaluates
+        return system.frequency_response(omega_dt)
+    return dlti_frequency_response(A, system.B, system.C, system.D, omega_dt, schur=system.receiver_schur())
+
+
 class FrequencyResponseCache:
-    """Responses of realisations on a grid, memoised by content (least recently used).
+    """A receiver's responses of received realisations on a grid (:func:`received_response`),
+    memoised by content (least recently used).
 
     A receiving vehicle holds one: a sender's unchanged clear ``T`` and ``S`` are evaluated
     twice and then kept, an obfuscated message is new every time. The key is the exact bytes of
@@ -231,7 +261,7 @@ class FrequencyResponseCache:
         self._grid: tuple[np.ndarray, bytes] | None = None
 
     def response(self, system: HasResponse, omega_dt: np.ndarray, *, inverse: bool = False) -> np.ndarray:
-        """``system.frequency_response(omega_dt)``, read-only, from the cache when seen before.
+        """``received_response(system, omega_dt)``, read-only, from the cache when seen before.
 
         Parameters
         ----------
@@ -254,7 +284,7 @@ class FrequencyResponseCache:
         if inverse:
             H = inv2x2(self.response(system, omega_dt))
         else:
-            H = system.frequency_response(np.asarray(omega_dt, dtype=float))
+            H = received_response(system, np.asarray(omega_dt, dtype=float))
         H.setflags(write=False)
         tag = hash(key)
         if tag not in self._seen:           # first sighting: remember the key's hash only
