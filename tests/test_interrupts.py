@@ -111,3 +111,37 @@ def test_sigkill_leaves_no_worker_and_the_next_run_cleans_up(tmp_path):
     assert done.returncode == 0, done.stderr
     assert not list(tmp_path.glob(".res.partial-*"))  # ... the next run into the same place does
     assert "mse.csv" in json.loads((out / MANIFEST).read_text())["files"]
+
+
+def _raised_in_a_callback(interrupt: BaseException):
+    """What a kernel's caller sees when the signal's handler ran inside numba's boxing callback (measured
+    with SIGTERM during ``reproduce``): SystemErrors raised from the interrupt."""
+    def run(args, command_line):
+        try:
+            try:
+                raise interrupt
+            except BaseException as err:
+                raise SystemError("<function _numba_unpickle> returned a result with an exception set") from err
+        except SystemError as err:
+            raise SystemError("CPUDispatcher(<function _block_form>) returned a result with an exception set") from err
+    return run
+
+
+@pytest.mark.parametrize("interrupt, status", [(KeyboardInterrupt(), 130), ("terminated", 143)])
+def test_an_interrupt_inside_a_compiled_kernels_callback_is_still_an_interrupt(tmp_path, monkeypatch, capsys,
+                                                                               interrupt, status):
+    from roadcollab.cli import main as cli
+
+    interrupt = cli.Terminated() if interrupt == "terminated" else interrupt
+    monkeypatch.setitem(cli._RUN, "reproduce", _raised_in_a_callback(interrupt))
+    out = tmp_path / "res"
+    assert cli.main(["reproduce", "--kernels", "reference", "--out", str(out)]) == status
+    assert capsys.readouterr().err.strip() == f"roadcollab reproduce: interrupted; nothing was written to {out}"
+
+
+def test_a_system_error_without_an_interrupt_is_not_taken_for_one(tmp_path, monkeypatch):
+    from roadcollab.cli import main as cli
+
+    monkeypatch.setitem(cli._RUN, "reproduce", _raised_in_a_callback(RuntimeError("a kernel failed")))
+    with pytest.raises(SystemError):
+        cli.main(["reproduce", "--kernels", "reference", "--out", str(tmp_path / "res")])

@@ -11,12 +11,13 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
+from roadcollab.collaboration.guard import fleet_guards
 from roadcollab.collaboration.relay import Exchange, Relay, simulate_measurements
 from roadcollab.experiments.bench.study import _config_for
 from roadcollab.experiments.pipeline import FleetPipeline
 from roadcollab.lti import kernels
 from roadcollab.lti.realisation import StateSpaceData, SystemCache
-from roadcollab.lti.response import received_response
+from roadcollab.lti.response import FrequencyResponseCache, received_response
 from roadcollab.models.vehicle import sample_fleet
 from roadcollab.wire import protocol
 
@@ -39,29 +40,44 @@ class _WireRelay(Relay):
 
 
 @pytest.fixture(scope="module")
-def fleet():
-    cfg = replace(_config_for(2000), n_vehicles=3)
-    pipe = FleetPipeline(cfg, sample_fleet(3, cfg.fleet, rng=21))
-    roads, noise = np.random.default_rng(22), np.random.default_rng(23)
-    segments = [simulate_measurements(pipe.estimators, pipe.road(roads).velocity[:pipe.grid.n_samples],
-                                      cfg.sensor_noise_std, rng=noise) for _ in range(3)]
-    return cfg, pipe, segments
+def fleets():
+    """A 3-vehicle fleet and three segments per kernel path (a sender's memos are made on one path)."""
+    out = {}
+    for path in ("compiled", "reference"):
+        with kernels.use_kernels(path):
+            cfg = replace(_config_for(2000), n_vehicles=3)
+            pipe = FleetPipeline(cfg, sample_fleet(3, cfg.fleet, rng=21))
+            roads, noise = np.random.default_rng(22), np.random.default_rng(23)
+            segments = [simulate_measurements(pipe.estimators, pipe.road(roads).velocity[:pipe.grid.n_samples],
+                                              cfg.sensor_noise_std, rng=noise) for _ in range(3)]
+            out[path] = cfg, pipe, segments, fleet_guards(pipe.estimators, pipe.road_moment, cfg.sensor_noise_std)
+    return out
+
+
+def _fresh_receivers(pipe) -> None:
+    """Empty receiver caches, so that no variant is served what another one computed."""
+    for est in pipe.estimators:
+        est.response_cache, est.system_cache = FrequencyResponseCache(), SystemCache()
 
 
 @pytest.mark.parametrize("path", PATHS)
-@pytest.mark.parametrize("mechanism", ["paper", "none"])
-def test_the_relay_in_memory_is_the_relay_over_the_wire_bit_for_bit(fleet, path, mechanism):
-    cfg, pipe, segments = fleet
-    exchange = Exchange(mechanism, cfg.obfuscation) if mechanism == "paper" else mechanism
+@pytest.mark.parametrize("mechanism, guarded", [("paper", False), ("paper", True), ("paper_vehicle", False),
+                                                ("none", False), ("none", True)])
+def test_the_relay_in_memory_is_the_relay_over_the_wire_bit_for_bit(fleets, path, mechanism, guarded):
+    cfg, pipe, segments, guards = fleets[path]
+    exchange = Exchange(mechanism, cfg.obfuscation) if mechanism != "none" else mechanism
+    guard = {"guard": guards} if guarded else {"unguarded": True}
     with kernels.use_kernels(path):
-        relays = [cls(pipe.estimators, exchange, rng=5, unguarded=True, **kw)
-                  for cls, kw in ((Relay, {}), (_WireRelay, {"cached": True}), (_WireRelay, {"cached": False}))]
-        for ys in segments:
-            memory, *wire = (relay.run(ys) for relay in relays)
-            for steps in wire:
-                for j, (a, b) in enumerate(zip(memory, steps)):
-                    assert np.array_equal(a.result.estimate, b.result.estimate), (mechanism, path, j)
-                    assert np.array_equal(a.result.W_hat, b.result.W_hat)
+        runs = []
+        for cls, kw in ((Relay, {}), (_WireRelay, {"cached": True}), (_WireRelay, {"cached": False})):
+            _fresh_receivers(pipe)
+            relay = cls(pipe.estimators, exchange, rng=5, **guard, **kw)
+            runs.append([[(s.result.estimate, s.result.W_hat) for s in relay.run(ys)] for ys in segments])
+    memory, *wire = runs
+    for other in wire:
+        for k, (seg_a, seg_b) in enumerate(zip(memory, other)):
+            for j, ((est_a, w_a), (est_b, w_b)) in enumerate(zip(seg_a, seg_b)):
+                assert np.array_equal(est_a, est_b) and np.array_equal(w_a, w_b), (mechanism, path, k, j)
 
 
 @pytest.mark.parametrize("path", PATHS)

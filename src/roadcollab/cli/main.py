@@ -100,8 +100,11 @@ def main(argv: list[str] | None = None) -> int:
         with contextlib.nullcontext() if kernels is None else use_kernels(kernels):
             _compile_alongside(args, kernels)
             return run(args, command_line(argv))
-    except (KeyboardInterrupt, Terminated) as err:
-        status = 143 if isinstance(err, Terminated) else 130
+    except (KeyboardInterrupt, Terminated, SystemError) as err:
+        cause = _interruption(err)
+        if cause is None:
+            raise
+        status = 143 if isinstance(cause, Terminated) else 130
         where = "" if out is None else (f"; the previous results in {out} are untouched" if had_results
                                         else f"; nothing was written to {out}")
         print(f"roadcollab {args.command}: interrupted{where}", file=sys.stderr)
@@ -145,6 +148,24 @@ class Terminated(BaseException):
 
 def _terminated(signum, frame) -> None:
     raise Terminated()
+
+
+def _interruption(err: BaseException) -> BaseException | None:
+    """The ``KeyboardInterrupt`` or :class:`Terminated` that ``err`` is or was caused by, else None.
+
+    A signal's handler runs at the next Python instruction, and after a compiled kernel that is often
+    inside numba's callback that boxes its result (``_numba_unpickle``): the interrupt then reaches the
+    caller as a ``SystemError`` raised from it (measured: SIGTERM during ``reproduce``, in
+    ``_block_form``).
+    """
+    seen: set[int] = set()
+    cur: BaseException | None = err
+    while cur is not None and id(cur) not in seen:
+        if isinstance(cur, (KeyboardInterrupt, Terminated)):
+            return cur
+        seen.add(id(cur))
+        cur = cur.__cause__ or cur.__context__
+    return None
 
 
 def _check_out(args: argparse.Namespace) -> None:

@@ -82,12 +82,12 @@ class StateSpaceData:
     def frequency_response(self, omega_dt: np.ndarray) -> np.ndarray:
         """Response at ``z = exp(j omega_dt)``, shape (M, p, m).
 
-        A pure function of the realisation; a receiver that sees the same realisation again
-        keeps its responses in a :class:`~roadcollab.lti.response.FrequencyResponseCache`. The
+        A pure function of the realisation (a receiver evaluates a sender's systems through
+        :func:`~roadcollab.lti.response.received_response` and its cache instead). The
         last response is also memoised on this object, keyed by the exact bytes of the matrices
         and the frequencies (a sender's ``Psi`` is evaluated once for obfuscating and again, on the
         same bins, when Theorem 1 is measured: 2.9 s of the default reproduction, measured), except
-        for a system decoded through a :class:`SystemCache`, whose receiver's cache does that.
+        for a system decoded through a :class:`SystemCache`, whose receiver's cache keeps responses.
 
         Parameters
         ----------
@@ -99,8 +99,8 @@ class StateSpaceData:
         (M, p, m) complex ndarray
         """
         omega_dt = np.asarray(omega_dt, dtype=float)
-        # A system a receiver decoded through its SystemCache is evaluated through its
-        # FrequencyResponseCache, which keeps what is seen again: no memo here (its copy of a
+        # A system a receiver decoded through its SystemCache is evaluated by received_response through
+        # its FrequencyResponseCache, which keeps what is seen again: no memo here (its copy of a
         # 3000-bin response cost 60 us per received T~, S~, measured).
         received = bool(self.__dict__.get("_received"))
         full_key = None if received else content_key(self.A, self.B, self.C, self.D, omega_dt)
