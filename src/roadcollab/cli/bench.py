@@ -106,6 +106,14 @@ def _run_scale(args: argparse.Namespace) -> int:
     return 0
 
 
+def _load(load: dict) -> str:
+    """The load averages before and after a benchmark, for its table's title."""
+    start, end = load["start"], load["end"]
+    if start is None or end is None:
+        return "load average not available"
+    return (f"load {start[0]:.2f} -> {end[0]:.2f} (1 min), {start[1]:.2f} -> {end[1]:.2f} (5 min)")
+
+
 def run(args: argparse.Namespace, command_line: str) -> int:
     """Time the pipeline and print the record (one JSON line with ``--json``, else tables).
 
@@ -131,7 +139,7 @@ def run(args: argparse.Namespace, command_line: str) -> int:
         return 0
     f = rec["floor"]
     print_table(f"ms per vehicle-segment ({rec['samples_per_segment']} samples, 1 thread, "
-                f"{plural(rec['repeats'], 'repeat')}; floor {f['floor_ms']:.3f} ms)",
+                f"{plural(rec['repeats'], 'repeat')}; floor {f['floor_ms']:.3f} ms; {_load(rec['load_average'])})",
                 ("mechanism", "min ms", "median ms", "receive (median)", "send (median)", "x floor (min)",
                  "x floor (median)"),
                 [(m, f"{v['ms_min']:.2f}", f"{v['ms_median']:.2f}", f"{v['ms_receive_median']:.2f}",
@@ -150,5 +158,6 @@ def run(args: argparse.Namespace, command_line: str) -> int:
     print_table("scaling (cost per N log N relative to N = 4000)", ("N", "paper ms", "rel", "hardened ms", "rel"),
                 [(str(s_["n_samples"]), f"{s_['ms_paper']:.2f}", f"{s_['paper_per_nlogn_rel']:.2f}",
                   f"{s_['ms_hardened']:.2f}", f"{s_['hardened_per_nlogn_rel']:.2f}") for s_ in rec["scaling"]])
-    print(f"setup per vehicle: {rec['ms_per_vehicle_setup']:.1f} ms")
+    print(f"setup per vehicle: {rec['ms_per_vehicle_setup']:.1f} ms; seed {rec['seed']}, "
+          f"roadcollab {rec['roadcollab_version']}")
     return 0

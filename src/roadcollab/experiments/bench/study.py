@@ -21,12 +21,14 @@ new systems every segment, which are evaluated every time.
 from __future__ import annotations
 
 import dataclasses
+import os
 import statistics
 import time
 
 import numpy as np
 from threadpoolctl import threadpool_limits
 
+from ... import __version__
 from ...wire import protocol
 from ..._validation import check_int
 from ...errors import MessageError, ParameterError
@@ -41,7 +43,7 @@ from ...models.simulation import add_sensor_noise, simulate_response
 from ...models.vehicle import sample_fleet
 from ...lti.kernels import KERNELS, compiled_available, kernel_path, use_kernels
 
-__all__ = ["bench_segment", "bench_kernel_paths", "bench_naive", "bench_exactness", "run_bench"]
+__all__ = ["bench_segment", "bench_kernel_paths", "bench_naive", "bench_exactness", "machine_load", "run_bench"]
 
 MECHANISMS = ("none", "paper", "paper_vehicle", "hardened")
 
@@ -294,6 +296,21 @@ def _scaling(sizes, repeats: int, seed: int) -> list[dict]:
     return scaling
 
 
+def machine_load() -> list[float] | None:
+    """The machine's 1-, 5- and 15-minute load averages (``os.getloadavg``): what the speed targets
+    are stated against ("on a quiet machine"), recorded beside every benchmark.
+
+    Returns
+    -------
+    list of float, or None
+        Three load averages; None where the system keeps none.
+    """
+    try:
+        return [float(x) for x in os.getloadavg()]
+    except (AttributeError, OSError):        # no getloadavg (Windows), or it failed
+        return None
+
+
 def run_bench(*, sizes=(1000, 2000, 4000, 8000, 16000, 32000, 64000), repeats: int = 30, seed: int = 0,
               kernels: str | None = None, exactness_segments: int | None = None) -> dict:
     """The benchmark record printed by ``roadcollab bench --json``.
@@ -334,10 +351,13 @@ def run_bench(*, sizes=(1000, 2000, 4000, 8000, 16000, 32000, 64000), repeats: i
         ``hardened_per_nlogn_rel``: cost per ``N log2 N`` relative to the reference point, 1
         everywhere for ``N log N`` scaling), ``repeats`` and ``threads`` (1), ``kernels`` (the path
         used), ``kernel_paths`` (``paper`` on both paths, :func:`bench_kernel_paths`) and
-        ``max_rel_privacy_vs_clear`` (the largest of every mechanism's, over every segment it ran).
+        ``max_rel_privacy_vs_clear`` (the largest of every mechanism's, over every segment it ran);
+        ``load_average`` (``{"start": ..., "end": ...}``: :func:`machine_load` before and after the
+        measurements), ``seed`` and ``roadcollab_version``.
     """
     if kernels is not None and kernels not in KERNELS:
         raise ParameterError(f"kernels must be one of {KERNELS}, got {kernels!r}")
+    load_start = machine_load()
     with threadpool_limits(limits=1), use_kernels(kernels or kernel_path()):
         main = {m: bench_segment(4000, mechanism=m, repeats=repeats, seed=seed) for m in MECHANISMS}
         paths = bench_kernel_paths(4000, repeats=repeats, seed=seed)
@@ -347,6 +367,7 @@ def run_bench(*, sizes=(1000, 2000, 4000, 8000, 16000, 32000, 64000), repeats: i
         exact = bench_exactness(segments=exactness_segments or repeats, seed=seed)
         path = kernel_path()
         scaling = _scaling(sizes, repeats, seed)
+    load_end = machine_load()
     f = floor["floor_ms"]
     by_mech = {m: {"ms_min": r["ms_min"], "ms_median": r["ms_per_vehicle_segment"],
                    "ms_receive_median": r["ms_receive_median"], "ms_send_median": r["ms_send_median"],
@@ -370,4 +391,7 @@ def run_bench(*, sizes=(1000, 2000, 4000, 8000, 16000, 32000, 64000), repeats: i
         "kernels": path,
         "kernel_paths": paths,
         "max_rel_privacy_vs_clear": max(r["max_rel_privacy_vs_clear"] for r in main.values()),
+        "load_average": {"start": load_start, "end": load_end},
+        "seed": seed,
+        "roadcollab_version": __version__,
     }
