@@ -351,9 +351,8 @@ def run_bench(*, sizes=(1000, 2000, 4000, 8000, 16000, 32000, 64000), repeats: i
         ``hardened_per_nlogn_rel``: cost per ``N log2 N`` relative to the reference point, 1
         everywhere for ``N log N`` scaling), ``repeats`` and ``threads`` (1), ``kernels`` (the path
         used), ``kernel_paths`` (``paper`` on both paths, :func:`bench_kernel_paths`) and
-        ``max_rel_privacy_vs_clear`` (the largest of every mechanism's, over every segment it ran);
-        ``load_average`` (``{"start": ..., "end": ...}``: :func:`machine_load` before and after the
-        measurements), ``seed`` and ``roadcollab_version``.
+        ``max_rel_privacy_vs_clear`` (the largest of every mechanism's, over every segment it ran), ``seed``,
+        ``roadcollab_version`` and ``load_average`` (:func:`machine_load` at ``"start"`` and ``"end"``).
     """
     if kernels is not None and kernels not in KERNELS:
         raise ParameterError(f"kernels must be one of {KERNELS}, got {kernels!r}")
@@ -367,7 +366,6 @@ def run_bench(*, sizes=(1000, 2000, 4000, 8000, 16000, 32000, 64000), repeats: i
         exact = bench_exactness(segments=exactness_segments or repeats, seed=seed)
         path = kernel_path()
         scaling = _scaling(sizes, repeats, seed)
-    load_end = machine_load()
     f = floor["floor_ms"]
     by_mech = {m: {"ms_min": r["ms_min"], "ms_median": r["ms_per_vehicle_segment"],
                    "ms_receive_median": r["ms_receive_median"], "ms_send_median": r["ms_send_median"],
@@ -391,7 +389,5 @@ def run_bench(*, sizes=(1000, 2000, 4000, 8000, 16000, 32000, 64000), repeats: i
         "kernels": path,
         "kernel_paths": paths,
         "max_rel_privacy_vs_clear": max(r["max_rel_privacy_vs_clear"] for r in main.values()),
-        "load_average": {"start": load_start, "end": load_end},
-        "seed": seed,
-        "roadcollab_version": __version__,
+        "load_average": {"start": load_start, "end": machine_load()}, "seed": seed, "roadcollab_version": __version__,
     }
