@@ -111,7 +111,7 @@ def _load(load: dict) -> str:
     start, end = load["start"], load["end"]
     if start is None or end is None:
         return "load average not available"
-    return (f"load {start[0]:.2f} -> {end[0]:.2f} (1 min), {start[1]:.2f} -> {end[1]:.2f} (5 min)")
+    return f"load {start[0]:.2f} -> {end[0]:.2f} (1 min), {start[1]:.2f} -> {end[1]:.2f} (5 min)"
 
 
 def run(args: argparse.Namespace, command_line: str) -> int:
